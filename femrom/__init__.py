@@ -1,0 +1,16 @@
+"""femrom: structure-preserving reduced-order models of large mechanical structures.
+
+Layers import downward only::
+
+    mesh -> fem -> scene -> integrators -> snapshots -> linalg -> basis
+         -> inference -> rom -> post            (cli and cases on top)
+"""
+
+from importlib.metadata import PackageNotFoundError, version
+
+try:
+    __version__ = version("femrom")
+except PackageNotFoundError:  # running from a source tree that is not installed
+    __version__ = "0.0.0+unknown"
+
+__all__ = ["__version__"]

@@ -1,0 +1,3 @@
+from femrom.cli import main
+
+raise SystemExit(main())

@@ -1,0 +1,129 @@
+"""``femrom`` command line: run a scene file or a named case, list the cases.
+
+    femrom cases                      list the case scripts in cases/
+    femrom run beam [case options]    run a named case (cases/beam.py)
+    femrom run my_scene.toml -o out/  run any scene file: outputs, energy, plot
+    femrom info my_scene.toml         build the scene and print its sizes and effects
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+
+def cases_directory() -> Path:
+    """The repository's ``cases/`` folder (next to ``femrom/`` in a source checkout)."""
+    return Path(__file__).resolve().parents[1] / "cases"
+
+
+def available_cases() -> dict[str, str]:
+    """Case name -> first line of its docstring."""
+    found = {}
+    for path in sorted(cases_directory().glob("*.py")):
+        if path.name.startswith("_"):
+            continue
+        text = path.read_text()
+        doc = ""
+        if text.lstrip().startswith('"""'):
+            doc = text.lstrip()[3:].split("\n", 1)[0].strip().rstrip('"')
+        found[path.stem] = doc
+    return found
+
+
+def load_case(name: str):
+    cases = available_cases()
+    if name not in cases:
+        raise SystemExit(f"femrom: unknown case {name!r}; available: {', '.join(cases) or '(none)'}")
+    path = cases_directory() / f"{name}.py"
+    spec = importlib.util.spec_from_file_location(f"femrom_case_{name}", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def run_scene_file(path: Path, out_dir: Path) -> dict:
+    """Build and integrate a scene; write outputs.npz, metrics.json and response.png."""
+    from femrom.integrators import simulate
+    from femrom.post import plot_response, write_metrics
+    from femrom.scene import Scene, build
+
+    scene = Scene.from_toml(path)
+    tic = time.perf_counter()
+    model = build(scene)
+    build_seconds = time.perf_counter() - tic
+    result = simulate(model)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    arrays = {"t": result.times}
+    if result.outputs is not None:
+        arrays["y"] = result.outputs
+    if result.energy is not None:
+        arrays["energy"] = result.energy
+    np.savez(out_dir / "outputs.npz", **arrays)
+    (out_dir / "scene.toml").write_text(scene.source_text)
+    metrics = {"scene": scene.name, "n_dofs": model.system.n_dofs, "effects": scene.effect_names,
+               "build_seconds": build_seconds, "build_timings": model.timings, **result.summary}
+    write_metrics(out_dir / "metrics.json", metrics)
+    plot_response(out_dir / "response.png", result.times, result.outputs, model.system.output_names,
+                  result.energy, title=scene.name)
+    return metrics
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    parser = argparse.ArgumentParser(prog="femrom", description=__doc__.split("\n")[0])
+    sub = parser.add_subparsers(dest="command", required=True)
+    sub.add_parser("cases", help="list the named cases")
+    run = sub.add_parser("run", help="run a named case or a scene file", add_help=False)
+    run.add_argument("target", nargs="?")
+    info = sub.add_parser("info", help="build a scene and print its size and effects")
+    info.add_argument("scene", type=Path)
+
+    if argv[:1] == ["run"]:
+        args, rest = parser.parse_known_args(argv)
+    else:
+        args, rest = parser.parse_args(argv), []
+
+    if args.command == "cases":
+        for name, doc in available_cases().items():
+            print(f"{name:20s} {doc}")
+        return 0
+    if args.command == "info":
+        from femrom.scene import Scene, build
+
+        model = build(Scene.from_toml(args.scene))
+        s = model.system
+        print(f"{model.scene.name}: {s.n_dofs} free dofs of {s.condensation.n_total}, "
+              f"effects {', '.join(model.scene.effect_names)}; inputs {s.n_inputs}, outputs {s.n_outputs}")
+        return 0
+    # run
+    if args.target is None or args.target in ("-h", "--help"):
+        print("usage: femrom run CASE [case options] | femrom run SCENE.toml [-o OUT]")
+        print("cases: " + ", ".join(available_cases()))
+        return 0 if args.target else 2
+    target = Path(args.target)
+    if target.suffix == ".toml":
+        opts = argparse.ArgumentParser(prog="femrom run SCENE.toml")
+        opts.add_argument("-o", "--out", type=Path, default=Path("results") / target.stem)
+        o = opts.parse_args(rest)
+        from femrom.scene import SceneError
+
+        try:
+            metrics = run_scene_file(target, o.out)
+        except SceneError as exc:
+            print(f"femrom: {exc}", file=sys.stderr)
+            return 2
+        print(f"{metrics['scene']}: {metrics['n_dofs']} dofs, {metrics['n_steps']} steps in "
+              f"{metrics['stepping_seconds']:.2f} s; results in {o.out}")
+        return 0
+    module = load_case(args.target)
+    return int(module.main(rest) or 0)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,150 @@
+"""Function spaces of the structures femrom knows: what a scene needs of a basis.
+
+A space answers, in its own dof numbering (``n_total`` dofs before Dirichlet
+condensation): its operators, the dofs on a named boundary, the load vector of
+a named or located load, the output row of a probe, and the nodal coordinates
+of a displacement component. The scene layer maps a scene file onto these
+calls and never touches skfem directly.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+from skfem import Basis, LinearForm
+
+from femrom.fem import _line
+from femrom.mesh import MeshError, boundary_facets, subdomain_elements
+
+
+class SpaceError(ValueError):
+    """A request a space cannot serve (unknown component, unsupported load)."""
+
+
+@LinearForm
+def _unit_integral(v, w):
+    return v
+
+
+class LineSpace:
+    """Beam (Hermite: components ``w`` and ``slope``) or bar/string (P1: ``u``) on a line."""
+
+    def __init__(self, mesh, element: str):
+        self.mesh = mesh
+        self.element = element
+        self.basis = _line.line_basis(mesh, element)
+        self.components = ("w", "slope") if element == "hermite" else ("u",)
+
+    # -- sizes -----------------------------------------------------------
+    @property
+    def n_total(self) -> int:
+        return self.basis.N
+
+    @property
+    def length(self) -> float:
+        return float(self.mesh.p[0].max() - self.mesh.p[0].min())
+
+    # -- operators -------------------------------------------------------
+    def stiffness(self, effect: str, material) -> sp.csr_matrix:
+        if effect == "bending":
+            if self.element != "hermite":
+                raise SpaceError("the 'bending' effect needs element = 'hermite' on a line")
+            _need(material, "second_moment", "bending")
+            return _line.bending_stiffness(self.basis, material.youngs_modulus * material.second_moment)
+        if effect == "elasticity":
+            if self.element != "p1":
+                raise SpaceError("'elasticity' on a line is the axial/string operator: use element = 'p1' "
+                                 "(or the 'bending' effect with 'hermite')")
+            _need(material, "area", "elasticity")
+            return _line.axial_stiffness(self.basis, material.youngs_modulus * material.area)
+        raise SpaceError(f"a line space has no stiffness effect {effect!r}")
+
+    def mass(self, material, *, lumped: bool) -> sp.csr_matrix:
+        _need(material, "area", "inertia")
+        return _line.line_mass(self.basis, material.density * material.area, lumped=lumped)
+
+    def nodal_weights(self) -> np.ndarray:
+        """(n_total,) ``int phi_i dx`` on value dofs (zero on slopes): lumped quadrature."""
+        weights = np.zeros(self.n_total)
+        values = _line.translational_dofs(self.basis)
+        weights[values] = np.asarray(_unit_integral.assemble(self.basis))[values]
+        return weights
+
+    # -- boundaries ------------------------------------------------------
+    def boundary_dofs(self, name: str, *, clamped: bool) -> np.ndarray:
+        facets = boundary_facets(self.mesh, name)
+        dofs = self.basis.get_dofs(facets)
+        return dofs.all() if clamped or self.element == "p1" else dofs.all(["u"])
+
+    # -- loads and outputs -------------------------------------------------
+    def _row(self, at, component) -> sp.csr_matrix:
+        """(1, n_total) functional: value (or slope) of the field at ``at``."""
+        component = self._component(component)
+        if isinstance(at, str):
+            facets = boundary_facets(self.mesh, at)
+            nodal = self.basis.get_dofs(facets).nodal
+            key = "u_x" if component == "slope" else "u"
+            dofs = np.asarray(nodal[key])
+            if dofs.size != 1:
+                raise SpaceError(f"boundary {at!r} has {dofs.size} nodes; a line load or probe needs one")
+            return sp.csr_matrix((np.ones(1), (np.zeros(1, int), dofs)), shape=(1, self.n_total))
+        x = float(at[0])
+        lo, hi = self.mesh.p[0].min(), self.mesh.p[0].max()
+        if not lo <= x <= hi:
+            raise SpaceError(f"point x = {x} lies outside the beam [{lo}, {hi}]")
+        if component == "slope":
+            raise SpaceError("a slope probe or moment load must sit on a named boundary node")
+        return sp.csr_matrix(self.basis.probes(np.array([[x]])))
+
+    def load_vector(self, load) -> np.ndarray:
+        """(n_total,) consistent load of a point force (``w``/``u``) or moment (``slope``)."""
+        if load.kind != "point_load":
+            raise SpaceError(f"a line structure takes point loads only, not {load.kind!r}")
+        return load.magnitude * np.asarray(self._row(load.at, load.component).todense()).ravel()
+
+    def output_row(self, probe) -> sp.csr_matrix:
+        if probe.average:
+            if not isinstance(probe.at, str):
+                raise SpaceError("an average output needs a subdomain name in 'over'")
+            self._component(probe.component)
+            elements = subdomain_elements(self.mesh, probe.at)
+            basis = Basis(self.mesh, self.basis.elem, elements=elements,
+                          intorder=_line.LINE_ELEMENTS[self.element][1])
+            row = np.asarray(_unit_integral.assemble(basis))
+            values = np.zeros_like(row)
+            idx = _line.translational_dofs(self.basis)
+            values[idx] = row[idx]
+            return sp.csr_matrix(values / values.sum())
+        return self._row(probe.at, probe.component)
+
+    def coordinates(self, component=None) -> tuple[np.ndarray, np.ndarray]:
+        """Dofs of ``component`` and their (1, k) coordinates."""
+        component = self._component(component)
+        key = 1 if component == "slope" else 0
+        dofs = np.asarray(self.basis.nodal_dofs[key])
+        return dofs, self.mesh.p[:, :]
+
+    def interpolate(self, function, component=None) -> np.ndarray:
+        """(n_total,) nodal interpolant of ``function(x, y, z)`` (Hermite: values and slopes)."""
+        q = np.zeros(self.n_total)
+        x = self.mesh.p[0]
+        zeros = np.zeros_like(x)
+        q[self.basis.nodal_dofs[0]] = function(x, zeros, zeros)
+        if self.element == "hermite":
+            h = 1e-6 * max(self.length, 1e-300)
+            q[self.basis.nodal_dofs[1]] = (function(x + h, zeros, zeros) - function(x - h, zeros, zeros)) / (2 * h)
+        return q
+
+    def _component(self, component):
+        component = component or self.components[0]
+        if component not in self.components:
+            raise SpaceError(f"unknown component {component!r}; valid: {', '.join(self.components)}")
+        return component
+
+
+def _need(material, key, effect):
+    if getattr(material, key) is None:
+        raise SpaceError(f"the {effect!r} effect needs [material] {key}")
+
+
+__all__ = ["LineSpace", "SpaceError", "MeshError"]

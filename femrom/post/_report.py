@@ -1,0 +1,125 @@
+"""Report pieces every case writes: metrics.json, response/energy plots, cost tables."""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import platform
+from pathlib import Path
+
+import numpy as np
+
+
+def _jsonable(value):
+    if isinstance(value, dict):
+        return {str(k): _jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_jsonable(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return _jsonable(value.tolist())
+    if isinstance(value, (np.floating, float)):
+        value = float(value)
+        return value if math.isfinite(value) else str(value)
+    if isinstance(value, np.integer):
+        return int(value)
+    return value
+
+
+def machine_description() -> dict:
+    """Where a measurement was taken (for metrics and benchmark files)."""
+    import psutil
+
+    return {"platform": platform.platform(), "processor": platform.machine(),
+            "cpu_count": os.cpu_count(), "memory_gb": round(psutil.virtual_memory().total / 2**30, 1),
+            "python": platform.python_version()}
+
+
+def write_metrics(path, metrics: dict) -> Path:
+    """Write ``metrics`` as JSON (numpy values converted); atomic replace."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_suffix(path.suffix + ".tmp")
+    tmp.write_text(json.dumps(_jsonable(metrics), indent=2) + "\n")
+    os.replace(tmp, path)
+    return path
+
+
+def plot_response(path, times, outputs=None, output_names=(), energy=None, title="") -> Path:
+    """Outputs ``y(t)`` (top) and relative energy change ``(E - E0)/E0`` (bottom) to a PNG.
+
+    Parameters
+    ----------
+    times : (k,) ndarray
+    outputs : (p, k) ndarray or None
+    energy : (k,) ndarray or None
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    panels = [x for x in (outputs, energy) if x is not None]
+    fig, axes = plt.subplots(max(len(panels), 1), 1, figsize=(8, 3.2 * max(len(panels), 1)),
+                             sharex=True, squeeze=False)
+    axes = axes[:, 0]
+    i = 0
+    if outputs is not None:
+        for row, name in zip(np.atleast_2d(outputs), output_names or [f"y{j}" for j in range(len(outputs))]):
+            axes[i].plot(times, row, lw=1.0, label=name)
+        axes[i].set_ylabel("output")
+        axes[i].legend(loc="upper right", fontsize=8)
+        axes[i].grid(alpha=0.3)
+        i += 1
+    if energy is not None:
+        energy = np.asarray(energy)
+        scale = abs(energy[0]) if energy[0] != 0 else max(np.max(np.abs(energy)), 1e-300)
+        axes[i].plot(times, (energy - energy[0]) / scale, lw=1.0, color="tab:red")
+        axes[i].set_ylabel("(E - E0) / |E0|")
+        axes[i].grid(alpha=0.3)
+    axes[-1].set_xlabel("t [s]")
+    if title:
+        axes[0].set_title(title)
+    fig.tight_layout()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
+def accuracy_cost_table(rows: list[dict], columns: list[str]) -> str:
+    """Markdown table of ``rows`` (dicts) restricted to ``columns``."""
+    def fmt(v):
+        if isinstance(v, float):
+            return f"{v:.3e}" if (v != 0 and (abs(v) < 1e-2 or abs(v) >= 1e4)) else f"{v:.4g}"
+        return str(v)
+
+    lines = ["| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
+    lines += ["| " + " | ".join(fmt(r.get(c, "")) for c in columns) + " |" for r in rows]
+    return "\n".join(lines)
+
+
+def plot_accuracy_cost(path, rows: list[dict], cost: str, error: str, label: str, title="") -> Path:
+    """Log-log error against cost, one point per row, annotated with ``label``."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6, 4))
+    x = [r[cost] for r in rows]
+    y = [r[error] for r in rows]
+    ax.loglog(x, y, "o-")
+    for r, xi, yi in zip(rows, x, y):
+        ax.annotate(str(r[label]), (xi, yi), textcoords="offset points", xytext=(4, 4), fontsize=8)
+    ax.set_xlabel(cost)
+    ax.set_ylabel(error)
+    ax.grid(alpha=0.3, which="both")
+    if title:
+        ax.set_title(title)
+    fig.tight_layout()
+    path = Path(path)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path

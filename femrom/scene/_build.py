@@ -1,0 +1,232 @@
+"""Build a scene: assemble only the effects it lists into a SecondOrderSystem."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse as sp
+
+from femrom import fem
+from femrom.fem import Condensation, LocalPotential
+from femrom.mesh import build_mesh
+from femrom.scene._config import Scene
+from femrom.scene._errors import SceneError
+from femrom.scene._system import SecondOrderSystem
+
+STIFFNESS_EFFECTS = ("elasticity", "bending")
+
+
+@dataclass(frozen=True, eq=False)
+class FullOrderModel:
+    """A built scene: the system, its space (for fields and rendering) and (q0, v0)."""
+
+    scene: Scene
+    system: SecondOrderSystem
+    space: object
+    initial_displacement: np.ndarray
+    initial_velocity: np.ndarray
+    timings: dict = field(default_factory=dict)
+
+    @property
+    def times(self) -> np.ndarray:
+        return self.scene.time.dt * np.arange(self.scene.time.n_steps + 1)
+
+
+def make_space(scene: Scene, mesh):
+    element = scene.structure.element
+    dim = mesh.p.shape[0]
+    if dim == 1:
+        if element == "p2":
+            raise SceneError("element 'p2' is for solids; a line takes 'hermite' or 'p1'")
+        return fem.LineSpace(mesh, element)
+    if dim == 3:
+        if element == "hermite":
+            raise SceneError("element 'hermite' is for beams on a line; a solid takes 'p1' or 'p2'")
+        return fem.SolidSpace(mesh, element)
+    raise SceneError(f"no structure model for {dim}D meshes yet (1D lines and 3D solids)")
+
+
+def build(scene: Scene, *, mesh=None) -> FullOrderModel:
+    """Assemble the scene's effects, and nothing else, on the free dofs.
+
+    Parameters
+    ----------
+    scene : Scene
+    mesh : skfem.Mesh, optional
+        Use this mesh instead of generating the scene's geometry (tests, imported meshes).
+    """
+    timings = {}
+    names = scene.effect_names
+    if "inertia" not in names:
+        raise SceneError("a dynamic scene needs the 'inertia' effect")
+    stiffness_effects = [n for n in names if n in STIFFNESS_EFFECTS]
+    if len(stiffness_effects) != 1:
+        raise SceneError(f"list exactly one stiffness effect of {', '.join(STIFFNESS_EFFECTS)}; got {stiffness_effects}")
+
+    tic = time.perf_counter()
+    if mesh is None:
+        mesh = build_mesh(scene.structure.geometry, dict(scene.structure.parameters))
+    timings["mesh"] = time.perf_counter() - tic
+
+    tic = time.perf_counter()
+    space = make_space(scene, mesh)
+    condensation = _condensation(scene, space)
+    timings["space"] = time.perf_counter() - tic
+
+    material = scene.material
+    tic = time.perf_counter()
+    stiffness_full = space.stiffness(stiffness_effects[0], material)
+    stiffness = condensation.matrix(stiffness_full)
+    timings["stiffness"] = time.perf_counter() - tic
+
+    tic = time.perf_counter()
+    lumped = scene.effect("inertia").option("mass") == "lumped"
+    if scene.effect("inertia").option("mass") not in ("consistent", "lumped"):
+        raise SceneError("[effects.inertia] mass must be 'consistent' or 'lumped'")
+    mass = condensation.matrix(space.mass(material, lumped=lumped))
+    timings["mass"] = time.perf_counter() - tic
+
+    damping = None
+    if "damping" in names:
+        tic = time.perf_counter()
+        damping = _damping(scene.effect("damping"), mass, stiffness)
+        timings["damping"] = time.perf_counter() - tic
+
+    input_matrix = inputs = None
+    if "actuation" in names:
+        tic = time.perf_counter()
+        columns = [condensation.vector(space.load_vector(i.load)) for i in scene.inputs]
+        input_matrix = np.column_stack(columns)
+        signals = tuple(i.signal for i in scene.inputs)
+        inputs = _SignalVector(signals)
+        timings["inputs"] = time.perf_counter() - tic
+
+    nonlinear = None
+    if "nonlinear_potential" in names:
+        nonlinear = _nonlinear_potential(scene.effect("nonlinear_potential"), space, condensation)
+
+    output_matrix = None
+    output_names = ()
+    if scene.outputs.probes:
+        tic = time.perf_counter()
+        rows = [condensation.columns(space.output_row(p)) for p in scene.outputs.probes]
+        output_matrix = sp.vstack(rows).tocsr()
+        output_names = tuple(p.name for p in scene.outputs.probes)
+        timings["outputs"] = time.perf_counter() - tic
+
+    system = SecondOrderSystem(
+        mass=mass, stiffness=stiffness, damping=damping,
+        input_matrix=input_matrix, inputs=inputs,
+        output_matrix=output_matrix, nonlinear=nonlinear,
+        condensation=condensation, output_names=output_names,
+        metadata={"scene": scene.name, "effects": names, "n_total": space.n_total,
+                  "n_free": condensation.n_free, "element": scene.structure.element},
+    )
+    tic = time.perf_counter()
+    q0, v0 = _initial_state(scene, space, system)
+    timings["initial_conditions"] = time.perf_counter() - tic
+    return FullOrderModel(scene, system, space, q0, v0, timings)
+
+
+class _SignalVector:
+    """``u(t) = [s_1(t), ..., s_m(t)]``."""
+
+    def __init__(self, signals):
+        self.signals = signals
+
+    def __call__(self, t):
+        return np.array([float(s(t)) for s in self.signals])
+
+
+def _condensation(scene, space) -> Condensation:
+    fixed = [space.boundary_dofs(name, clamped=True) for name in scene.boundary.clamped]
+    fixed += [space.boundary_dofs(name, clamped=False) for name in scene.boundary.pinned]
+    fixed = np.concatenate(fixed) if fixed else np.zeros(0, dtype=np.int64)
+    return Condensation.from_fixed(space.n_total, fixed)
+
+
+def _damping(effect, mass, stiffness):
+    if effect.option("kind") != "rayleigh":
+        raise SceneError(f"unknown damping kind {effect.option('kind')!r}; valid: rayleigh")
+    try:
+        return fem.rayleigh_damping(mass, stiffness, effect.option("alpha"), effect.option("beta"))
+    except ValueError as exc:
+        raise SceneError(f"[effects.damping] {exc}") from None
+
+
+def _nonlinear_potential(effect, space, condensation):
+    if not hasattr(space, "nodal_weights"):
+        raise SceneError("the 'nonlinear_potential' effect is available on line structures only")
+    weights = effect.option("coefficient") * condensation.vector(space.nodal_weights())
+    kind = effect.option("kind")
+    if kind == "sine_gordon":
+        return LocalPotential.sine_gordon(weights)
+    if kind == "quartic":
+        return LocalPotential.cubic(weights, 1.0)
+    raise SceneError(f"unknown nonlinear potential {kind!r}; valid: sine_gordon, quartic")
+
+
+def _initial_state(scene, space, system):
+    ic = scene.initial_conditions
+    n = system.n_dofs
+    cond = system.condensation
+    if ic.kind == "zero":
+        return np.zeros(n), np.zeros(n)
+    if ic.kind == "static_load":
+        f = cond.vector(space.load_vector(ic.load))
+        solver = fem.make_solver(system.stiffness, strategy=scene.time.solver,
+                                 near_nullspace=_near_nullspace(space, cond))
+        return solver.solve(f), np.zeros(n)
+    if ic.kind == "mode":
+        shape = _mode_shape(system, ic.index)
+        dofs, _ = space.coordinates(ic.component)
+        free_component = np.isin(cond.free, dofs)
+        peak = np.max(np.abs(shape[free_component])) if free_component.any() else np.max(np.abs(shape))
+        return ic.amplitude * shape / peak, np.zeros(n)
+    if ic.kind == "expression":
+        q = cond.vector(space.interpolate(_expression(ic.displacement), ic.component))
+        v = cond.vector(space.interpolate(_expression(ic.velocity), ic.component))
+        return q, v
+    raise SceneError(f"unknown initial condition {ic.kind!r}")
+
+
+def _near_nullspace(space, cond):
+    modes = getattr(space, "rigid_body_modes", None)
+    return None if modes is None else cond.vector(modes())
+
+
+def _mode_shape(system, index):
+    """Eigenvector ``index`` (1-based) of ``K phi = omega^2 M phi`` by shift-invert Lanczos."""
+    from scipy.sparse.linalg import eigsh
+
+    k = min(index + 2, system.n_dofs - 1)
+    values, vectors = eigsh(system.stiffness.tocsc(), k=k, M=system.mass.tocsc(), sigma=0.0, which="LM")
+    order = np.argsort(values)
+    return vectors[:, order[index - 1]]
+
+
+_EXPRESSION_NAMES = {name: getattr(np, name) for name in
+                     ("sin", "cos", "tan", "exp", "log", "sqrt", "sinh", "cosh", "tanh", "arctan",
+                      "abs", "where", "pi")}
+
+
+def _expression(text: str):
+    """A numpy expression of ``x, y, z`` (scene files are trusted code, like a script)."""
+    try:
+        code = compile(text, "<initial condition>", "eval")
+    except SyntaxError as exc:
+        raise SceneError(f"[initial_conditions] cannot parse expression {text!r}: {exc.msg}") from None
+    allowed = set(_EXPRESSION_NAMES) | {"x", "y", "z"}
+    unknown = sorted(set(code.co_names) - allowed)
+    if unknown:
+        raise SceneError(f"[initial_conditions] unknown name {unknown[0]!r} in {text!r}; "
+                         f"valid: x, y, z, {', '.join(_EXPRESSION_NAMES)}")
+
+    def evaluate(x, y, z):
+        value = eval(code, {"__builtins__": {}}, {**_EXPRESSION_NAMES, "x": x, "y": y, "z": z})
+        return np.broadcast_to(np.asarray(value, dtype=float), np.shape(x)).copy()
+
+    return evaluate
+

@@ -1,0 +1,370 @@
+"""Scene configuration: frozen dataclasses loaded from TOML.
+
+A scene file lists a structure (geometry + mesh parameters + element), a
+material, the *effects* to simulate, boundary conditions, inputs, initial
+conditions, the time window and the outputs to keep. Every key is checked: an
+unknown key or effect is an error naming it and listing the valid ones.
+
+Example (``cases/beam.toml``)::
+
+    name = "cantilever"
+    [structure]
+    geometry = "beam_line"
+    element = "hermite"
+    parameters = { length = 1.0, mesh_size = 0.02 }
+    [material]
+    youngs_modulus = 2.1e11
+    density = 7850.0
+    area = 1.0e-4
+    second_moment = 8.33e-10
+    [effects]
+    inertia = { mass = "consistent" }
+    bending = {}
+    [boundary]
+    clamped = ["left"]
+    [initial_conditions]
+    kind = "static_load"
+    load = { kind = "point_load", at = "right", component = "w", magnitude = 10.0 }
+    [time]
+    t_end = 0.5
+    dt = 1.0e-4
+    integrator = "newmark"
+    [outputs]
+    probes = [{ name = "tip", at = "right", component = "w" }]
+"""
+
+from __future__ import annotations
+
+import tomllib
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+from femrom.scene._errors import SceneError
+from femrom.scene._signals import Signal
+
+#: Effects a scene may list, with their options and defaults.
+EFFECTS: dict[str, dict[str, Any]] = {
+    "inertia": {"mass": "consistent"},
+    "elasticity": {},
+    "bending": {},
+    "damping": {"kind": "rayleigh", "alpha": 0.0, "beta": 0.0},
+    "actuation": {},
+    "nonlinear_potential": {"kind": "sine_gordon", "coefficient": 1.0},
+}
+
+INTEGRATORS = ("newmark", "generalized_alpha", "central_difference", "implicit_midpoint")
+ELEMENTS = ("hermite", "p1", "p2")
+FIELDS = ("displacement", "velocity", "acceleration")
+LOAD_KINDS = ("point_load", "surface_traction", "surface_pressure")
+INITIAL_KINDS = ("zero", "static_load", "mode", "expression")
+
+
+def _take(data: Any, section: str, allowed: dict[str, Any], required: tuple[str, ...] = ()) -> dict:
+    """Defaults updated by ``data``; unknown or missing keys raise a SceneError."""
+    if data is None:
+        data = {}
+    if not isinstance(data, dict):
+        raise SceneError(f"[{section}] must be a table, got {type(data).__name__}")
+    unknown = sorted(set(data) - set(allowed))
+    if unknown:
+        raise SceneError(f"unknown key {unknown[0]!r} in [{section}]; valid keys: {', '.join(allowed)}")
+    missing = [k for k in required if data.get(k) is None]
+    if missing:
+        raise SceneError(f"missing key {missing[0]!r} in [{section}]")
+    return {**allowed, **data}
+
+
+def _choice(value, valid, what):
+    if value not in valid:
+        raise SceneError(f"unknown {what} {value!r}; valid: {', '.join(valid)}")
+    return value
+
+
+@dataclass(frozen=True)
+class StructureConfig:
+    geometry: str
+    element: str = "p1"
+    parameters: tuple[tuple[str, float], ...] = ()
+
+    @classmethod
+    def from_dict(cls, data):
+        d = _take(data, "structure", {"geometry": None, "element": "p1", "parameters": {}}, ("geometry",))
+        params = _take(d["parameters"], "structure.parameters", dict(d["parameters"] or {}))
+        return cls(str(d["geometry"]), _choice(d["element"], ELEMENTS, "element"),
+                   tuple(sorted((k, float(v)) for k, v in params.items())))
+
+
+@dataclass(frozen=True)
+class MaterialConfig:
+    """Isotropic linear-elastic material (SI). Line structures use ``area`` and
+    ``second_moment``: bending rigidity ``E I``, axial rigidity ``E A``, mass
+    per length ``rho A``."""
+
+    youngs_modulus: float
+    density: float
+    poisson_ratio: float | None = None
+    area: float | None = None
+    second_moment: float | None = None
+
+    @classmethod
+    def from_dict(cls, data):
+        keys = {"youngs_modulus": None, "density": None, "poisson_ratio": None,
+                "area": None, "second_moment": None}
+        d = _take(data, "material", keys, ("youngs_modulus", "density"))
+        for k, v in d.items():
+            if v is not None and not float(v) > 0:
+                raise SceneError(f"[material] {k} must be positive, got {v}")
+        return cls(**{k: (None if v is None else float(v)) for k, v in d.items()})
+
+
+@dataclass(frozen=True)
+class EffectConfig:
+    name: str
+    options: tuple[tuple[str, Any], ...] = ()
+
+    def option(self, key):
+        return dict(self.options)[key]
+
+
+def _effects_from_dict(data) -> tuple[EffectConfig, ...]:
+    if not isinstance(data, dict) or not data:
+        raise SceneError("[effects] must list at least 'inertia' and a stiffness effect")
+    effects = []
+    for name, options in data.items():
+        if name not in EFFECTS:
+            raise SceneError(f"unknown effect {name!r}; valid effects: {', '.join(EFFECTS)}")
+        opts = _take(options, f"effects.{name}", EFFECTS[name])
+        effects.append(EffectConfig(name, tuple(sorted(opts.items()))))
+    return tuple(effects)
+
+
+@dataclass(frozen=True)
+class LoadConfig:
+    """A spatial load pattern: one column of ``B`` (or a static load).
+
+    ``at`` is a boundary name or a point ``[x, y, z]``; ``component`` is the
+    displacement component (``w``/``slope`` on beams, ``u`` on bars, ``x``/``y``/``z``
+    on solids) or ``direction`` a vector for tractions. ``magnitude`` scales it.
+    """
+
+    kind: str
+    at: Any
+    component: str | None = None
+    direction: tuple[float, ...] | None = None
+    magnitude: float = 1.0
+
+    @classmethod
+    def from_dict(cls, data, where):
+        d = _take(data, where, {"kind": "point_load", "at": None, "component": None,
+                                "direction": None, "magnitude": 1.0}, ("at",))
+        _choice(d["kind"], LOAD_KINDS, f"load kind in [{where}]")
+        at = d["at"] if isinstance(d["at"], str) else tuple(float(x) for x in d["at"])
+        direction = None if d["direction"] is None else tuple(float(x) for x in d["direction"])
+        if d["kind"] == "surface_traction" and direction is None:
+            raise SceneError(f"[{where}] a surface_traction needs a 'direction' vector")
+        return cls(d["kind"], at, d["component"], direction, float(d["magnitude"]))
+
+
+@dataclass(frozen=True)
+class InputConfig:
+    name: str
+    load: LoadConfig
+    signal: Signal
+
+    @classmethod
+    def from_dict(cls, data, index):
+        where = f"inputs[{index}]"
+        d = _take(data, where, {"name": f"u{index}", "load": None, "signal": None}, ("load", "signal"))
+        return cls(str(d["name"]), LoadConfig.from_dict(d["load"], f"{where}.load"),
+                   Signal.from_dict(d["signal"], f"{where}.signal"))
+
+
+@dataclass(frozen=True)
+class BoundaryConfig:
+    """Homogeneous Dirichlet conditions on named boundaries.
+
+    ``clamped``: every dof (beam: deflection and slope; solid: x, y, z).
+    ``pinned``: displacement dofs only (beam: deflection; solid: same as clamped).
+    """
+
+    clamped: tuple[str, ...] = ()
+    pinned: tuple[str, ...] = ()
+
+    @classmethod
+    def from_dict(cls, data):
+        d = _take(data, "boundary", {"clamped": [], "pinned": []})
+        return cls(tuple(d["clamped"]), tuple(d["pinned"]))
+
+
+@dataclass(frozen=True)
+class InitialConfig:
+    """Initial displacement and velocity.
+
+    kinds: ``zero``; ``static_load`` (``q0 = K^-1 f`` of a load, at rest);
+    ``mode`` (eigenmode ``index`` (1-based) scaled to a peak ``amplitude``);
+    ``expression`` (numpy expressions of ``x, y, z, pi`` for ``displacement``
+    and ``velocity`` of one ``component``).
+    """
+
+    kind: str = "zero"
+    load: LoadConfig | None = None
+    index: int = 1
+    amplitude: float = 1.0
+    component: str | None = None
+    displacement: str = "0"
+    velocity: str = "0"
+
+    @classmethod
+    def from_dict(cls, data):
+        d = _take(data, "initial_conditions", {"kind": "zero", "load": None, "index": 1, "amplitude": 1.0,
+                                               "component": None, "displacement": "0", "velocity": "0"})
+        _choice(d["kind"], INITIAL_KINDS, "initial condition kind")
+        load = None
+        if d["kind"] == "static_load":
+            if d["load"] is None:
+                raise SceneError("[initial_conditions] kind 'static_load' needs a 'load' table")
+            load = LoadConfig.from_dict(d["load"], "initial_conditions.load")
+        if int(d["index"]) < 1:
+            raise SceneError(f"[initial_conditions] mode index is 1-based, got {d['index']}")
+        return cls(d["kind"], load, int(d["index"]), float(d["amplitude"]), d["component"],
+                   str(d["displacement"]), str(d["velocity"]))
+
+
+@dataclass(frozen=True)
+class TimeConfig:
+    t_end: float
+    dt: float
+    integrator: str = "newmark"
+    spectral_radius: float = 0.8
+    solver: str = "auto"
+
+    @classmethod
+    def from_dict(cls, data):
+        d = _take(data, "time", {"t_end": None, "dt": None, "integrator": "newmark",
+                                 "spectral_radius": 0.8, "solver": "auto"}, ("t_end", "dt"))
+        _choice(d["integrator"], INTEGRATORS, "integrator")
+        if not (0 < float(d["dt"]) <= float(d["t_end"])):
+            raise SceneError(f"[time] needs 0 < dt <= t_end, got dt={d['dt']}, t_end={d['t_end']}")
+        if not 0 <= float(d["spectral_radius"]) <= 1:
+            raise SceneError(f"[time] spectral_radius must lie in [0, 1], got {d['spectral_radius']}")
+        return cls(float(d["t_end"]), float(d["dt"]), d["integrator"], float(d["spectral_radius"]), str(d["solver"]))
+
+    @property
+    def n_steps(self) -> int:
+        return int(round(self.t_end / self.dt))
+
+
+@dataclass(frozen=True)
+class ProbeConfig:
+    name: str
+    at: Any
+    component: str | None = None
+    average: bool = False
+
+
+@dataclass(frozen=True)
+class OutputConfig:
+    """What a run keeps: probes (``E`` rows), full fields, energy; nothing else."""
+
+    probes: tuple[ProbeConfig, ...] = ()
+    fields: tuple[str, ...] = ()
+    energy: bool = True
+    save_every: int = 1
+
+    @classmethod
+    def from_dict(cls, data):
+        d = _take(data, "outputs", {"probes": [], "averages": [], "fields": [], "energy": True, "save_every": 1})
+        probes = []
+        for kind, entries in (("probes", d["probes"]), ("averages", d["averages"])):
+            for i, p in enumerate(entries):
+                where = f"outputs.{kind}[{i}]"
+                key = "at" if kind == "probes" else "over"
+                e = _take(p, where, {"name": f"{kind[:-1]}{i}", key: None, "component": None}, (key,))
+                at = e[key] if isinstance(e[key], str) else tuple(float(x) for x in e[key])
+                probes.append(ProbeConfig(str(e["name"]), at, e["component"], kind == "averages"))
+        names = [p.name for p in probes]
+        if len(set(names)) != len(names):
+            raise SceneError(f"[outputs] output names must be unique, got {names}")
+        for f in d["fields"]:
+            _choice(f, FIELDS, "output field")
+        if int(d["save_every"]) < 1:
+            raise SceneError(f"[outputs] save_every must be >= 1, got {d['save_every']}")
+        return cls(tuple(probes), tuple(d["fields"]), bool(d["energy"]), int(d["save_every"]))
+
+
+@dataclass(frozen=True)
+class Scene:
+    """A complete scene: what to build, what to simulate, what to keep."""
+
+    name: str
+    structure: StructureConfig
+    material: MaterialConfig
+    effects: tuple[EffectConfig, ...]
+    time: TimeConfig
+    boundary: BoundaryConfig = BoundaryConfig()
+    inputs: tuple[InputConfig, ...] = ()
+    initial_conditions: InitialConfig = InitialConfig()
+    outputs: OutputConfig = OutputConfig()
+    description: str = ""
+    source_text: str = field(default="", repr=False, compare=False)
+
+    SECTIONS = ("name", "description", "structure", "material", "effects", "boundary",
+                "inputs", "initial_conditions", "time", "outputs")
+
+    @classmethod
+    def from_dict(cls, data: dict, source_text: str = "") -> "Scene":
+        unknown = sorted(set(data) - set(cls.SECTIONS))
+        if unknown:
+            raise SceneError(f"unknown section {unknown[0]!r}; valid sections: {', '.join(cls.SECTIONS)}")
+        for required in ("structure", "material", "effects", "time"):
+            if required not in data:
+                raise SceneError(f"missing section [{required}]")
+        effects = _effects_from_dict(data["effects"])
+        inputs = tuple(InputConfig.from_dict(d, i) for i, d in enumerate(data.get("inputs", [])))
+        names = {e.name for e in effects}
+        if inputs and "actuation" not in names:
+            raise SceneError("the scene lists [[inputs]] but not the 'actuation' effect")
+        if "actuation" in names and not inputs:
+            raise SceneError("the 'actuation' effect needs at least one [[inputs]] entry")
+        return cls(
+            name=str(data.get("name", "scene")),
+            description=str(data.get("description", "")),
+            structure=StructureConfig.from_dict(data["structure"]),
+            material=MaterialConfig.from_dict(data["material"]),
+            effects=effects,
+            boundary=BoundaryConfig.from_dict(data.get("boundary")),
+            inputs=inputs,
+            initial_conditions=InitialConfig.from_dict(data.get("initial_conditions")),
+            time=TimeConfig.from_dict(data["time"]),
+            outputs=OutputConfig.from_dict(data.get("outputs")),
+            source_text=source_text,
+        )
+
+    @classmethod
+    def from_toml(cls, path) -> "Scene":
+        """Load a scene file; errors name the file and the offending key."""
+        path = Path(path)
+        try:
+            text = path.read_text()
+        except FileNotFoundError:
+            raise SceneError(f"scene file not found: {path}") from None
+        try:
+            data = tomllib.loads(text)
+        except tomllib.TOMLDecodeError as exc:
+            raise SceneError(f"{path}: invalid TOML: {exc}") from None
+        try:
+            return cls.from_dict(data, source_text=text)
+        except SceneError as exc:
+            raise SceneError(f"{path}: {exc}") from None
+
+    @property
+    def effect_names(self) -> tuple[str, ...]:
+        return tuple(e.name for e in self.effects)
+
+    def effect(self, name: str) -> EffectConfig | None:
+        return next((e for e in self.effects if e.name == name), None)
+
+    def to_dict(self) -> dict:
+        """Plain-dict view (for metadata in result files)."""
+        return asdict(self)

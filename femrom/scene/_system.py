@@ -1,0 +1,154 @@
+"""The full-order model a scene builds: a sparse second-order system."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+import numpy as np
+import scipy.sparse as sp
+
+from femrom.fem import Condensation, NonlinearForce
+
+
+@dataclass(frozen=True, eq=False)
+class SecondOrderSystem:
+    r"""``M q'' + C q' + K q + f_nl(q, q') = B u(t)``,  ``y = E q``  on the free dofs.
+
+    Only the operators of the effects a scene lists are present; an absent
+    effect is ``None`` and costs nothing downstream.
+
+    Attributes
+    ----------
+    mass : (n, n) sparse
+        Consistent or lumped mass ``M`` (SPD).
+    stiffness : (n, n) sparse
+        Stiffness ``K`` (symmetric; SPD once rigid-body modes are constrained).
+    damping : (n, n) sparse or None
+        Damping ``C`` (symmetric positive semidefinite), e.g. Rayleigh ``a M + b K``.
+    input_matrix : (n, m) ndarray or sparse, or None
+        Input columns ``B``.
+    inputs : callable or None
+        ``u(t) -> (m,) ndarray``; required when ``input_matrix`` is given.
+    output_matrix : (p, n) sparse or None
+        Output rows ``E``.
+    nonlinear : NonlinearForce or None
+        Nonlinear internal force with its tangent (and internal state).
+    condensation : Condensation
+        Free/fixed dof map back to full fields.
+    output_names : tuple of str
+        One name per output row.
+    metadata : dict
+        What built the system (scene name, mesh size, timings of each stage).
+    """
+
+    mass: sp.csr_matrix
+    stiffness: sp.csr_matrix
+    damping: sp.csr_matrix | None = None
+    input_matrix: Any = None
+    inputs: Callable[[float], np.ndarray] | None = None
+    output_matrix: sp.csr_matrix | None = None
+    nonlinear: NonlinearForce | None = None
+    condensation: Condensation | None = None
+    output_names: tuple[str, ...] = ()
+    metadata: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        n = self.mass.shape[0]
+        for name in ("mass", "stiffness", "damping"):
+            A = getattr(self, name)
+            if A is not None and A.shape != (n, n):
+                raise ValueError(f"{name} has shape {A.shape}, expected ({n}, {n})")
+        if (self.input_matrix is None) != (self.inputs is None):
+            raise ValueError("input_matrix and inputs must be given together")
+        if self.input_matrix is not None and self.input_matrix.shape[0] != n:
+            raise ValueError(f"input_matrix has {self.input_matrix.shape[0]} rows, expected {n}")
+        if self.output_matrix is not None and self.output_matrix.shape[1] != n:
+            raise ValueError(f"output_matrix has {self.output_matrix.shape[1]} columns, expected {n}")
+        if self.condensation is None:
+            object.__setattr__(self, "condensation", Condensation.none(n))
+        elif self.condensation.n_free != n:
+            raise ValueError(f"condensation has {self.condensation.n_free} free dofs, expected {n}")
+
+    # -- sizes and flags -------------------------------------------------
+    @property
+    def n_dofs(self) -> int:
+        return self.mass.shape[0]
+
+    @property
+    def n_inputs(self) -> int:
+        return 0 if self.input_matrix is None else self.input_matrix.shape[1]
+
+    @property
+    def n_outputs(self) -> int:
+        return 0 if self.output_matrix is None else self.output_matrix.shape[0]
+
+    @property
+    def is_linear(self) -> bool:
+        return self.nonlinear is None
+
+    @property
+    def has_diagonal_mass(self) -> bool:
+        M = sp.csr_matrix(self.mass)
+        return M.nnz == np.count_nonzero(M.diagonal()) and M.nnz <= M.shape[0]
+
+    @property
+    def effects(self) -> tuple[str, ...]:
+        """The operator terms present, in the order of the equation."""
+        present = ["inertia", "stiffness"]
+        if self.damping is not None:
+            present.append("damping")
+        if self.nonlinear is not None:
+            present.append("nonlinear")
+        if self.input_matrix is not None:
+            present.append("inputs")
+        if self.output_matrix is not None:
+            present.append("outputs")
+        return tuple(present)
+
+    # -- evaluations -----------------------------------------------------
+    def external_force(self, t: float) -> np.ndarray | None:
+        """(n,) ndarray ``B u(t)``, or ``None`` without inputs."""
+        if self.input_matrix is None:
+            return None
+        u = np.atleast_1d(np.asarray(self.inputs(t), dtype=float))
+        return np.asarray(self.input_matrix @ u).ravel()
+
+    def internal_force(self, q: np.ndarray, v: np.ndarray, state: Any = None) -> np.ndarray:
+        """(n,) ndarray ``C v + K q + f_nl(q, v)``."""
+        f = self.stiffness @ q
+        if self.damping is not None:
+            f = f + self.damping @ v
+        if self.nonlinear is not None:
+            f = f + self.nonlinear.force(q, v, state)
+        return f
+
+    def residual_force(self, t: float, q: np.ndarray, v: np.ndarray, state: Any = None) -> np.ndarray:
+        """(n,) ndarray ``B u(t) - C v - K q - f_nl``: the right side of ``M a = .``."""
+        f = -self.internal_force(q, v, state)
+        ext = self.external_force(t)
+        return f if ext is None else f + ext
+
+    def kinetic_energy(self, v: np.ndarray) -> float:
+        return 0.5 * float(v @ (self.mass @ v))
+
+    def potential_energy(self, q: np.ndarray) -> float:
+        """``q^T K q / 2 + U_nl(q)``; raises for a non-conservative nonlinear force."""
+        energy = 0.5 * float(q @ (self.stiffness @ q))
+        if self.nonlinear is not None:
+            energy += self.nonlinear.potential(q)
+        return energy
+
+    def energy(self, q: np.ndarray, v: np.ndarray) -> float:
+        """Total mechanical energy ``v^T M v / 2 + q^T K q / 2 + U_nl(q)``."""
+        return self.kinetic_energy(v) + self.potential_energy(q)
+
+    def outputs(self, q: np.ndarray) -> np.ndarray | None:
+        """(p,) or (p, k) ndarray ``E q``, or ``None`` without outputs."""
+        if self.output_matrix is None:
+            return None
+        return np.asarray(self.output_matrix @ q)
+
+    def full_field(self, q: np.ndarray) -> np.ndarray:
+        """Map free-dof vectors back to the full mesh dofs (zeros on Dirichlet dofs)."""
+        return self.condensation.expand(q)
