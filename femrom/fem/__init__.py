@@ -2,6 +2,7 @@
 
 from femrom.fem._condensation import Condensation
 from femrom.fem._damping import rayleigh_damping, rayleigh_from_damping_ratios
+from femrom.fem._elasticity import elasticity_stiffness, lame_parameters, vector_mass
 from femrom.fem._line import (
     axial_stiffness,
     bending_stiffness,
@@ -10,8 +11,21 @@ from femrom.fem._line import (
     line_mass,
 )
 from femrom.fem._nonlinear import LocalPotential, NonlinearForce
+from femrom.fem._spaces import LineSpace, SolidSpace, SpaceError
+from femrom.fem._vector_ops import (
+    average_rows,
+    dirichlet_dofs,
+    point_load,
+    probe_rows,
+    rigid_body_modes,
+    surface_pressure,
+    surface_traction,
+)
 
 __all__ = [
-    "Condensation", "LocalPotential", "NonlinearForce", "axial_stiffness", "bending_stiffness",
-    "hrz_lumped", "line_basis", "line_mass", "rayleigh_damping", "rayleigh_from_damping_ratios",
+    "Condensation", "LineSpace", "LocalPotential", "NonlinearForce", "SolidSpace", "SpaceError",
+    "average_rows", "axial_stiffness", "bending_stiffness", "dirichlet_dofs", "elasticity_stiffness",
+    "hrz_lumped", "lame_parameters", "line_basis", "line_mass", "point_load", "probe_rows",
+    "rayleigh_damping", "rayleigh_from_damping_ratios", "rigid_body_modes", "surface_pressure",
+    "surface_traction", "vector_mass",
 ]

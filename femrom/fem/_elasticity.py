@@ -22,9 +22,12 @@ is a fixed reference tensor contracted with a few numbers per element:
 
     M^e_{ai,bj} = \rho_e |\det A_e|\, \delta_{ij} \int_{\hat T} \hat\phi_a \hat\phi_b .
 
-All elements are then one matrix product ``(n_elements, 81) @ (81, n_local^2)``
-(per chunk of elements) and one scatter into the 3x3-block sparsity pattern of
-the scalar element, converted once to CSR.
+Per chunk of elements this is one matrix product ``R (n_local^2, 9) @ F (9, 9 n_e)``
+and one scatter (``np.add.at``) of whole 3x3 blocks into the block sparsity
+pattern of the scalar element, found once by sorting; the block matrix is
+converted once to CSR. For the P2 stiffness at 1e5 dofs this is ~20-40x faster
+than skfem's ``linear_elasticity`` form and 2x faster than building full COO
+triplets and calling ``coo_matrix(...).tocsr()``, with 9x smaller index arrays.
 """
 
 from __future__ import annotations
@@ -45,9 +48,9 @@ __all__ = [
 
 _SUPPORTED_ELEMENTS = (skfem.ElementTetP1, skfem.ElementTetP2)
 
-# Element block entries (9 n_local^2 floats each) computed per chunk: about
-# 64 MB of block data per chunk bounds peak memory on 1e6-dof P2 meshes while
-# keeping the per-chunk scatter overhead small.
+# Temporary memory per chunk of elements (element values and their int64
+# scatter targets, ~27 n_local^2 words per element): small next to the result
+# (P2 at 5e5 dofs: 479 MB CSR), and chunking costs nothing measurable.
 _CHUNK_BYTES = 64 * 2**20
 
 
@@ -136,23 +139,26 @@ def _affine_maps(mesh, elements) -> tuple[np.ndarray, np.ndarray]:
     p = mesh.p.T
     t = mesh.t[:, elements]
     x0 = p[t[0]]
-    A = np.stack([p[t[1]] - x0, p[t[2]] - x0, p[t[3]] - x0], axis=2)
-    det = np.linalg.det(A)
+    c0, c1, c2 = p[t[1]] - x0, p[t[2]] - x0, p[t[3]] - x0  # columns of A_e
+    # Rows of A^{-1} are the cross products of the columns over det A
+    # (cofactor formula; cheaper than batched LU for 3x3).
+    adj = np.stack([np.cross(c1, c2), np.cross(c2, c0), np.cross(c0, c1)], axis=1)
+    det = np.einsum("ej,ej->e", c0, adj[:, 0])
     if np.any(det == 0.0):
         raise ValueError(f"{int(np.sum(det == 0.0))} degenerate (zero-volume) tetrahedra")
-    return np.linalg.inv(A), np.abs(det)
+    return adj / det[:, None, None], np.abs(det)
 
 
 def _reference_gradient_tensor(elem) -> np.ndarray:
-    r"""(9, n_local^2) ndarray ``R[(k, l), (a, b)] = \int \partial_k \phi_a \partial_l \phi_b``.
+    r"""(n_local^2, 9) ndarray ``R[(a, b), (k, l)] = \int \partial_k \phi_a \partial_l \phi_b``.
 
     Exact: gradients have degree ``p - 1``, integrated with a degree ``2 p - 2`` rule.
     """
     X, W = get_quadrature(RefTet, max(2 * (elem.maxdeg - 1), 1))
     nl = elem.doflocs.shape[0]
     dphi = np.stack([elem.lbasis(X, a)[1] for a in range(nl)])  # (a, k, q)
-    R = np.einsum("akq,blq,q->klab", dphi, dphi, W)
-    return R.reshape(9, nl * nl)
+    R = np.einsum("akq,blq,q->abkl", dphi, dphi, W)
+    return R.reshape(nl * nl, 9)
 
 
 def _reference_mass_matrix(elem) -> np.ndarray:
@@ -182,8 +188,9 @@ class _BlockPattern:
     ----------
     indptr, indices : int ndarrays
         CSR pattern of the (n_scalar, n_scalar) scalar coupling matrix.
-    position : (n_e, n_local, n_local) int ndarray
-        Index into ``indices`` of the pair (local a, local b) of each element.
+    position : (n_local^2, n_e) int ndarray
+        Index into ``indices`` of the local pair ``(a, b)`` (row ``a n_local + b``)
+        of each element.
     n_scalar : int
     """
 
@@ -204,7 +211,8 @@ def _block_pattern(scalar_dofs: np.ndarray, n_scalar: int) -> _BlockPattern:
     ``np.unique(return_inverse=True)`` here (0.45 s vs 0.65 s for 7e6 pairs).
     """
     n_e, nl = scalar_dofs.shape
-    key = (scalar_dofs[:, :, None] * n_scalar + scalar_dofs[:, None, :]).ravel()
+    dofs = scalar_dofs.T
+    key = (dofs[:, None, :] * n_scalar + dofs[None, :, :]).ravel()  # [a, b, e]
     order = np.argsort(key, kind="stable")
     sorted_key = key[order]
     del key
@@ -223,7 +231,7 @@ def _block_pattern(scalar_dofs: np.ndarray, n_scalar: int) -> _BlockPattern:
     indices = (unique_key - rows * n_scalar).astype(index_dtype)
     indptr = np.zeros(n_scalar + 1, dtype=index_dtype)
     np.cumsum(np.bincount(rows, minlength=n_scalar), out=indptr[1:])
-    return _BlockPattern(indptr, indices, position.reshape(n_e, nl, nl), n_scalar)
+    return _BlockPattern(indptr, indices, position.reshape(nl * nl, n_e), n_scalar)
 
 
 def _chunks(n_elements: int, entries_per_element: int, chunk_size: int | None):
@@ -234,20 +242,21 @@ def _chunks(n_elements: int, entries_per_element: int, chunk_size: int | None):
 
 # -- operators ----------------------------------------------------------------
 def _stiffness_factors(inv_jac, abs_det, lam, mu) -> np.ndarray:
-    r"""(9 [i, j], n_e, 9 [k, l]) ndarray of the per-element material-geometry factors.
+    r"""(9 [k, l], 9 n_e [e, i, j]) ndarray of per-element material-geometry factors.
 
     ``|det A| (lam G_ki G_lj + mu G_kj G_li + mu delta_ij G_k . G_l)``, ``G = A^{-1}``.
     """
     G = inv_jac
-    outer = np.einsum("eki,elj->ijekl", G, G)  # G_ki G_lj
-    gram = np.einsum("ekm,elm->ekl", G, G)  # G_k . G_l
+    outer = np.einsum("eki,elj->kleij", G, G)  # G_ki G_lj
     lam_w = (lam * abs_det)[:, None, None]
     mu_w = (mu * abs_det)[:, None, None]
-    F = lam_w * outer + mu_w * outer.transpose(1, 0, 2, 3, 4)  # G_kj G_li: swap i<->j
+    F = lam_w * outer
+    F += mu_w * outer.transpose(0, 1, 2, 4, 3)  # G_kj G_li
+    gram = np.einsum("ekm,elm->kle", G, G)  # G_k . G_l
+    gram *= mu * abs_det
     for i in range(3):
-        F[i, i] += mu_w * gram
-    n_e = G.shape[0]
-    return F.reshape(9, n_e, 9)
+        F[:, :, :, i, i] += gram
+    return F.reshape(9, -1)
 
 
 def elasticity_stiffness(basis, youngs_modulus, poisson_ratio, *,
@@ -270,10 +279,10 @@ def elasticity_stiffness(basis, youngs_modulus, poisson_ratio, *,
         ``MeshTet``. Only its mesh, element and dofs are used, so a basis built
         with ``intorder=1`` (cheap) gives the same matrix.
     youngs_modulus, poisson_ratio : float or (n_e,) array_like
-        Material, constant or per element of ``basis``.
+        Material, constant or per element of ``basis`` (``n_e`` elements; a
+        basis restricted with ``elements=`` leaves zero rows on the other nodes).
     chunk_size : int, optional
-        Elements per chunk (bounds the temporary memory; default ~64 MB of
-        element blocks per chunk).
+        Elements per chunk (bounds the temporary memory to ~64 MB by default).
 
     Returns
     -------
@@ -287,24 +296,28 @@ def elasticity_stiffness(basis, youngs_modulus, poisson_ratio, *,
                               _per_element(poisson_ratio, n_e, "poisson_ratio"))
     scalar_dofs = _scalar_element_dofs(basis)
     pattern = _block_pattern(scalar_dofs, basis.N // 3)
-    R = _reference_gradient_tensor(elem)
-    nl2 = R.shape[1]
-    data = np.zeros((9, pattern.n_blocks))
-    for chunk in _chunks(n_e, 9 * (nl2 + 9), chunk_size):
+    Rt = _reference_gradient_tensor(elem)
+    nl2 = Rt.shape[0]
+    blocks = np.zeros((pattern.n_blocks, 3, 3))
+    flat_blocks = blocks.reshape(-1)
+    for chunk in _chunks(n_e, 9 * nl2 * 3, chunk_size):
         inv_jac, abs_det = _affine_maps(basis.mesh, elements[chunk])
         F = _stiffness_factors(inv_jac, abs_det, lam[chunk], mu[chunk])
-        position = pattern.position[chunk].ravel()
-        for ij in range(9):
-            data[ij] += np.bincount(position, weights=(F[ij] @ R).ravel(),
-                                    minlength=pattern.n_blocks)
-    return _blocks_to_csr(pattern, data.T.reshape(-1, 3, 3))
+        values = Rt @ F  # (nl2, n_chunk * 9): [ab, e, ij]
+        position = pattern.position[:, chunk].astype(np.int64)
+        target = (position[:, :, None] * 9 + np.arange(9)).ravel()  # [ab, e, ij]
+        # One ufunc.at over whole 3x3 blocks (contiguous): as fast as bincount
+        # in numpy >= 1.25, and nothing is paid per untouched block.
+        np.add.at(flat_blocks, target, values.ravel())
+    indptr, indices = pattern.indptr, pattern.indices
+    del pattern  # frees the (n_local^2, n_e) positions before the CSR copy
+    return _blocks_to_csr(indptr, indices, blocks)
 
 
-def _blocks_to_csr(pattern: _BlockPattern, blocks: np.ndarray) -> sp.csr_matrix:
-    """CSR of the (3 n, 3 n) matrix with 3x3 ``blocks`` ((n_blocks, 3, 3)) on ``pattern``."""
-    n = 3 * pattern.n_scalar
-    K = sp.bsr_matrix((blocks, pattern.indices, pattern.indptr), shape=(n, n))
-    return K.tocsr()
+def _blocks_to_csr(indptr: np.ndarray, indices: np.ndarray, blocks: np.ndarray) -> sp.csr_matrix:
+    """CSR of the (3 n, 3 n) matrix with 3x3 ``blocks`` ((n_blocks, 3, 3)) on a block pattern."""
+    n = 3 * (indptr.size - 1)
+    return sp.bsr_matrix((blocks, indices, indptr), shape=(n, n)).tocsr()
 
 
 def _scalar_mass(basis, density, *, lumped: bool):
@@ -317,11 +330,7 @@ def _scalar_mass(basis, density, *, lumped: bool):
         raise ValueError(f"density must be > 0, got min {rho.min()}")
     Mref = _reference_mass_matrix(elem)
     scalar_dofs = _scalar_element_dofs(basis)
-    p = basis.mesh.p.T
-    t = basis.mesh.t[:, elements]
-    x0 = p[t[0]]
-    abs_det = np.abs(np.linalg.det(np.stack([p[t[k]] - x0 for k in (1, 2, 3)], axis=2)))
-    scale = rho * abs_det
+    scale = rho * _affine_maps(basis.mesh, elements)[1]
     n_scalar = basis.N // 3
     if lumped:
         # HRZ: diagonal of the consistent element mass, scaled so each element
@@ -332,12 +341,12 @@ def _scalar_mass(basis, density, *, lumped: bool):
         return np.bincount(scalar_dofs.ravel(), weights=weights, minlength=n_scalar)
     pattern = _block_pattern(scalar_dofs, n_scalar)
     data = np.bincount(pattern.position.ravel(),
-                       weights=(scale[:, None] * Mref.ravel()[None, :]).ravel(),
+                       weights=(Mref.reshape(-1, 1) * scale[None, :]).ravel(),
                        minlength=pattern.n_blocks)
     return pattern, data
 
 
-def vector_mass(basis, density, *, lumped: bool = False):
+def vector_mass(basis, density, *, lumped: bool = False) -> sp.csr_matrix:
     r"""Mass matrix of a displacement field, consistent or HRZ-lumped.
 
     .. math::
@@ -346,8 +355,9 @@ def vector_mass(basis, density, *, lumped: bool = False):
 
     Lumped: each element's consistent diagonal scaled to keep its mass
     (HRZ; Hinton, Rock & Zienkiewicz 1976). For P1 it equals the row sum
-    (``rho V_e / 4`` per vertex); for P2 the row sum gives zero vertex masses
-    while HRZ gives ``rho V_e / 36`` per vertex and ``4 rho V_e / 27`` per edge.
+    (``rho V_e / 4`` per vertex); for P2 the row sum gives negative vertex
+    masses (``-rho V_e / 20``) while HRZ gives ``rho V_e / 36`` per vertex and
+    ``4 rho V_e / 27`` per edge node, all positive.
 
     Parameters
     ----------
@@ -367,5 +377,7 @@ def vector_mass(basis, density, *, lumped: bool = False):
     if lumped:
         return sp.diags(np.repeat(result, 3), format="csr")
     pattern, data = result
-    blocks = data[:, None, None] * np.eye(3)[None, :, :]
-    return _blocks_to_csr(pattern, blocks)
+    n = pattern.n_scalar
+    scalar = sp.csr_matrix((data, pattern.indices, pattern.indptr), shape=(n, n))
+    # Interleaved numbering 3 s + c is exactly M_s (x) I_3 (as fast as a hand-made CSR).
+    return sp.kron(scalar, sp.identity(3), format="csr")

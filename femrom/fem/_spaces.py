@@ -13,8 +13,8 @@ import numpy as np
 import scipy.sparse as sp
 from skfem import Basis, LinearForm
 
-from femrom.fem import _line
-from femrom.mesh import MeshError, boundary_facets, subdomain_elements
+from femrom.fem import _elasticity, _line, _vector_ops
+from femrom.mesh import boundary_facets, subdomain_elements
 
 
 class SpaceError(ValueError):
@@ -142,9 +142,106 @@ class LineSpace:
         return component
 
 
+class SolidSpace:
+    """Displacement field on tetrahedra (P1 or P2); components ``x``, ``y``, ``z``."""
+
+    components = ("x", "y", "z")
+
+    def __init__(self, mesh, element: str):
+        from skfem import ElementTetP1, ElementTetP2, ElementVector
+
+        scalar = {"p1": ElementTetP1, "p2": ElementTetP2}.get(element)
+        if scalar is None:
+            raise SpaceError(f"unknown solid element {element!r}; valid: p1, p2")
+        self.mesh = mesh
+        self.element = element
+        # The fast assembly, loads and probes use only the mesh, element and dof
+        # numbering of this basis (they build their own facet/cell bases), so the
+        # lowest quadrature keeps its precomputed values small: skfem's default
+        # order would hold ~4 GB of basis values for vector P2 at 5e5 dofs.
+        self.basis = Basis(mesh, ElementVector(scalar()), intorder=1)
+
+    @property
+    def n_total(self) -> int:
+        return self.basis.N
+
+    def stiffness(self, effect: str, material) -> sp.csr_matrix:
+        if effect != "elasticity":
+            raise SpaceError(f"a solid takes the 'elasticity' effect, not {effect!r}")
+        _need(material, "poisson_ratio", "elasticity")
+        return _elasticity.elasticity_stiffness(self.basis, material.youngs_modulus, material.poisson_ratio)
+
+    def mass(self, material, *, lumped: bool) -> sp.csr_matrix:
+        return _elasticity.vector_mass(self.basis, material.density, lumped=lumped)
+
+    def boundary_dofs(self, name: str, *, clamped: bool) -> np.ndarray:
+        boundary_facets(self.mesh, name)  # one clear error for an unknown name
+        return _vector_ops.dirichlet_dofs(self.basis, name)
+
+    def rigid_body_modes(self) -> np.ndarray:
+        """(n_total, 6) translations and rotations: the near-nullspace for AMG."""
+        return _vector_ops.rigid_body_modes(self.basis)
+
+    def load_vector(self, load) -> np.ndarray:
+        """(n_total,) load: point force, constant traction or normal pressure."""
+        if load.kind == "surface_pressure":
+            return _vector_ops.surface_pressure(self.basis, _name(load.at, load.kind), load.magnitude)
+        vector = self._direction(load) * load.magnitude
+        if load.kind == "surface_traction":
+            return _vector_ops.surface_traction(self.basis, _name(load.at, load.kind), vector)
+        if isinstance(load.at, str):
+            raise SpaceError("a solid point_load needs a point [x, y, z] in 'at' (use surface_traction "
+                             "for a load on a named boundary)")
+        return _vector_ops.point_load(self.basis, load.at, vector)
+
+    def output_row(self, probe) -> sp.csr_matrix:
+        component = self.components.index(self._component(probe.component))
+        if probe.average:
+            return _vector_ops.average_rows(self.basis, _name(probe.at, "average"), component)
+        if isinstance(probe.at, str):
+            raise SpaceError(f"a solid probe needs a point [x, y, z]; to average over {probe.at!r} "
+                             "list it under outputs.averages")
+        return _vector_ops.probe_rows(self.basis, [probe.at], component)
+
+    def coordinates(self, component=None) -> tuple[np.ndarray, np.ndarray]:
+        """Dofs of ``component`` and their (3, k) locations (vertices, P2 edge midpoints)."""
+        c = self.components.index(self._component(component))
+        dofs = np.flatnonzero(np.arange(self.n_total) % 3 == c)
+        return dofs, self.basis.doflocs[:, dofs]
+
+    def interpolate(self, function, component=None) -> np.ndarray:
+        """(n_total,) Lagrange interpolant of ``function(x, y, z)`` in one component."""
+        dofs, x = self.coordinates(component)
+        q = np.zeros(self.n_total)
+        q[dofs] = function(*x)
+        return q
+
+    def _direction(self, load) -> np.ndarray:
+        if load.direction is not None:
+            direction = np.asarray(load.direction, dtype=float)
+            if direction.shape != (3,):
+                raise SpaceError(f"a solid load direction needs 3 components, got {load.direction}")
+            return direction
+        direction = np.zeros(3)
+        direction[self.components.index(self._component(load.component))] = 1.0
+        return direction
+
+    def _component(self, component):
+        component = component or "x"
+        if component not in self.components:
+            raise SpaceError(f"unknown component {component!r}; valid: {', '.join(self.components)}")
+        return component
+
+
+def _name(at, what):
+    if not isinstance(at, str):
+        raise SpaceError(f"a {what} needs a boundary name, got {at}")
+    return at
+
+
 def _need(material, key, effect):
     if getattr(material, key) is None:
         raise SpaceError(f"the {effect!r} effect needs [material] {key}")
 
 
-__all__ = ["LineSpace", "SpaceError", "MeshError"]
+__all__ = ["LineSpace", "SolidSpace", "SpaceError"]
