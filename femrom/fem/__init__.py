@@ -11,6 +11,13 @@ from femrom.fem._line import (
     line_mass,
 )
 from femrom.fem._nonlinear import LocalPotential, NonlinearForce
+from femrom.fem._solvers import (
+    STRATEGIES,
+    LinearSolver,
+    LinearSolverError,
+    choose_strategy,
+    make_solver,
+)
 from femrom.fem._spaces import LineSpace, SolidSpace, SpaceError
 from femrom.fem._vector_ops import (
     average_rows,
@@ -23,6 +30,7 @@ from femrom.fem._vector_ops import (
 )
 
 __all__ = [
+    "STRATEGIES", "LinearSolver", "LinearSolverError", "choose_strategy", "make_solver",
     "Condensation", "LineSpace", "LocalPotential", "NonlinearForce", "SolidSpace", "SpaceError",
     "average_rows", "axial_stiffness", "bending_stiffness", "dirichlet_dofs", "elasticity_stiffness",
     "hrz_lumped", "lame_parameters", "line_basis", "line_mass", "point_load", "probe_rows",

@@ -1,0 +1,86 @@
+"""Run a built scene: choose the scheme and keep only the outputs the scene asks for."""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from femrom.fem import make_solver
+from femrom.integrators._central_difference import CentralDifference
+from femrom.integrators._consumers import EnergyRecorder, OutputRecorder, Trajectory
+from femrom.integrators._driver import integrate
+from femrom.integrators._midpoint import ImplicitMidpoint
+from femrom.integrators._newmark import GeneralizedAlpha, Newmark
+
+_FIELD_KEYS = {"displacement": "q", "velocity": "v", "acceleration": "a"}
+
+
+def scheme_for(time_config):
+    """The scheme a scene's ``[time]`` names."""
+    name = time_config.integrator
+    if name == "newmark":
+        return Newmark()
+    if name == "generalized_alpha":
+        return GeneralizedAlpha(spectral_radius=time_config.spectral_radius)
+    if name == "central_difference":
+        return CentralDifference()
+    if name == "implicit_midpoint":
+        return ImplicitMidpoint()
+    raise ValueError(f"unknown integrator {name!r}")
+
+
+@dataclass(frozen=True, eq=False)
+class SimulationResult:
+    """What a scene keeps: times, outputs (p, k), energy (k,), fields (n, k) per name."""
+
+    times: np.ndarray
+    outputs: np.ndarray | None
+    energy: np.ndarray | None
+    fields: dict
+    summary: dict
+
+
+def simulate(model, *, dt: float | None = None, t_end: float | None = None, consumers=(),
+             progress: bool | None = None) -> SimulationResult:
+    """Integrate a :class:`~femrom.scene.FullOrderModel` over its time window.
+
+    Only what ``[outputs]`` lists is recorded: probe/average outputs, the
+    energy, and full fields (in memory here; stream them to a store with an
+    extra consumer). ``dt`` and ``t_end`` override the scene's (ladders).
+    """
+    scene, system = model.scene, model.system
+    dt = scene.time.dt if dt is None else float(dt)
+    t_end = scene.time.t_end if t_end is None else float(t_end)
+    n_steps = int(round(t_end / dt))
+    every = scene.outputs.save_every
+    kept = []
+    outputs = energy = trajectory = None
+    if system.output_matrix is not None:
+        outputs = OutputRecorder(system, every=every)
+        kept.append(outputs)
+    if scene.outputs.energy and (system.nonlinear is None or system.nonlinear.conservative):
+        energy = EnergyRecorder(system, every=every)
+        kept.append(energy)
+    if scene.outputs.fields:
+        trajectory = Trajectory(every=every, fields=tuple(_FIELD_KEYS[f] for f in scene.outputs.fields))
+        kept.append(trajectory)
+
+    modes = getattr(model.space, "rigid_body_modes", None)
+    near_nullspace = None if modes is None else system.condensation.vector(modes())
+    solver = functools.partial(make_solver, strategy=scene.time.solver, near_nullspace=near_nullspace)
+    summary = integrate(system, scheme_for(scene.time), model.initial_displacement, model.initial_velocity,
+                        dt, n_steps, consumers=(*kept, *consumers), solver=solver, progress=progress)
+    times = dt * np.arange(0, n_steps + 1, every)
+    fields = {}
+    if trajectory is not None:
+        fields = {name: getattr(trajectory, key) for name, key in _FIELD_KEYS.items()
+                  if name in scene.outputs.fields}
+    return SimulationResult(
+        times=times,
+        outputs=None if outputs is None else outputs.outputs,
+        energy=None if energy is None else energy.total,
+        fields=fields,
+        summary=asdict(summary),
+    )

@@ -1,0 +1,120 @@
+"""Scenes: strict configuration, signals, and 'only the listed effects are assembled'."""
+
+import numpy as np
+import pytest
+from skfem import MeshLine
+
+import femrom.fem as fem
+from femrom.scene import Scene, SceneError, Signal, build
+
+BEAM = {
+    "name": "unit",
+    "structure": {"geometry": "beam_line", "element": "hermite", "parameters": {"length": 1.0, "mesh_size": 0.1}},
+    "material": {"youngs_modulus": 2.1e11, "density": 7850.0, "area": 2e-4, "second_moment": 1.6667e-9},
+    "effects": {"inertia": {}, "bending": {}},
+    "boundary": {"clamped": ["left"]},
+    "initial_conditions": {"kind": "expression", "displacement": "1e-3 * x**2"},
+    "time": {"t_end": 0.01, "dt": 1e-3},
+    "outputs": {"probes": [{"name": "tip", "at": "right", "component": "w"}]},
+}
+
+
+def _line_mesh(n=10):
+    return MeshLine(np.linspace(0.0, 1.0, n + 1)).with_boundaries(
+        {"left": lambda x: np.isclose(x[0], 0.0), "right": lambda x: np.isclose(x[0], 1.0)})
+
+
+def _with(**sections):
+    data = {k: (dict(v) if isinstance(v, dict) else v) for k, v in BEAM.items()}
+    data.update(sections)
+    return data
+
+
+@pytest.mark.parametrize("data, fragment", [
+    (_with(effects={"inertia": {}, "bending": {}, "magic": {}}), "unknown effect 'magic'; valid effects: inertia"),
+    (_with(material={"youngs_modulus": 1.0, "density": 1.0, "colour": "red"}), "unknown key 'colour' in [material]"),
+    (_with(time={"t_end": 1.0, "dt": 0.1, "integrator": "rk4"}), "unknown integrator 'rk4'; valid: newmark"),
+    (_with(time={"t_end": 1.0, "dt": -0.1}), "0 < dt <= t_end"),
+    (_with(effects={"inertia": {"mass": "consistent", "lump": 1}, "bending": {}}), "unknown key 'lump' in [effects.inertia]"),
+    (_with(gravity=9.81), "unknown section 'gravity'"),
+    (_with(inputs=[{"load": {"at": "right"}, "signal": {"kind": "step"}}]), "not the 'actuation' effect"),
+])
+def test_bad_scene_is_one_clear_error(data, fragment):
+    with pytest.raises(SceneError) as info:
+        Scene.from_dict(data)
+    assert fragment in str(info.value)
+
+
+def test_scene_file_errors_name_the_file(tmp_path):
+    path = tmp_path / "broken.toml"
+    path.write_text("[structure\n")
+    with pytest.raises(SceneError, match="broken.toml: invalid TOML"):
+        Scene.from_toml(path)
+    with pytest.raises(SceneError, match="scene file not found"):
+        Scene.from_toml(tmp_path / "absent.toml")
+
+
+def test_unknown_component_and_boundary_are_named():
+    with pytest.raises(ValueError, match="unknown component 'z'; valid: w, slope"):
+        build(Scene.from_dict(_with(outputs={"probes": [{"at": "right", "component": "z"}]})), mesh=_line_mesh())
+    with pytest.raises(ValueError, match="no boundary 'middle'"):
+        build(Scene.from_dict(_with(boundary={"clamped": ["middle"]})), mesh=_line_mesh())
+
+
+def test_signals():
+    t = np.array([-1.0, 0.0, 0.25, 0.5, 1.0, 2.0])
+    assert np.allclose(Signal.from_dict({"kind": "step", "amplitude": 2.0})(t), [0, 2, 2, 2, 2, 2])
+    impulse = Signal.from_dict({"kind": "impulse", "amplitude": 3.0, "duration": 1.0})
+    assert np.allclose(impulse(t), [0, 0, 3 * np.sin(np.pi / 4), 3, 0, 0], atol=1e-12)
+    sine = Signal.from_dict({"kind": "sine", "frequency": 0.25})
+    assert np.allclose(sine(t), [0, 0, np.sin(np.pi / 8), np.sin(np.pi / 4), 1, 0], atol=1e-12)
+    sig = Signal.from_dict({"kind": "sigmoid", "midpoint": 1.0, "width": 0.1})
+    assert sig(1.0) == pytest.approx(0.5) and sig(2.0) > 0.9999
+    arr = Signal.from_dict({"kind": "array", "times": [0.0, 1.0], "values": [0.0, 4.0]})
+    assert np.allclose(arr(t), [0, 0, 1, 2, 4, 0])
+    with pytest.raises(SceneError, match="unknown signal kind 'chirp'"):
+        Signal.from_dict({"kind": "chirp"})
+    with pytest.raises(SceneError, match="unknown key 'freq'"):
+        Signal.from_dict({"kind": "sine", "freq": 1.0})
+
+
+def test_scene_without_damping_or_inputs_never_assembles_them(monkeypatch):
+    """Principle 1 of DESIGN.md: nothing is assembled that the scene does not list."""
+    def forbidden(*args, **kwargs):
+        raise AssertionError("assembled an operator the scene does not list")
+
+    monkeypatch.setattr(fem, "rayleigh_damping", forbidden)
+    monkeypatch.setattr(fem.LineSpace, "load_vector", forbidden)
+    monkeypatch.setattr(fem.LocalPotential, "sine_gordon", forbidden)
+    model = build(Scene.from_dict(BEAM), mesh=_line_mesh())
+    s = model.system
+    assert s.damping is None and s.input_matrix is None and s.inputs is None and s.nonlinear is None
+    assert s.effects == ("inertia", "stiffness", "outputs")
+    # and the same scene with damping and an input does assemble them (the
+    # monkeypatched functions are really the ones the builder calls)
+    damped = _with(effects={"inertia": {}, "bending": {}, "damping": {"alpha": 0.1}})
+    with pytest.raises(AssertionError, match="does not list"):
+        build(Scene.from_dict(damped), mesh=_line_mesh())
+    actuated = _with(effects={"inertia": {}, "bending": {}, "actuation": {}},
+                     inputs=[{"load": {"at": "right", "component": "w"}, "signal": {"kind": "step"}}])
+    with pytest.raises(AssertionError, match="does not list"):
+        build(Scene.from_dict(actuated), mesh=_line_mesh())
+
+
+def test_full_scene_assembles_every_listed_effect():
+    data = _with(
+        effects={"inertia": {"mass": "lumped"}, "bending": {}, "damping": {"alpha": 0.5, "beta": 1e-5},
+                 "actuation": {}},
+        inputs=[{"name": "tip_force", "load": {"at": "right", "component": "w", "magnitude": 2.0},
+                 "signal": {"kind": "sine", "frequency": 5.0}}],
+    )
+    model = build(Scene.from_dict(data), mesh=_line_mesh())
+    s = model.system
+    assert s.has_diagonal_mass
+    assert (s.damping - (0.5 * s.mass + 1e-5 * s.stiffness)).count_nonzero() == 0
+    # the tip load column is 2 at the tip deflection dof, zero elsewhere
+    assert s.input_matrix.shape == (s.n_dofs, 1) and s.input_matrix.sum() == pytest.approx(2.0)
+    assert s.external_force(0.05) == pytest.approx(np.sin(2 * np.pi * 5.0 * 0.05) * s.input_matrix[:, 0])
+    # the initial condition 1e-3 x^2 is interpolated in value and slope; the tip probe reads it
+    assert float(s.outputs(model.initial_displacement)[0]) == pytest.approx(1e-3)
+    assert np.all(s.full_field(model.initial_displacement)[:2] == 0)  # clamped dofs stay zero
