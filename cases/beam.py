@@ -120,7 +120,7 @@ def run(out_dir, *, quick: bool = False, scene_path=SCENE) -> dict:
     (out_dir / "scene.toml").write_text(scene.source_text)
 
     dt_rows = time_step_ladder(scene, factors=(8, 4, 2, 1) if not quick else (4, 2, 1))
-    mesh_rows = mesh_ladder(scene, (0.2, 0.1, 0.05) if quick else (0.2, 0.1, 0.05, 0.025, 0.0125))
+    mesh_rows = mesh_ladder(scene, (0.1, 0.05, 0.025) if quick else (0.2, 0.1, 0.05, 0.025, 0.0125))
     plot_accuracy_cost(out_dir / "accuracy_cost_dt.png", dt_rows, "stepping_seconds", "tip_error", "dt",
                        title="FOM time step: tip error vs stepping time")
     plot_accuracy_cost(out_dir / "accuracy_cost_mesh.png", mesh_rows, "seconds", "frequency_error", "dofs",

@@ -1,6 +1,5 @@
 """Linear-solver strategies: agreement, factor reuse, strategy choice, errors."""
 
-import time
 
 import numpy as np
 import pytest
@@ -151,18 +150,16 @@ def test_pardiso_factorises_once_and_reuses():
     A = poisson_2d(120)  # 14,400 dofs
     rng = np.random.default_rng(3)
     solver = make_solver(A, "pardiso")
-    times, errors = [], []
+    errors = []
     for _ in range(5):
         b = rng.standard_normal(A.shape[0])
-        tic = time.perf_counter()
         x = solver.solve(b)
-        times.append(time.perf_counter() - tic)
         errors.append(np.linalg.norm(A @ x - b) / np.linalg.norm(b))
+    # the phases PARDISO really ran: one analysis + factorisation, then solves only
+    # (speed of reuse is measured in benchmarks/fom_ladder.py, not asserted here)
+    assert solver.phase_calls[12] == 1 and solver.phase_calls[33] == 5
     assert solver.n_factorizations == 1 and solver.n_solves == 5
     assert max(errors) < 1e-12
-    # a phase-33 solve is a pair of triangular solves: several times cheaper
-    # than the factorisation (measured ~10x here; 2x leaves room for a busy machine)
-    assert np.median(times) < solver.setup_seconds / 2
 
 
 @needs_pardiso

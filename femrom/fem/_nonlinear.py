@@ -98,7 +98,8 @@ class LocalPotential(NonlinearForce):
         return self.weights * self.dphi(q)
 
     def tangent(self, q, v=None, state=None):
-        return sp.diags(self.weights * self.ddphi(q), format="csr"), None
+        # a DIA matrix: cheap to build every Newton iteration (csr costs ~0.2 ms at n = 40)
+        return sp.dia_matrix((self.weights * self.ddphi(q), 0), shape=(q.size, q.size)), None
 
     def potential(self, q) -> float:
         return float(self.weights @ self.phi(q))

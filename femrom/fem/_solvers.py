@@ -183,6 +183,8 @@ class PardisoSolver(LinearSolver):
         self._ja = np.ascontiguousarray(A.indices + 1, dtype=np.int32)
         self._n = A.shape[0]
         self._factored = False
+        #: how often each PARDISO phase ran (12: analyse + factorise, 33: solve)
+        self.phase_calls = {12: 0, 33: 0, -1: 0}
         start = time.perf_counter()
         self._call(12, np.zeros((self._n, 1), order="F"))
         self._factored = True
@@ -190,6 +192,7 @@ class PardisoSolver(LinearSolver):
         self.n_factorizations = 1
 
     def _call(self, phase: int, b: np.ndarray) -> np.ndarray:
+        self.phase_calls[phase] = self.phase_calls.get(phase, 0) + 1
         int_p = ctypes.POINTER(ctypes.c_int32)
         dbl_p = ctypes.POINTER(ctypes.c_double)
         x = np.zeros_like(b)
