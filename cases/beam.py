@@ -116,7 +116,7 @@ def run(out_dir, *, quick: bool = False, scene_path=SCENE) -> dict:
     drift = float(np.max(np.abs(energy - energy[0])) / energy[0])
 
     plot_response(out_dir / "response.png", result.times, result.outputs, model.system.output_names,
-                  energy, title=f"{scene.description} ({model.system.n_dofs} dofs)")
+                  energy, title=f"cantilever FOM, {model.system.n_dofs} dofs, {result.summary['scheme']}")
     (out_dir / "scene.toml").write_text(scene.source_text)
 
     dt_rows = time_step_ladder(scene, factors=(8, 4, 2, 1) if not quick else (4, 2, 1))
