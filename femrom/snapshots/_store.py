@@ -1,0 +1,451 @@
+r"""A snapshot store: trajectories of ``(q, v, a, u, y, t)`` in one HDF5 file.
+
+The snapshot matrix of a field is ``X = [x_0, x_1, ..., x_{K-1}]``, an (n, K)
+matrix whose columns are the states of every trajectory, one after another.
+It never has to fit in memory: :meth:`SnapshotStore.iter_blocks` yields it as
+(n, k) column blocks, each read from whole chunks on disk.
+"""
+
+from __future__ import annotations
+
+import datetime
+import os
+import socket
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Iterator
+
+import h5py
+import numpy as np
+
+import femrom
+from femrom.fem import Condensation
+from femrom.integrators import StepResult, scheme_for
+from femrom.snapshots import _format
+from femrom.snapshots._errors import SnapshotStoreError
+from femrom.snapshots._superblock import SuperblockError, clear_write_flags, read_superblock
+
+
+def split_model(model_or_system):
+    """``(model, system)`` from a :class:`~femrom.scene.FullOrderModel` or a bare system."""
+    if hasattr(model_or_system, "system") and hasattr(model_or_system, "scene"):
+        return model_or_system, model_or_system.system
+    if hasattr(model_or_system, "mass") and hasattr(model_or_system, "n_dofs"):
+        return None, model_or_system
+    raise TypeError(f"expected a FullOrderModel or a SecondOrderSystem, got "
+                    f"{type(model_or_system).__name__}")
+
+
+def trajectory_name(trajectory) -> str:
+    """Trajectories are named ``"000"``, ``"001"``, ...; an int ``i`` means ``f"{i:03d}"``."""
+    if isinstance(trajectory, (int, np.integer)):
+        return f"{int(trajectory):03d}"
+    return str(trajectory)
+
+
+def _state_fields(model, system, fields) -> tuple[str, ...]:
+    if fields is None:
+        keys = {"displacement": "q", "velocity": "v", "acceleration": "a"}
+        asked = model.scene.outputs.fields if model is not None else ()
+        fields = ("q", *(keys[f] for f in asked if keys[f] != "q"))
+    fields = tuple(dict.fromkeys(fields))
+    unknown = [f for f in fields if f not in _format.STATE_FIELDS]
+    if unknown:
+        raise ValueError(f"unknown snapshot field {unknown[0]!r}; valid: "
+                         f"{', '.join(_format.STATE_FIELDS)}")
+    if "q" not in fields:
+        raise ValueError("a snapshot store always keeps 'q'")
+    return tuple(f for f in _format.STATE_FIELDS if f in fields)
+
+
+class SnapshotStore:
+    """Snapshots of one system in an HDF5 file: several trajectories, one layout.
+
+    Make one with :meth:`create`, open one with :meth:`open`. Each field ``q``,
+    ``v``, ``a`` of a trajectory is a (K, n) dataset chunked as (c, n): a
+    chunk is ``c`` whole snapshot columns, so column blocks read contiguously.
+    Rows past a trajectory's *declared length* are never read.
+
+    Attributes
+    ----------
+    path : Path
+    system : SecondOrderSystem or None
+        Needed to write (inputs, outputs, nonlinear checkpoints) and to restore
+        a nonlinear state from a checkpoint.
+    """
+
+    def __init__(self, path, *, system=None):
+        self.path = Path(path)
+        self.system = system
+        self._file: h5py.File | None = None
+        self._swmr_reader = False
+        self._writer = None
+        self._handle()
+        if system is not None and system.n_dofs != self.n_dofs:
+            raise SnapshotStoreError(f"{self.path}: store has {self.n_dofs} dofs, the system "
+                                     f"{system.n_dofs}")
+
+    # -- making and opening ----------------------------------------------
+    @classmethod
+    def create(cls, path, model_or_system, *, fields=None, scheme=None, dt: float | None = None,
+               n_steps: int | None = None, units: dict | None = None,
+               overwrite: bool = False) -> "SnapshotStore":
+        """Create an empty store for a system (or a built scene).
+
+        Parameters
+        ----------
+        path : str or Path
+        model_or_system : FullOrderModel or SecondOrderSystem
+            A model also records the scene's TOML text, its scheme, ``dt`` and
+            step count, and (by default) the fields its ``[outputs]`` lists.
+        fields : tuple of str, optional
+            Which of ``"q"``, ``"v"``, ``"a"`` to keep (``"q"`` always).
+            Inputs ``u`` and outputs ``y`` are kept when the system has them.
+        scheme : scheme or str, optional
+            Default scheme name of the trajectories (a model's scene gives one).
+        dt : float, optional
+            Default time step of the trajectories.
+        n_steps : int, optional
+            Default planned number of steps (``resume`` runs up to it).
+        units : dict, optional
+            Units of the quantities; SI (:data:`DEFAULT_UNITS`) by default.
+        overwrite : bool
+            Replace an existing file.
+        """
+        path = Path(path)
+        model, system = split_model(model_or_system)
+        fields = _state_fields(model, system, fields)
+        if path.exists() and not overwrite:
+            raise SnapshotStoreError(f"{path}: file exists (pass overwrite=True to replace it)")
+        scene = None if model is None else model.scene
+        if scene is not None:
+            scheme = scheme_for(scene.time) if scheme is None else scheme
+            dt = scene.time.dt if dt is None else dt
+            n_steps = scene.time.n_steps if n_steps is None else n_steps
+        cond = system.condensation
+        attrs = {
+            "format": _format.FORMAT_NAME,
+            "format_version": _format.FORMAT_VERSION,
+            "femrom_version": femrom.__version__,
+            "created": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+            "scene_name": "" if scene is None else scene.name,
+            "scene_toml": "" if scene is None else scene.source_text,
+            "units": _format.dumps(_format.DEFAULT_UNITS if units is None else units),
+            "fields": _format.dumps(list(fields)),
+            "n_dofs": system.n_dofs,
+            "n_inputs": system.n_inputs,
+            "n_outputs": system.n_outputs,
+            "output_names": _format.dumps(list(system.output_names)),
+            "system": _format.dumps(system.metadata),
+        }
+        if scheme is not None:
+            attrs["scheme"] = getattr(scheme, "name", str(scheme))
+        if dt is not None:
+            attrs["dt"] = float(dt)
+        if n_steps is not None:
+            attrs["n_steps"] = int(n_steps)
+        with _format.open_file(path, "w", libver="latest") as f:
+            f.attrs.update(attrs)
+            dofmap = f.create_group("dofmap")
+            dofmap.attrs["n_total"] = cond.n_total
+            dofmap.create_dataset("free", data=np.asarray(cond.free, dtype=np.int64))
+            dofmap.create_dataset("fixed", data=np.asarray(cond.fixed, dtype=np.int64))
+            f.create_group("trajectories")
+        return cls(path, system=system)
+
+    @classmethod
+    def open(cls, path, *, system=None) -> "SnapshotStore":
+        """Open an existing store (read-only until a writer is made).
+
+        Raises
+        ------
+        SnapshotStoreError
+            Missing, not HDF5, truncated, foreign, wrong-shaped or inconsistent.
+        """
+        return cls(path, system=system)
+
+    def _handle(self) -> h5py.File:
+        if self._file is None:
+            f, swmr = _format.open_for_reading(self.path)
+            try:
+                with self._guard("checking the layout"):
+                    _format.check_store(f, self.path)
+                    if swmr:
+                        _format.check_on_disk(f, self.path)
+            except BaseException:
+                f.close()
+                raise
+            self._file, self._swmr_reader = f, swmr
+        return self._file
+
+    @contextmanager
+    def _guard(self, what: str):
+        """Turn HDF5 failures (damaged or truncated data) into one-line errors naming the file."""
+        try:
+            yield
+        except SnapshotStoreError:
+            raise
+        except (OSError, KeyError, ValueError, RuntimeError) as exc:
+            raise SnapshotStoreError(f"{self.path}: damaged or unreadable ({what}): "
+                                     f"{_format.hdf5_message(exc)}") from None
+
+    def close(self) -> None:
+        """Close the file (an open writer is closed first, keeping its data)."""
+        if self._writer is not None:
+            self._writer.close()
+        if self._file is not None:
+            self._file.close()
+            self._file = None
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+    def __repr__(self) -> str:
+        return f"SnapshotStore({str(self.path)!r})"
+
+    # -- writing -----------------------------------------------------------
+    def writer(self, trajectory=None, *, chunk_steps: int | None = None, every: int = 1,
+               n_steps: int | None = None, dt: float | None = None, scheme=None,
+               fsync: bool = False):
+        """A consumer that streams a run into a new trajectory; see :class:`SnapshotWriter`."""
+        from femrom.snapshots._writer import SnapshotWriter
+
+        return SnapshotWriter(self, trajectory, chunk_steps=chunk_steps, every=every,
+                              n_steps=n_steps, dt=dt, scheme=scheme, fsync=fsync)
+
+    def _open_for_writing(self, writer) -> h5py.File:
+        """Reopen the file read-write for ``writer`` (clearing a killed writer's flags first)."""
+        if self._writer is not None:
+            raise SnapshotStoreError(f"{self.path}: trajectory {self._writer.trajectory!r} is "
+                                     "still being written; close its writer first")
+        if self._file is not None:
+            self._file.close()
+            self._file = None
+        self._recover()
+        f = _format.open_file(self.path, "r+", libver="latest")
+        try:
+            with self._guard("checking the layout"):
+                _format.check_store(f, self.path)
+            f.attrs["writer_pid"] = os.getpid()
+            f.attrs["writer_host"] = socket.gethostname()
+        except BaseException:
+            f.close()
+            raise
+        self._file, self._swmr_reader, self._writer = f, False, writer
+        return f
+
+    def _writer_closed(self) -> None:
+        self._writer = None
+        if self._file is not None:
+            self._file.close()
+            self._file = None
+
+    def _recover(self) -> None:
+        """Clear the "open for write" flags a killed writer left, after checking it is gone."""
+        try:
+            block = read_superblock(self.path)
+        except SuperblockError:
+            return  # not a version-3 superblock: opening it reports what is wrong
+        if not block.open_for_write:
+            return
+        f, _ = _format.open_for_reading(self.path)
+        with f:
+            pid, host = f.attrs.get("writer_pid"), _format.text(f.attrs.get("writer_host", ""))
+        if pid is not None and host == socket.gethostname() and _process_alive(int(pid)):
+            raise SnapshotStoreError(f"{self.path}: is open for writing by process {int(pid)}")
+        clear_write_flags(self.path)
+
+    # -- reading -------------------------------------------------------------
+    @property
+    def n_dofs(self) -> int:
+        """Free dofs n: the row count of the snapshot matrix."""
+        return int(self._handle().attrs["n_dofs"])
+
+    @property
+    def fields(self) -> tuple[str, ...]:
+        """Per-step datasets kept: some of ``q``, ``v``, ``a``, then ``u``, ``y`` if present."""
+        return _format.stored_fields(self._handle())
+
+    @property
+    def trajectories(self) -> tuple[str, ...]:
+        """Trajectory names in order (``"000"``, ``"001"``, ...)."""
+        return tuple(sorted(self._handle()["trajectories"]))
+
+    @property
+    def metadata(self) -> dict:
+        """Format, femrom version, creation time, scene TOML, units, scheme, dt, dof map, ..."""
+        with self._guard("reading metadata"):
+            return _format.read_metadata(self._handle())
+
+    @property
+    def condensation(self) -> Condensation:
+        """The dof map: free-dof snapshots back to full fields with ``.expand``."""
+        f = self._handle()
+        return Condensation.from_fixed(int(f["dofmap"].attrs["n_total"]), f["dofmap/fixed"][()])
+
+    def _group(self, trajectory) -> h5py.Group:
+        name = trajectory_name(trajectory)
+        group = self._handle()["trajectories"].get(name)
+        if group is None:
+            raise SnapshotStoreError(f"{self.path}: no trajectory {name!r}; stored: "
+                                     f"{', '.join(self.trajectories) or '(none)'}")
+        return group
+
+    def _dataset(self, group: h5py.Group, key: str) -> h5py.Dataset:
+        ds = group[key]
+        if self._swmr_reader:
+            ds.refresh()  # a live writer may have appended since the file was opened
+        return ds
+
+    def length(self, trajectory) -> int:
+        """Declared (committed) number of snapshots of a trajectory."""
+        group = self._group(trajectory)
+        with self._guard(f"reading trajectory {group.name}"):
+            length = int(self._dataset(group, "committed")[0])
+            for key in (*self.fields, "t", "step"):
+                if self._dataset(group, key).shape[0] < length:
+                    raise SnapshotStoreError(f"{self.path}: trajectory {group.name} declares "
+                                             f"{length} snapshots but {key!r} holds "
+                                             f"{group[key].shape[0]}")
+        return length
+
+    def n_snapshots(self, field: str = "q") -> int:
+        """Columns K of the snapshot matrix of ``field``: committed steps of all trajectories."""
+        self._check_field(field)
+        return sum(self.length(name) for name in self.trajectories)
+
+    def _check_field(self, field: str) -> None:
+        if field not in self.fields:
+            raise SnapshotStoreError(f"{self.path}: no field {field!r}; stored: "
+                                     f"{', '.join(self.fields)}")
+
+    def _rows(self, group, key, start, stop, length) -> np.ndarray:
+        if not 0 <= start <= stop <= length:
+            raise SnapshotStoreError(f"{self.path}: trajectory {group.name} has {length} committed "
+                                     f"snapshots; cannot read [{start}, {stop})")
+        with self._guard(f"reading {group.name}/{key}"):
+            return self._dataset(group, key)[start:stop]
+
+    def read(self, trajectory, field: str, start: int = 0, stop: int | None = None) -> np.ndarray:
+        """Snapshot columns ``start:stop`` of one trajectory.
+
+        Returns
+        -------
+        (w, k) ndarray
+            ``w = n`` for ``q``, ``v``, ``a``; ``m`` for ``u``; ``p`` for ``y``.
+            Fortran-ordered (the transpose of the (k, w) rows read, no copy).
+
+        Raises
+        ------
+        SnapshotStoreError
+            ``stop`` beyond the declared length, or an unknown field/trajectory.
+        """
+        self._check_field(field)
+        group = self._group(trajectory)
+        length = self.length(trajectory)
+        stop = length if stop is None else int(stop)
+        return self._rows(group, field, int(start), stop, length).T
+
+    def times(self, trajectory) -> np.ndarray:
+        """(L,) ndarray: times of the committed snapshots."""
+        group = self._group(trajectory)
+        length = self.length(trajectory)
+        return self._rows(group, "t", 0, length, length)
+
+    def steps(self, trajectory) -> np.ndarray:
+        """(L,) int ndarray: step indices of the committed snapshots."""
+        group = self._group(trajectory)
+        length = self.length(trajectory)
+        return self._rows(group, "step", 0, length, length)
+
+    def iter_blocks(self, field: str, block_steps: int,
+                    trajectories=None) -> Iterator[np.ndarray]:
+        """Column blocks of the snapshot matrix ``[X_000, X_001, ...]``, in order.
+
+        Each block lies in one trajectory: (w, k) with ``k = block_steps``
+        except the last block of a trajectory. Memory: one block. Choose
+        ``block_steps`` a multiple of the trajectories' ``chunk_steps`` to
+        read whole chunks.
+
+        Parameters
+        ----------
+        field : str
+        block_steps : int
+        trajectories : sequence, optional
+            Names or indices; all by default.
+        """
+        self._check_field(field)
+        block_steps = int(block_steps)
+        if block_steps < 1:
+            raise ValueError(f"block_steps must be >= 1, got {block_steps}")
+        names = self.trajectories if trajectories is None else \
+            tuple(trajectory_name(t) for t in trajectories)
+        for name in names:
+            group = self._group(name)
+            length = self.length(name)
+            for start in range(0, length, block_steps):
+                yield self._rows(group, field, start, min(start + block_steps, length), length).T
+
+    def attrs(self, trajectory) -> dict:
+        """A trajectory's run parameters: scheme, dt, n_steps, every, chunk_steps, created."""
+        group = self._group(trajectory)
+        return {k: (_format.text(v) if isinstance(v, (bytes, str)) else
+                    (v.item() if isinstance(v, np.generic) else v))
+                for k, v in group.attrs.items()}
+
+    def is_complete(self, trajectory) -> bool:
+        """Whether the last planned step (``n_steps`` attribute) is committed."""
+        attrs = self.attrs(trajectory)
+        if "n_steps" not in attrs:
+            return False
+        length = self.length(trajectory)
+        final = (int(attrs["n_steps"]) // int(attrs["every"])) * int(attrs["every"])
+        return length > 0 and int(self.steps(trajectory)[-1]) == final
+
+    def checkpoint(self, trajectory, system=None) -> StepResult | None:
+        """The committed restart state of a trajectory (``None`` before anything is committed).
+
+        It is the state of the last committed snapshot, or, when none is
+        committed yet, of the first one the writer received (not yet a row).
+        The nonlinear state is restored with ``system.nonlinear.restore``
+        (``system`` defaults to the store's); without a system it stays a
+        dict of arrays.
+        """
+        group = self._group(trajectory)
+        system = self.system if system is None else system
+        with self._guard(f"reading {group.name}/checkpoint"):
+            slot = int(self._dataset(group, "committed")[1])
+            if slot < 0:
+                return None
+            ck = group["checkpoint"]
+            q, v = _readonly(ck["q"][slot]), _readonly(ck["v"][slot])
+            a = _readonly(ck["a"][slot]) if ck["has_a"][slot] else None
+            arrays = {key: ck["state"][key][slot] for key in ck["state"]}
+            step, t = int(ck["step"][slot]), float(ck["t"][slot])
+        state = None
+        if system is not None and system.nonlinear is not None:
+            state = system.nonlinear.restore(arrays)
+        elif arrays:
+            state = arrays
+        return StepResult(step=step, t=t, q=q, v=v, a=a, state=state)
+
+
+def _readonly(x: np.ndarray) -> np.ndarray:
+    x = np.array(x, dtype=float)
+    x.setflags(write=False)
+    return x
+
+
+def _process_alive(pid: int) -> bool:
+    if pid == os.getpid():
+        return False
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True

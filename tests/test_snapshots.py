@@ -1,0 +1,436 @@
+"""Snapshot store: round trip, metadata, block reads, resume, SIGKILL at random moments,
+and one clear error for every kind of bad file."""
+
+import datetime
+import importlib.util
+import os
+import re
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+from types import SimpleNamespace
+
+import h5py
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+import femrom
+from femrom.integrators import (
+    CentralDifference,
+    Newmark,
+    OutputRecorder,
+    Trajectory,
+    integrate,
+    iterate,
+)
+from femrom.scene import SecondOrderSystem
+from femrom.snapshots import (
+    DEFAULT_UNITS,
+    FORMAT_NAME,
+    SnapshotStore,
+    SnapshotStoreError,
+    resume,
+)
+from femrom.snapshots import _format, _store, _writer
+from femrom.snapshots._superblock import lookup3, read_superblock
+
+REPO = Path(__file__).resolve().parents[1]
+HELPER = Path(__file__).with_name("_kill_helper.py")
+
+
+def _load_helper():
+    spec = importlib.util.spec_from_file_location("femrom_kill_helper", HELPER)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+helper = _load_helper()
+
+
+def forced_chain(n: int = 6) -> SecondOrderSystem:
+    """Damped spring chain, u = [sin 1.3 t, cos 0.4 t] on the end dofs, two outputs."""
+    K = sp.diags([2.0 * np.ones(n), -np.ones(n - 1), -np.ones(n - 1)], [0, 1, -1], format="csr")
+    M = sp.diags(1.0 + 0.1 * np.arange(n), format="csr")
+    B = np.zeros((n, 2))
+    B[0, 0] = B[-1, 1] = 1.0
+    return SecondOrderSystem(mass=M, stiffness=K, damping=(0.02 * K).tocsr(), input_matrix=B,
+                             inputs=lambda t: np.array([np.sin(1.3 * t), np.cos(0.4 * t)]),
+                             output_matrix=sp.csr_matrix(np.eye(n)[[1, n - 2]]),
+                             output_names=("left", "right"))
+
+
+def _rows_equal(store, other, trajectory, length=None) -> bool:
+    """Bitwise equality of every field and the times over ``other``'s first ``length`` rows."""
+    length = store.length(trajectory) if length is None else length
+    return (all(np.array_equal(store.read(trajectory, f), other.read(trajectory, f, 0, length))
+                for f in store.fields)
+            and np.array_equal(store.times(trajectory), other.times(trajectory)[:length])
+            and np.array_equal(store.steps(trajectory), other.steps(trajectory)[:length]))
+
+
+# -- round trip ----------------------------------------------------------------
+def test_round_trip_of_several_trajectories_and_column_blocks(tmp_path):
+    system = forced_chain()
+    n, dt = system.n_dofs, 0.05
+    store = SnapshotStore.create(tmp_path / "s.h5", system, fields=("q", "v", "a"),
+                                 scheme=Newmark(), dt=dt, n_steps=50)
+    references = []
+    rng = np.random.default_rng(0)
+    for every in (1, 3):  # two trajectories: different initial states, sampling and chunks
+        q0, v0 = rng.standard_normal(n), rng.standard_normal(n)
+        trajectory, outputs = Trajectory(every=every), OutputRecorder(system, every=every)
+        writer = store.writer(chunk_steps=7, every=every)  # 51 or 17 rows: partial last chunk
+        integrate(system, Newmark(), q0, v0, dt, 50, consumers=[writer, trajectory, outputs])
+        references.append((trajectory, outputs))
+
+    assert store.trajectories == ("000", "001")
+    assert store.n_dofs == n and store.fields == ("q", "v", "a", "u", "y")
+    assert store.n_snapshots("q") == 51 + 17
+    for name, (trajectory, outputs) in zip(store.trajectories, references):
+        for field in ("q", "v", "a"):  # bitwise: the store copies the integrator's numbers
+            assert np.array_equal(store.read(name, field), getattr(trajectory, field))
+        assert np.array_equal(store.times(name), trajectory.t)
+        assert np.array_equal(store.steps(name), trajectory.steps)
+        assert np.array_equal(store.read(name, "y"), outputs.outputs)
+        assert np.array_equal(store.read(name, "u"),
+                              np.column_stack([system.inputs(t) for t in trajectory.t]))
+        assert np.array_equal(store.read(name, "q", 4, 9), trajectory.q[:, 4:9])
+        assert store.is_complete(name)
+    assert store.attrs(1)["every"] == 3 and store.attrs(0)["dt"] == dt
+
+    blocks = list(store.iter_blocks("q", 5))
+    # each block in one trajectory: 51 -> 11 blocks (last of 1), 17 -> 4 blocks (last of 2)
+    assert [b.shape[1] for b in blocks] == [5] * 10 + [1] + [5] * 3 + [2]
+    assert all(b.shape[0] == n for b in blocks)
+    whole = np.hstack([t.q for t, _ in references])
+    assert np.array_equal(np.hstack(blocks), whole)
+    assert np.array_equal(np.hstack(list(store.iter_blocks("v", 100, trajectories=[1]))),
+                          references[1][0].v)
+
+    with h5py.File(store.path, "r") as f:  # the layout: (K, n) rows, chunks of whole columns
+        q = f["trajectories/000/q"]
+        assert q.chunks == (7, n) and q.maxshape == (None, n) and q.compression is None
+
+    with pytest.raises(SnapshotStoreError, match=r"has 51 committed snapshots; cannot read \[40, 52\)"):
+        store.read(0, "q", 40, 52)
+    with pytest.raises(SnapshotStoreError, match="no field 'w'; stored: q, v, a, u, y"):
+        store.read(0, "w")
+    with pytest.raises(SnapshotStoreError, match="no trajectory '007'; stored: 000, 001"):
+        store.read(7, "q")
+    store.close()
+
+
+def test_metadata_scene_text_version_dof_map_units(tmp_path):
+    model = helper.scene_model()
+    store = SnapshotStore.create(tmp_path / "m.h5", model)
+    meta = SnapshotStore.open(tmp_path / "m.h5").metadata
+    assert meta["format"] == FORMAT_NAME and meta["format_version"] == 1
+    assert meta["femrom_version"] == femrom.__version__
+    assert meta["scene_toml"] == helper.SCENE_TOML and meta["scene_name"] == "sine_gordon_bar"
+    assert meta["units"] == DEFAULT_UNITS
+    assert meta["scheme"] == "NewmarkAverageAcceleration"
+    assert meta["dt"] == 0.01 and meta["n_steps"] == 1000
+    assert meta["fields"] == ["q", "v", "a"]  # the scene's [outputs] fields
+    assert meta["output_names"] == ["tip"] and meta["n_inputs"] == 1
+    cond = model.system.condensation
+    assert meta["dofmap"]["n_total"] == cond.n_total == 25
+    assert np.array_equal(meta["dofmap"]["free"], cond.free)
+    assert np.array_equal(meta["dofmap"]["fixed"], cond.fixed) and cond.fixed.size == 1
+    created = datetime.datetime.fromisoformat(meta["created"])
+    assert abs((datetime.datetime.now(datetime.timezone.utc) - created).total_seconds()) < 600
+    assert np.array_equal(store.condensation.expand(np.ones(24)), cond.expand(np.ones(24)))
+
+
+# -- commit and resume in-process ----------------------------------------------
+def test_only_completed_chunks_are_declared_and_close_commits_the_rest(tmp_path):
+    system = forced_chain()
+    store = SnapshotStore.create(tmp_path / "c.h5", system, dt=0.05, n_steps=30,
+                                 scheme=CentralDifference())
+    writer = store.writer(chunk_steps=4)
+    run = iterate(system, CentralDifference(), np.ones(6), np.zeros(6), 0.05, 30)
+    for k, result in zip(range(11), run):  # steps 0..10: two chunks of 4 and 3 buffered rows
+        writer(result)
+    assert store.length(0) == 8 and writer.length == 8
+    assert store.checkpoint(0).step == 7  # the last committed row
+    with pytest.raises(SnapshotStoreError, match="cannot read"):
+        store.read(0, "q", 0, 9)
+    writer.close()
+    assert store.length(0) == 11 and store.checkpoint(0).step == 10
+    assert not store.is_complete(0)
+    with pytest.raises(SnapshotStoreError, match="trajectory .000. exists"):
+        store.writer(0)  # an existing trajectory is continued by resume, not a new writer
+    store.close()
+
+
+def test_resume_after_an_error_and_before_the_first_chunk_is_bit_identical(tmp_path):
+    system = helper.stateful_system()
+    q0, v0 = helper.stateful_initial_state()
+    reference = SnapshotStore.create(tmp_path / "ref.h5", system, fields=("q", "v", "a"),
+                                     scheme=Newmark(), dt=0.02, n_steps=80)
+    integrate(system, Newmark(), q0, v0, 0.02, 80, consumers=[reference.writer(chunk_steps=6)])
+
+    # a run stopped by an exception at step 40: close() commits 41 rows, resume does the rest
+    def bomb(result):
+        if result.step == 40:
+            raise KeyboardInterrupt
+
+    store = SnapshotStore.create(tmp_path / "a.h5", system, fields=("q", "v", "a"),
+                                 scheme=Newmark(), dt=0.02, n_steps=80)
+    with pytest.raises(KeyboardInterrupt):
+        integrate(system, Newmark(), q0, v0, 0.02, 80,
+                  consumers=[store.writer(chunk_steps=6), bomb])
+    assert store.length(0) == 41
+    state = store.checkpoint(0).state  # the stateful force's (sliders, commits), restored
+    assert state[1] == 40 and state[0].shape == (helper.STATEFUL_DOFS,)
+    store.close()
+    summary = resume(tmp_path / "a.h5", system, Newmark())
+    assert summary.n_steps == 40
+    done = SnapshotStore.open(tmp_path / "a.h5")
+    assert done.length(0) == 81 and _rows_equal(done, reference, 0)
+    done.close()
+    assert resume(tmp_path / "a.h5", system, Newmark()).n_steps == 0  # complete: nothing to do
+
+    # a run that died before its first chunk: only the initial checkpoint is committed
+    store = SnapshotStore.create(tmp_path / "b.h5", system, fields=("q", "v", "a"),
+                                 scheme=Newmark(), dt=0.02, n_steps=80)
+    writer = store.writer(chunk_steps=50)
+    for _, result in zip(range(20), iterate(system, Newmark(), q0, v0, 0.02, 80)):
+        writer(result)
+    writer._buffered = 0  # drop the buffered rows, as a kill would
+    store.close()
+    stopped = SnapshotStore.open(tmp_path / "b.h5")
+    assert stopped.length(0) == 0 and stopped.checkpoint(0).step == 0
+    stopped.close()
+    resume(tmp_path / "b.h5", system, Newmark())
+    done = SnapshotStore.open(tmp_path / "b.h5")
+    assert _rows_equal(done, reference, 0) and done.length(0) == 81
+    done.close()
+
+    with pytest.raises(SnapshotStoreError, match="was run with NewmarkAverageAcceleration, "
+                                                 "not CentralDifference"):
+        resume(tmp_path / "b.h5", system, CentralDifference())
+    reference.close()
+
+
+class _Stop(BaseException):
+    """Stands for a kill at one point of the commit protocol."""
+
+
+def _run_stopped_at(path, system, event_to_stop):
+    """Run 17 steps in chunks of 3, stopping just before write/flush number ``event_to_stop``.
+
+    The file is then closed without the writer's own ``close()``: everything
+    written before the stop reaches the disk, nothing after it (the prefix a
+    kill leaves that is hardest on the commit order). Returns the events counted.
+    """
+    events = [0]
+    write_rows, flush = _writer._write_rows, _writer.SnapshotWriter._flush
+
+    def count(function):
+        def wrapped(*args, **kwargs):
+            if events[0] == event_to_stop:
+                raise _Stop
+            events[0] += 1
+            return function(*args, **kwargs)
+        return wrapped
+
+    store = SnapshotStore.create(path, system, fields=("q", "v", "a"), scheme=Newmark(),
+                                 dt=0.02, n_steps=17)
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(_writer, "_write_rows", count(write_rows))
+        patch.setattr(_writer.SnapshotWriter, "_flush", count(flush))
+        writer = store.writer(chunk_steps=3)
+        run = iterate(system, Newmark(), *helper.stateful_initial_state(), 0.02, 17)
+        try:
+            for result in run:
+                writer(result)
+        except _Stop:
+            pass
+    writer._closed = True  # abandon the writer: no commit of the buffered rows
+    store._writer_closed()
+    return events[0]
+
+
+def test_a_stop_between_any_two_writes_of_a_commit_keeps_the_store_consistent(tmp_path):
+    system = helper.stateful_system()
+    n_events = _run_stopped_at(tmp_path / "reference.h5", system, -1)  # never stops
+    reference = SnapshotStore.open(tmp_path / "reference.h5")
+    assert reference.length(0) == 18
+    # the protocol: the initial checkpoint is 8 writes (step, t, has_a, q, v, a, 2 state
+    # arrays), flush, committed record, flush; each chunk adds 7 row writes (q, v, a, u, y,
+    # t, step) to that
+    initial, per_commit = 8 + 3, 7 + 8 + 3
+    assert n_events == initial + 6 * per_commit
+    first = initial + 3 * per_commit  # every point of the 4th chunk's commit, and just after
+    for event in range(first, first + per_commit + 1):
+        path = tmp_path / f"stopped_{event}.h5"
+        _run_stopped_at(path, system, event)
+        store = SnapshotStore.open(path)
+        length = store.length(0)
+        assert length in (9, 12)  # three chunks committed, or four
+        assert _rows_equal(store, reference, 0)
+        assert store.checkpoint(0).step == length - 1  # never a checkpoint ahead of the rows
+        store.close()
+        resume(path, system, Newmark())
+        finished = SnapshotStore.open(path)
+        assert finished.length(0) == 18 and _rows_equal(finished, reference, 0)
+        finished.close()
+    reference.close()
+
+
+# -- SIGKILL at random moments ---------------------------------------------------
+def _kill_once(kind, path, delay):
+    """Start the helper, wait until its writer exists, sleep ``delay`` s, SIGKILL it."""
+    env = {**os.environ, "PYTHONPATH": str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", "")}
+    process = subprocess.Popen([sys.executable, str(HELPER), kind, str(path)],
+                               stdout=subprocess.PIPE, env=env)
+    try:
+        assert process.stdout.readline().strip() == b"ready"
+        time.sleep(delay)
+        os.kill(process.pid, signal.SIGKILL)
+    finally:
+        process.wait()
+        process.stdout.close()
+
+
+@pytest.mark.parametrize("kind, kills", [
+    ("stateful", 5), ("scene", 2),
+    pytest.param("stateful", 30, marks=pytest.mark.slow, id="stateful-30-slow"),
+])
+def test_sigkill_at_random_moments_keeps_chunks_and_resumes_bit_identically(tmp_path, kind, kills):
+    tic = time.perf_counter()
+    helper.run(kind, tmp_path / "reference.h5")
+    run_seconds = time.perf_counter() - tic
+    reference = SnapshotStore.open(tmp_path / "reference.h5")
+    total = reference.length(0)
+    model = helper.model_for(kind)
+    scheme = None if kind == "scene" else Newmark()
+    rng = np.random.default_rng(2024 if kind == "stateful" else 7)
+    chunk = helper.STATEFUL_CHUNK if kind == "stateful" else helper.SCENE_CHUNK
+    landed = []
+    for attempt in range(3 * kills):
+        if len(landed) == kills:
+            break
+        path = tmp_path / f"killed_{attempt}.h5"
+        # the child steps about as fast as the reference run (same code); a kill after its
+        # last commit lands nowhere and is retried with a shorter window
+        _kill_once(kind, path, rng.uniform(0.0, 0.7 * run_seconds / (1 + attempt // kills)))
+        store = SnapshotStore.open(path)  # a killed SWMR writer leaves a readable file
+        length = store.length(0)
+        assert 0 <= length <= total
+        if length == total:
+            store.close()
+            continue
+        assert length % chunk == 0  # only whole chunks are ever declared
+        assert _rows_equal(store, reference, 0)  # every committed chunk is the reference's
+        checkpoint = store.checkpoint(0)
+        assert checkpoint.step == (length - 1 if length else 0)
+        store.close()
+        if not landed:
+            # a killed writer's file cut short is refused, not read as zeros past its end
+            cut = tmp_path / "killed_and_cut.h5"
+            data = path.read_bytes()
+            cut.write_bytes(data[:2 * len(data) // 3])
+            with pytest.raises(SnapshotStoreError, match="truncated"):
+                SnapshotStore.open(cut).read(0, "q")
+            # and every committed chunk of the killed file is inside it (checked on open);
+            # seen from a file half as long, the last ones are not
+            with h5py.File(path, "r", libver="latest", swmr=True) as f:
+                _format.check_on_disk(f, path)
+                half = SimpleNamespace(stat=lambda: SimpleNamespace(st_size=len(data) // 2))
+                if length:
+                    with pytest.raises(SnapshotStoreError, match="is not in the file"):
+                        _format.check_on_disk(f, half)
+            # a live writer is never overridden
+            with pytest.MonkeyPatch.context() as patch:
+                patch.setattr(_store, "_process_alive", lambda pid: True)
+                with pytest.raises(SnapshotStoreError, match="open for writing by process"):
+                    resume(path, model, scheme)
+        resume(path, model, scheme)
+        finished = SnapshotStore.open(path)
+        assert finished.length(0) == total and _rows_equal(finished, reference, 0)
+        finished.close()
+        assert read_superblock(path).flags == 0  # closed cleanly after the resume
+        landed.append(length // chunk)
+    reference.close()
+    print(f"{kind}: kills landed at committed chunks {landed} of {total // chunk}")
+    assert len(landed) == kills
+
+
+# -- bad files -------------------------------------------------------------------
+@pytest.fixture
+def good_store(tmp_path):
+    system = forced_chain()
+    store = SnapshotStore.create(tmp_path / "good.h5", system, scheme=Newmark(), dt=0.05,
+                                 n_steps=40)
+    integrate(system, Newmark(), np.ones(6), np.zeros(6), 0.05, 40,
+              consumers=[store.writer(chunk_steps=8)])
+    store.close()
+    return tmp_path / "good.h5"
+
+
+def _damaged(good: Path, name: str, change) -> Path:
+    path = good.with_name(name)
+    path.write_bytes(good.read_bytes())
+    change(path)
+    return path
+
+
+def _edit(path, edit):
+    with h5py.File(path, "r+") as f:
+        edit(f)
+
+
+def _replace_q(f):
+    del f["trajectories/000/q"]
+    f["trajectories/000/q"] = np.zeros((41, 7))
+
+
+def _set_length(f):
+    f["trajectories/000/committed"][0] = 1000
+
+
+def _truncate(path):
+    data = path.read_bytes()
+    path.write_bytes(data[:len(data) // 2])
+
+
+def _scribble(path):
+    data = bytearray(path.read_bytes())
+    data[48:80] = b"\xab" * 32  # the root object header, guarded by its checksum
+    path.write_bytes(bytes(data))
+
+
+@pytest.mark.parametrize("name, change, message", [
+    ("text.h5", lambda p: p.write_text("q, v, a\n1, 2, 3\n"), "not an HDF5 file"),
+    ("bare.h5", lambda p: h5py.File(p, "w").close(), "not a femrom snapshot store (HDF5 file without"),
+    ("foreign.h5", lambda p: _edit(p, lambda f: f.attrs.__setitem__("format", "netcdf4")),
+     "not a femrom snapshot store (format 'netcdf4'"),
+    ("shape.h5", lambda p: _edit(p, _replace_q), "/trajectories/000/q has shape (41, 7), "
+                                                 "expected (K, 6)"),
+    ("length.h5", lambda p: _edit(p, _set_length), "declares 1000 snapshots but its datasets hold 41"),
+    ("truncated.h5", _truncate, "truncated HDF5 file"),
+    ("scribbled.h5", _scribble, "damaged or unreadable"),
+])
+def test_bad_files_give_one_clear_error_naming_the_file(good_store, name, change, message):
+    path = _damaged(good_store, name, change)
+    with pytest.raises(SnapshotStoreError, match=re.escape(message)) as info:
+        store = SnapshotStore.open(path)
+        store.read(0, "q")  # damage past the metadata shows on reading
+    text = str(info.value)
+    assert str(path) in text and "\n" not in text
+    with pytest.raises(SnapshotStoreError, match="not found"):
+        SnapshotStore.open(good_store.with_name("absent.h5"))
+
+
+def test_superblock_checksum_is_lookup3(good_store):
+    # reference values printed by the driver of Bob Jenkins' lookup3.c (2006)
+    assert lookup3(b"") == 0xDEADBEEF
+    assert lookup3(b"Four score and seven years ago") == 0x17770551
+    assert lookup3(b"Four score and seven years ago", 1) == 0xCD628161
+    block = read_superblock(good_store)  # raises on a checksum mismatch
+    assert block.version == 3 and block.flags == 0
