@@ -1,0 +1,24 @@
+"""Reduced second-order models and their structure-preserving time stepping.
+
+- :class:`SecondOrderROM`: intrusive (:meth:`SecondOrderROM.galerkin`) or
+  learned (``SecondOrderROM(learner=LagrangianOpInf()).fit(data)``) models with
+  ``predict``, outputs, reduced energy, lazy full-field reconstruction and
+  HDF5 ``save``/``load``;
+- :class:`ReducedSolution`: what ``predict`` returns;
+- reduced schemes (:data:`SCHEMES`): Newmark average acceleration, the
+  implicit midpoint rule, Stoermer-Verlet, as precomputed linear step maps;
+- :class:`HamiltonianROM`: linear canonical Hamiltonian ROMs with symplectic
+  Euler A/B, Stoermer-Verlet and the implicit midpoint rule;
+- :func:`select_regularization`: a grid of regularization weights scored by
+  training fit and by energy over an extended window.
+"""
+
+from femrom.rom._hamiltonian import HAMILTONIAN_SCHEMES, HamiltonianROM, hamiltonian_step_matrix
+from femrom.rom._model import ReducedSolution, SecondOrderROM
+from femrom.rom._selection import RegularizationScore, select_regularization
+from femrom.rom._steppers import SCHEMES, linear_step_map, verlet_bound
+
+__all__ = [
+    "HAMILTONIAN_SCHEMES", "HamiltonianROM", "SCHEMES", "hamiltonian_step_matrix", "ReducedSolution", "RegularizationScore", "SecondOrderROM", "linear_step_map",
+    "select_regularization", "verlet_bound",
+]
