@@ -513,3 +513,29 @@ def test_stepresult_is_a_restart_point_for_a_stateful_force():
     resumed = list(iterate(system, Newmark(), None, None, 0.05, 3, start=start))
     np.testing.assert_array_equal(resumed[-1].q, results[-1].q)
     assert resumed[-1].state == results[-1].state == 6
+
+
+@pytest.mark.parametrize("scheme, mass_kept", [(Newmark(), False), (ImplicitMidpoint(), True),
+                                               (ImplicitMidpoint(accelerations=False), False)])
+def test_the_mass_factor_lives_only_as_long_as_the_scheme_needs_it(scheme, mass_kept):
+    """The initial acceleration needs M's factor once; an implicit scheme that never
+    solves with M again must not hold it for the whole run (1.2 GB at 5e5 dofs)."""
+    import gc
+    import weakref
+
+    system = chain(n=30, rayleigh=None, forced=False)
+    built = []
+
+    def factory(A, spd=True):
+        solver = make_solver(A, "superlu", spd=spd)
+        built.append((weakref.ref(solver), A is system.mass))
+        return solver
+
+    q0, v0 = initial_state(30)
+    run = iterate(system, scheme, q0, v0, 1e-2, 5, solver=factory)
+    gc.collect()
+    mass_alive = [ref() is not None for ref, is_mass in built if is_mass]
+    assert mass_alive and any(mass_alive) == mass_kept
+    assert any(ref() is not None for ref, is_mass in built if not is_mass)  # A_eff is kept
+    steps = list(run)
+    assert len(steps) == 6 and run.summary().n_factorizations == len(built)

@@ -185,6 +185,7 @@ class PardisoSolver(LinearSolver):
         self._factored = False
         #: how often each PARDISO phase ran (12: analyse + factorise, 33: solve)
         self.phase_calls = {12: 0, 33: 0, -1: 0}
+        _mkl_pardiso()  # locating MKL (1-5 s once per process) is not the factorisation
         start = time.perf_counter()
         self._call(12, np.zeros((self._n, 1), order="F"))
         self._factored = True

@@ -59,6 +59,11 @@ class ImplicitMidpoint:
     order = 2
     name = "ImplicitMidpoint"
 
+    @property
+    def uses_mass_solver(self) -> bool:
+        """Whether steps solve with M (the driver frees M's factor otherwise)."""
+        return self.accelerations
+
     def init(self, system, dt: float, make_solver, mass_solver, t0, q0, v0, a0, state0):
         """Build (and for a linear system, factorise) ``M + dt/2 C + dt^2/4 K``."""
         S = system.mass + (0.25 * dt * dt) * system.stiffness
