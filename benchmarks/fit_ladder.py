@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import platform
 import time
 from pathlib import Path
@@ -145,6 +146,7 @@ def _write(out_dir, problem_kind, rows):
         out_dir = Path(out_dir)
         out_dir.mkdir(parents=True, exist_ok=True)
         payload = {"benchmark": "fit_ladder", "machine": platform.platform(),
+                   "date": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "load_average": os.getloadavg(),
                    "processor": platform.processor(), "problem": problem_kind,
                    "description": __doc__.split("\n\n")[1], "rows": rows}
         name = "fit_ladder.json" if problem_kind == "string" else f"fit_ladder_{problem_kind}.json"
@@ -163,7 +165,7 @@ def main(argv=None) -> int:
     parser.add_argument("--sizes", type=int, nargs="+", default=list(SIZES))
     parser.add_argument("--out", type=Path, default=Path(__file__).parent / "results")
     parser.add_argument("--problem", choices=("string", "random"), default="string")
-    parser.add_argument("--limit", type=float, default=LIMIT_SECONDS,
+    parser.add_argument("--limit", "--max-seconds", dest="limit", type=float, default=LIMIT_SECONDS,
                         help="skip a solver whose predicted time exceeds this (seconds)")
     args = parser.parse_args(argv)
     run(args.sizes, args.out, args.problem, args.limit)

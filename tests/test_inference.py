@@ -109,7 +109,7 @@ def test_galerkin_mass_orthonormal_and_rayleigh(beam):
 
 
 # -- 3. Theorem 1: learned -> intrusive at the finite-difference order -------
-@pytest.mark.parametrize("order", [2, 4])
+@pytest.mark.parametrize("order", [2, 4, 6])
 def test_theorem1_learned_stiffness_converges_at_fd_order(beam, order):
     M, K, w, Phi = beam
     r = 4
@@ -131,9 +131,12 @@ def test_theorem1_learned_stiffness_converges_at_fd_order(beam, order):
         errors.append(relative(learned.stiffness_, K_intrusive))
     slope = np.polyfit(np.log(steps), np.log(errors), 1)[0]
     # Theorem 1: ||K^ - K~|| = O(dt^p) for derivative data of order p;
-    # 0.3 covers the pre-asymptotic constant of the highest mode (w_4 dt ~ 0.5)
-    assert abs(slope - order) < 0.3, (slope, errors)
-    assert errors[-1] < (1e-3 if order == 2 else 1e-6)
+    # 0.3 covers the pre-asymptotic constant of the highest mode (w_4 dt ~ 0.5).
+    # Order 6 is still pre-asymptotic on this window (measured slope 5.48, error
+    # ratios 39 and 51 per halving, rising toward 2^6 = 64) and a finer step
+    # reaches round-off (6e-13 at T/12800): 0.6 there, still far from order 4.
+    assert abs(slope - order) < (0.6 if order == 6 else 0.3), (slope, errors)
+    assert errors[-1] < {2: 1e-3, 4: 1e-6, 6: 1e-8}[order]
 
 
 def test_newmark_accelerations_give_the_intrusive_operators_exactly(beam):
@@ -267,6 +270,52 @@ def test_fast_solver_matches_cvxpy_on_a_beam_problem(beam):
     _, scs = solve_conic(problem, "SCS")
     assert (fast["objective"] - ref["objective"]) / ref["objective"] < 1e-6
     assert (fast["objective"] - scs["objective"]) / scs["objective"] < 1e-6
+
+
+def test_fast_solver_certifies_a_large_active_set():
+    """r = 30, 300 random snapshots: about half of the eigenvalues of K^ and C^
+    end on their bounds. The fast solver must certify its point (duality gap
+    below its 1e-8 tolerance) and reach SCS's optimum to 1e-6 (Clarabel is
+    minutes at this size, benchmarks/fit_ladder.py)."""
+    rng = np.random.default_rng(40)
+    data = random_data(rng, 30, 300)
+    problem = LagrangianOpInf(regularization=1e-8).regression(data)
+    X, fast = solve_fast(problem)
+    _, scs = solve_conic(problem, "SCS")
+    assert fast["status"] == "optimal" and fast["gap_estimate"] < 1e-8
+    assert (fast["objective"] - scs["objective"]) / scs["objective"] < 1e-6
+    assert problem.is_feasible(X, tol=1e-12)
+    assert min(fast["active"].values()) >= 5          # the constraints do bind
+
+
+def test_fast_solver_matches_cvxpy_on_ill_conditioned_pod_data(beam):
+    """Real data in POD coordinates: a mass-orthonormal POD basis (r = 8) of a
+    forced, damped Newmark run, fourth-order finite differences. The Gram
+    matrix's condition number is ~1e8 here (POD amplitudes fall fast), the
+    regime where first-order methods crawl (docs/inference.md)."""
+    M, K, w, Phi = beam
+    n = M.shape[0]
+    C = rayleigh_damping(M, K, 0.5, 1e-5)
+    Bfull = np.zeros((n, 1))
+    Bfull[n // 2, 0] = 1.0
+    inputs = lambda t: np.array([np.sin(5.0 * t) + 0.3 * np.sin(40.0 * t)])  # noqa: E731
+    system = SecondOrderSystem(mass=M, stiffness=K, damping=C, input_matrix=Bfull, inputs=inputs)
+    trajectory = Trajectory(fields=("q",))
+    dt = 1e-3
+    integrate(system, Newmark(), Phi[:, :4] @ np.array([0.01, 0.004, 0.002, 0.001]), np.zeros(n),
+              dt, 3000, consumers=[trajectory])
+    Q = trajectory.q
+    R = np.linalg.cholesky(M.toarray()).T                       # M = R^T R
+    V = np.linalg.solve(R, np.linalg.svd(R @ Q, full_matrices=False)[0][:, :8])
+    U = np.column_stack([inputs(t) for t in trajectory.t])
+    data = reduce_snapshots(V, Q, dt, product=M, inputs=U, order=4)
+    problem = LagrangianOpInf(regularization=1e-8).regression(data)
+    g = np.linalg.eigvalsh(problem.scaled()[0].regularized_gram())
+    assert g[-1] / g[0] > 1e6                                   # the data are ill-conditioned
+    X, fast = solve_fast(problem)
+    _, ref = solve_conic(problem, "CLARABEL")
+    assert (fast["objective"] - ref["objective"]) / ref["objective"] < 1e-6
+    assert problem.is_feasible(X, tol=1e-12)
 
 
 def test_gram_problem_adds_trajectories_like_concatenation():

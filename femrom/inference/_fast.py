@@ -30,17 +30,23 @@ the (p, p) Gram matrix and r x r eigendecompositions only:
    where ``(2 G + rho I)^{-1}`` comes from one eigendecomposition of ``G``,
    ``Pi_S`` symmetrises each block and clips its eigenvalues at ``eps_j``,
    ``alpha = 1.6`` over-relaxes and ``rho = sqrt(g_min g_max)``; the fixed-point
-   map is Anderson-accelerated, and every ``polish_every`` iterations the
-   positive eigenspaces of the projected matrices seed step 3.
+   map is Anderson-accelerated (coefficients from the (m, m) normal equations
+   of the residual differences), and the positive eigenspaces of the projected
+   matrices seed step 3 after 10, 20, ..., 50 iterations, then every
+   ``polish_every``: on well-conditioned data the active set is right after
+   10-20 iterations, so early polishes end the run.
 5. **Certificate.** A candidate is accepted when its relative duality gap
    (:func:`_gap_estimate`) is below ``tol``; the best feasible candidate by
    objective is returned in any case, with its gap in ``info``.
 
 Where it is fast and where it is not (``docs/inference.md``): steps 2-3 are
 exact and cheap when the constraints are inactive or the active set is found
-from the clipped solution (random problems with half the eigenvalues on the
-bounds: certified optimum at r = 100 in about 1.4 s); on very ill-conditioned
-Gram matrices (POD data of a string, ``kappa(G) ~ 1e10``) ADMM converges slowly.
+after a few ADMM iterations (random problems with half the eigenvalues on
+the bounds: certified optimum at r = 100 in 0.1-0.35 s); on very
+ill-conditioned Gram matrices (POD data of a string, ``kappa(G) ~ 1e7-1e10``
+even after Jacobi scaling ~1e6) every linear solve needs thousands of
+conjugate-gradient iterations and ADMM converges slowly: there the solver is
+slow and, past r ~ 30, not at the optimum (docs/inference.md).
 
 BLAS threads are limited to one inside the solver when ``threadpoolctl`` is
 importable: at these sizes (r <= a few hundred) threading only adds
@@ -70,8 +76,9 @@ class FastOptions:
         its objective.
     max_iterations : int
         ADMM iterations at most.
-    polish_every : int
-        ADMM iterations between polish attempts.
+    polish_first, polish_every : int
+        ADMM iterations between polish attempts: ``polish_first`` for the first
+        five attempts, ``polish_every`` after that.
     cg_tol : float
         Relative residual of the conjugate-gradient solves.
     cg_max_iterations : int
@@ -94,6 +101,7 @@ class FastOptions:
     tol: float = 1e-8
     max_iterations: int = 2000
     polish_every: int = 50
+    polish_first: int = 10
     cg_tol: float = 1e-12
     cg_max_iterations: int = 300
     relaxation: float = 1.6
@@ -508,6 +516,7 @@ def _admm(problem: GramProblem, start, options: FastOptions, info):
     stalled = checks = 0
     history_v, history_g = [], []
     pending = None
+    next_polish = options.polish_first
     k = 0
     for k in range(1, options.max_iterations + 1):
         Zn, Un, X, faces = T(Z, U) if pending is None else pending
@@ -524,11 +533,16 @@ def _admm(problem: GramProblem, start, options: FastOptions, info):
                 history_v.pop(0)
                 history_g.pop(0)
             if len(history_g) >= 2:
-                dG = np.diff(np.asarray(history_g), axis=0).T
-                dV = np.diff(np.asarray(history_v), axis=0).T
-                gamma = np.linalg.lstsq(dG, residual, rcond=1e-10)[0]
-                cand = Tv - dV @ gamma
-                Zc = problem.project(cand[:Z.size].reshape(Z.shape))
+                dG = np.diff(np.asarray(history_g), axis=0)      # (m, n): rows are differences
+                dV = np.diff(np.asarray(history_v), axis=0)
+                # least squares min ||residual - dG^T gamma|| by its (m, m) normal
+                # equations, Tikhonov-safeguarded (an SVD of the tall (n, m) matrix
+                # cost more than the ADMM step itself)
+                normal = dG @ dG.T
+                normal[np.diag_indices_from(normal)] += 1e-10 * np.trace(normal) + 1e-300
+                gamma = np.linalg.solve(normal, dG @ residual)
+                cand = Tv - gamma @ dV
+                Zc = cand[:Z.size].reshape(Z.shape)     # T needs no feasible Z
                 Uc = cand[Z.size:].reshape(U.shape)
                 trial = T(Zc, Uc)
                 trial_residual = np.sqrt(np.sum((trial[0] - Zc) ** 2) + np.sum((trial[1] - Uc) ** 2))
@@ -537,16 +551,22 @@ def _admm(problem: GramProblem, start, options: FastOptions, info):
                     faces = trial[3]
                 else:
                     history_v, history_g = [], []
-        if k % options.polish_every == 0:
+        if k == next_polish:
+            # early polishes find the active set of well-conditioned problems
+            # after a few dozen iterations; later ones are spaced out
+            next_polish += options.polish_first if k < 5 * options.polish_first else options.polish_every
             checks += 1
             Xp, gap = _polish(problem, faces, Z, options, info)
             fp = problem.objective(Xp)
             stalled = 0 if fp < best_f * (1.0 - options.stall_tol) else stalled + 1
-            if fp < best_f:
+            if fp < best_f or gap <= options.tol:
+                # a certified polish ends the search even when round-off puts
+                # its objective a hair above an earlier, uncertified point
                 best_X, best_f, best_gap = Xp, fp, gap
-            if problem.objective(Z) < best_f:
-                best_X, best_f = Z, problem.objective(Z)
-                best_gap = _gap_estimate(problem, Z, options, info)
+            Zp = problem.project(Z)     # an accepted Anderson point need not be feasible
+            if best_gap > options.tol and problem.objective(Zp) < best_f:
+                best_X, best_f = Zp, problem.objective(Zp)
+                best_gap = _gap_estimate(problem, Zp, options, info)
             if best_gap <= options.tol:
                 status = "optimal"
                 break

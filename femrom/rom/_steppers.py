@@ -102,22 +102,30 @@ def verlet_bound(M, K) -> float:
 def run_linear(A: np.ndarray, x0: np.ndarray, n_steps: int, forcing: np.ndarray | None):
     """(s, n_steps + 1) ndarray: ``x_{k+1} = A x_k + forcing[:, k]``.
 
-    Rows of a C-ordered (n_steps + 1, s) buffer are written in place (no
-    temporaries, contiguous memory): one ``dot`` and one add per step.
+    One BLAS call per step and nothing else: the forcing is written next to
+    the states in a C-ordered (n_steps + 1, 2 s) buffer whose row ``k`` is
+    ``[x_k, f_k]``, and ``x_{k+1} = [A, I] [x_k; f_k]`` is a single
+    ``dot(..., out=)`` into the next row (no temporaries). Without forcing,
+    ``dot(A, x_k, out=)`` on an (n_steps + 1, s) buffer. At r ~ 20 a step is
+    dominated by the interpreter's call overhead (``benchmarks/rom_step.py``),
+    so the fused call saves the separate vector add of a step.
     """
-    X = np.empty((n_steps + 1, x0.size))
-    X[0] = x0
+    s = x0.size
     dot = np.dot
     if forcing is None:
+        X = np.empty((n_steps + 1, s))
+        X[0] = x0
         for k in range(n_steps):
             dot(A, X[k], out=X[k + 1])
-    else:
-        Ft = np.ascontiguousarray(forcing.T)
-        for k in range(n_steps):
-            row = X[k + 1]
-            dot(A, X[k], out=row)
-            row += Ft[k]
-    return X.T
+        return X.T
+    Aug = np.ascontiguousarray(np.hstack([A, np.eye(s)]))
+    buffer = np.empty((n_steps + 1, 2 * s))
+    buffer[0, :s] = x0
+    buffer[:n_steps, s:] = forcing[:, :n_steps].T
+    buffer[n_steps, s:] = 0.0
+    for k in range(n_steps):
+        dot(Aug, buffer[k], out=buffer[k + 1, :s])
+    return buffer[:, :s].T
 
 
 def run_nonlinear(M, C, K, B, nonlinear, dt: float, scheme: str, q0, v0, times,
