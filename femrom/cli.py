@@ -43,6 +43,7 @@ def load_case(name: str):
     path = cases_directory() / f"{name}.py"
     spec = importlib.util.spec_from_file_location(f"femrom_case_{name}", path)
     module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module  # dataclasses resolve annotations through it
     spec.loader.exec_module(module)
     return module
 

@@ -23,8 +23,11 @@ from femrom.inference._data import (
 from femrom.inference._derivatives import finite_difference, stencil_weights
 from femrom.inference._fast import FastOptions, solve_fast
 from femrom.inference._hamiltonian import (
+    GRADIENT_DATA,
     HamiltonianOperators,
     HamiltonianOpInf,
+    ProjectedPotential,
+    project_potential_gradient,
     symmetric_lyapunov_fit,
 )
 from femrom.inference._learners import (
@@ -54,4 +57,5 @@ __all__ = [
     "SecondOrderOpInf", "Stiffness", "concatenate", "finite_difference", "galerkin",
     "reduce_snapshots", "reduced_coordinates", "solve_conic", "solve_fast", "stencil_weights",
     "symmetric_lyapunov_fit",
+    "GRADIENT_DATA", "ProjectedPotential", "project_potential_gradient",
 ]

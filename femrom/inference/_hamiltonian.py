@@ -29,6 +29,22 @@ whose optimality conditions are Lyapunov equations
 (:func:`scipy.linalg.solve_continuous_lyapunov`) in ``O(r^3)``, never as an
 ``r^2 x r^2`` Kronecker system. A Tikhonov weight ``lambda`` adds
 ``lambda I`` to the Gram matrix (``2 lambda`` on the left's diagonal).
+
+Known nonlinear Hamiltonian terms (Sharma, Wang & Kramer 2022, Sec. 3): with
+``H = q^T D_q q / 2 + p^T D_p p / 2 + H_nl(q, p)`` and ``H_nl`` known (a
+potential object, :mod:`femrom.integrators._hamiltonian`), the forcing data are
+the projected gradients ``F^_q = Phi^T dH_nl/dp (Q, P)`` and
+``F^_p = Phi^T dH_nl/dq (Q, P)``, subtracted before the Lyapunov fits
+(:meth:`HamiltonianOpInf.fit_snapshots`); the reduced model evaluates the same
+term through :class:`ProjectedPotential`, ``H^_nl(q^, p^) = H_nl(Phi q^, Phi p^)``,
+so its right-hand side stays ``J_{2r} grad H^``.
+
+``shared=True`` (an option of femrom, not of the paper) fits one symmetric
+``D^ = D^_q = D^_p`` to both residuals, for systems whose full operators are
+equal (the NLS: ``D_q = D_p = -Laplacian``). The reduced Hamiltonian is then
+invariant under the phase rotation ``(q^, p^) -> (q^ cos a - p^ sin a,
+q^ sin a + p^ cos a)`` whenever ``H_nl`` is, and the reduced mass
+``|q^|^2 + |p^|^2`` is an exact invariant of the ROM (Noether).
 """
 
 from __future__ import annotations
@@ -74,6 +90,61 @@ class HamiltonianOperators:
         return 0.5 * (np.sum(q * (self.position @ q), axis=0) + np.sum(p * (self.momentum @ p), axis=0))
 
 
+class ProjectedPotential:
+    r"""``H^_nl(q^, p^) = H_nl(Phi q^, Phi p^)`` of a known potential through a cotangent lift.
+
+    ``grad_q^ H^_nl = Phi^T dH_nl/dq (Phi q^, Phi p^)`` (likewise for ``p^``)
+    and Hessian blocks ``Phi^T H_xy Phi`` (r, r), so that a reduced system built
+    on it is again canonical Hamiltonian. Costs ``O(n r)`` per gradient and
+    ``O(n r^2)`` per Hessian (pointwise potentials): the unreduced price that
+    hyper-reduction would remove.
+
+    Parameters
+    ----------
+    potential : object
+        ``value``, ``gradient``, ``hessian`` on full states (n,) / (n, k).
+    basis : (n, r) ndarray
+        ``Phi``.
+    """
+
+    def __init__(self, potential, basis: np.ndarray):
+        self.potential = potential
+        self.basis = np.asarray(basis, dtype=float)
+
+    def value(self, q: np.ndarray, p: np.ndarray):
+        return self.potential.value(self.basis @ q, self.basis @ p)
+
+    def gradient(self, q: np.ndarray, p: np.ndarray):
+        gq, gp = self.potential.gradient(self.basis @ q, self.basis @ p)
+        return self.basis.T @ gq, self.basis.T @ gp
+
+    def hessian(self, q: np.ndarray, p: np.ndarray):
+        V = self.basis
+        blocks = []
+        for h in self.potential.hessian(V @ q, V @ p):
+            if isinstance(h, np.ndarray) and h.ndim == 1:      # pointwise potential: Phi^T diag(h) Phi
+                blocks.append(V.T @ (h[:, None] * V))
+            else:
+                h = h.toarray() if hasattr(h, "toarray") else np.asarray(h)
+                blocks.append(V.T @ h @ V)
+        return tuple(blocks)
+
+
+def project_potential_gradient(basis: np.ndarray, potential, Q: np.ndarray,
+                               P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    r"""``(F^_q, F^_p) = (Phi^T dH_nl/dp (Q, P), Phi^T dH_nl/dq (Q, P))``, each (r, K).
+
+    ``Q``, ``P`` (n, K) are full states: the FOM snapshots (as in the paper) or
+    their reconstructions ``Phi Q^``, ``Phi P^``.
+    """
+    gq, gp = potential.gradient(np.asarray(Q, float), np.asarray(P, float))
+    return basis.T @ gp, basis.T @ gq
+
+
+#: Where :meth:`HamiltonianOpInf.fit_snapshots` evaluates the known gradient.
+GRADIENT_DATA = ("snapshots", "reconstructed")
+
+
 class HamiltonianOpInf:
     r"""Learn ``D^_q``, ``D^_p`` (symmetric) from reduced canonical data.
 
@@ -81,6 +152,8 @@ class HamiltonianOpInf:
     ----------
     regularization : float
         Relative Tikhonov weight: ``lambda = rho * trace(X X^T) / r``.
+    shared : bool
+        Fit one symmetric ``D^ = D^_q = D^_p`` (module docstring).
 
     Attributes
     ----------
@@ -89,10 +162,11 @@ class HamiltonianOpInf:
         Relative residual of both regressions together.
     """
 
-    def __init__(self, regularization: float = 0.0):
+    def __init__(self, regularization: float = 0.0, shared: bool = False):
         if not regularization >= 0:
             raise ValueError(f"regularization must be >= 0, got {regularization}")
         self.regularization = float(regularization)
+        self.shared = bool(shared)
 
     def fit(self, states_q: np.ndarray, states_p: np.ndarray, ddt_q: np.ndarray,
             ddt_p: np.ndarray, forces_q: np.ndarray | None = None,
@@ -102,10 +176,69 @@ class HamiltonianOpInf:
         Rq = -ddt_p - (0.0 if forces_p is None else forces_p)
         lam_p = self.regularization * np.sum(states_p**2) / states_p.shape[0]
         lam_q = self.regularization * np.sum(states_q**2) / states_q.shape[0]
-        Dp = symmetric_lyapunov_fit(states_p, Rp, lam_p)
-        Dq = symmetric_lyapunov_fit(states_q, Rq, lam_q)
+        if self.shared:
+            Dp = Dq = symmetric_lyapunov_fit(np.hstack([states_p, states_q]), np.hstack([Rp, Rq]),
+                                             lam_p + lam_q)
+        else:
+            Dp = symmetric_lyapunov_fit(states_p, Rp, lam_p)
+            Dq = symmetric_lyapunov_fit(states_q, Rq, lam_q)
         self.operators_ = HamiltonianOperators(position=Dq, momentum=Dp)
         num = np.linalg.norm(Rp - Dp @ states_p) ** 2 + np.linalg.norm(Rq - Dq @ states_q) ** 2
         den = np.linalg.norm(Rp) ** 2 + np.linalg.norm(Rq) ** 2
         self.residual_ = float(np.sqrt(num / den)) if den > 0 else 0.0
+        return self
+
+    def fit_snapshots(self, basis: np.ndarray, Q: np.ndarray, P: np.ndarray, dt: float | None = None,
+                      *, ddt_q: np.ndarray | None = None, ddt_p: np.ndarray | None = None,
+                      potential=None, order: int = 4,
+                      gradient_data: str = "snapshots") -> "HamiltonianOpInf":
+        r"""Project full snapshots through ``Phi`` and fit.
+
+        ``Q^ = Phi^T Q``, ``P^ = Phi^T P``; derivative data ``Phi^T Q'``,
+        ``Phi^T P'`` from the given full derivatives or, when absent, finite
+        differences of order ``order`` of the reduced snapshots (uniform
+        ``dt``); forcing data from :func:`project_potential_gradient` at the
+        snapshots (``gradient_data="snapshots"``, the paper's choice) or at
+        ``Phi Q^``, ``Phi P^`` (``"reconstructed"``, what the ROM evaluates).
+
+        Parameters
+        ----------
+        basis : (n, r) ndarray
+            ``Phi`` of the cotangent lift.
+        Q, P : (n, K) ndarray
+        dt : float, optional
+            Snapshot spacing (needed without ``ddt_q``, ``ddt_p``).
+        ddt_q, ddt_p : (n, K) ndarray, optional
+            Full time derivatives.
+        potential : object, optional
+            The known ``H_nl``.
+        order : {2, 4, 6}
+        gradient_data : {"snapshots", "reconstructed"}
+
+        Attributes set
+        --------------
+        basis_ : (n, r) ndarray
+        potential_ : ProjectedPotential or None
+        """
+        from femrom.inference._derivatives import finite_difference
+
+        if gradient_data not in GRADIENT_DATA:
+            raise ValueError(f"unknown gradient_data {gradient_data!r}; valid: {GRADIENT_DATA}")
+        V = np.asarray(basis, dtype=float)
+        Qh, Ph = V.T @ Q, V.T @ P
+        if (ddt_q is None) != (ddt_p is None):
+            raise ValueError("give both ddt_q and ddt_p, or neither")
+        if ddt_q is None:
+            if dt is None:
+                raise ValueError("finite-difference derivatives need dt")
+            dQ, dP = finite_difference(Qh, dt, order), finite_difference(Ph, dt, order)
+        else:
+            dQ, dP = V.T @ ddt_q, V.T @ ddt_p
+        Fq = Fp = None
+        if potential is not None:
+            at = (Q, P) if gradient_data == "snapshots" else (V @ Qh, V @ Ph)
+            Fq, Fp = project_potential_gradient(V, potential, *at)
+        self.fit(Qh, Ph, dQ, dP, Fq, Fp)
+        self.basis_ = V
+        self.potential_ = None if potential is None else ProjectedPotential(potential, V)
         return self

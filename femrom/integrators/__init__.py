@@ -26,6 +26,13 @@ from femrom.integrators._driver import (
     iterate,
 )
 from femrom.integrators._midpoint import ImplicitMidpoint
+from femrom.integrators._hamiltonian import (
+    CANONICAL_SCHEMES,
+    CanonicalSystem,
+    CanonicalTrajectory,
+    QuarticPotential,
+    integrate_canonical,
+)
 from femrom.integrators._newmark import GeneralizedAlpha, Newmark, NewmarkAverageAcceleration
 from femrom.integrators._newton import ConvergenceError, Newton
 from femrom.fem import (
@@ -39,6 +46,11 @@ from femrom.integrators._simulate import SimulationResult, scheme_for, simulate
 from femrom.integrators._stability import estimate_max_frequency
 
 __all__ = [
+    "CANONICAL_SCHEMES",
+    "CanonicalSystem",
+    "CanonicalTrajectory",
+    "QuarticPotential",
+    "integrate_canonical",
     "STRATEGIES",
     "CentralDifference",
     "ConvergenceError",
