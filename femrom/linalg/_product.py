@@ -18,6 +18,7 @@ Three kinds, each with the orthonormalisation that suits it:
 
 from __future__ import annotations
 
+import contextlib
 from typing import Any
 
 import numpy as np
@@ -26,6 +27,24 @@ import scipy.sparse as sp
 
 
 _TSQR_ROWS = 4096  # rows per leaf of the tall-skinny QR (a leaf of 30 columns is ~1 MB)
+_CONTROLLER: list = []  # threadpoolctl's controller, made once (it scans the loaded libraries)
+
+
+def single_threaded_blas():
+    """A context in which BLAS/LAPACK run on one thread (threadpoolctl; no-op without it).
+
+    For many small factorisations: a LAPACK QR of a 4096 x 30 leaf with
+    OpenBLAS's two threads was 6x slower than with one on this 2-core machine
+    under load (threads spinning at every panel's barrier), and 17x for the
+    whole TSQR of a 2e4 x 30 block (benchmarks/snapshot_ladder.py, docs/benchmarks_snapshots.md).
+    """
+    try:
+        from threadpoolctl import ThreadpoolController
+    except ImportError:  # pragma: no cover - threadpoolctl is a dependency of the env
+        return contextlib.nullcontext()
+    if not _CONTROLLER:
+        _CONTROLLER.append(ThreadpoolController())
+    return _CONTROLLER[0].limit(limits=1, user_api="blas")
 
 
 def householder_qr(y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -38,6 +57,11 @@ def householder_qr(y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     factorisation streams the full block from memory once per column).
     """
     n, k = y.shape
+    with single_threaded_blas():
+        return _tsqr(y, n, k)
+
+
+def _tsqr(y, n, k):
     if n < 4 * _TSQR_ROWS or n < 4 * k:
         return np.linalg.qr(y)
     starts = range(0, n, _TSQR_ROWS)
