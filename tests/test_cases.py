@@ -45,6 +45,76 @@ def test_beam_case_accuracy_falls_with_cost(beam_metrics):
     assert all(a > b for a, b in zip(dt_errors, dt_errors[1:])), dt_errors
 
 
+def _rows(metrics, study, method):
+    return {row["r"]: row for row in metrics[study]["rows"] if row["method"] == method}
+
+
+def test_beam_case_writes_its_rom_report(beam_metrics):
+    _, out = beam_metrics
+    for name in ("rom_state_error.png", "rom_energy_error.png", "rom_tip_end.png", "accuracy_cost_rom.png",
+                 "coarse_rom_state_error.png", "coarse_accuracy_cost_rom.png"):
+        assert (out / name).stat().st_size > 0, name
+    assert "L-OpInf" in (out / "report.md").read_text() or "lopinf" in (out / "report.md").read_text()
+
+
+def test_beam_lopinf_energy_error_stays_bounded_over_20_training_windows(beam_metrics):
+    """Quick beam (40 dofs), trained on [0, 0.1] s, predicted to 2 s (20x)."""
+    metrics, _ = beam_metrics
+    assert metrics["rom"]["settings"]["extension"] == 20.0
+    for study in ("rom", "rom_coarse_data"):
+        for r, row in _rows(metrics, study, "lopinf").items():
+            # K^ > 0, C^ >= 0 and Newmark average acceleration: the learned energy cannot grow
+            # (1e-9: round-off of the linear step map over 20000 steps)
+            assert row["rom_energy_growth"] <= 1 + 1e-9, (study, r, row["rom_energy_growth"])
+            assert row["blowup_time"] is None and row["stiffness_asymmetry"] == 0.0
+            assert row["stiffness_min_eig"] > 0 and row["damping_min_eig"] >= -1e-12
+    gal = _rows(metrics, "rom", "galerkin")
+    for r, row in _rows(metrics, "rom", "lopinf").items():
+        # the Galerkin ROM conserves its energy exactly: its FOM-energy error is the energy of the
+        # initial state the basis misses (4.6e-3 at r = 2). L-OpInf adds what its small learned
+        # damping dissipates over 20 windows: observed at most 3.3e-4 more; 1e-3 allows load-free noise
+        assert row["energy_error_max"] <= gal[r]["energy_error_max"] + 1e-3, (r, row["energy_error_max"])
+    for r, row in _rows(metrics, "rom_coarse_data", "lopinf").items():
+        # coarse data (dt = 4e-4): wrong accelerations of the high modes are fitted as damping, the
+        # energy decays (observed 0.24 at r = 8) but stays bounded
+        assert row["energy_error_max"] < 0.5, (r, row["energy_error_max"])
+
+
+def test_beam_rom_state_error_against_the_projection_error(beam_metrics):
+    metrics, _ = beam_metrics
+    for r, row in _rows(metrics, "rom", "galerkin").items():
+        # Galerkin with the FOM's own scheme and step: the error is the projection error
+        # (observed ratio 1.00-1.006)
+        assert row["test_error"] <= 1.05 * row["projection_error"], (r, row)
+    for r, row in _rows(metrics, "rom", "lopinf").items():
+        if row["projection_error"] >= 3e-4:
+            # where the basis dominates (r = 2, 4): within 10x the projection error (observed 1.03, 8.2)
+            assert row["test_error"] <= 10 * row["projection_error"], (r, row)
+        # beyond, a floor: the learned K^ reproduces the *discrete* Newmark frequencies of the data
+        # (relative shift (omega dt)^2 / 12), and the ROM's Newmark adds the same shift again; for
+        # mode 2 at dt = 1e-4 that is 2.9e-3 over 2 s (observed 2.86e-3 to 2.88e-3 for r = 4, 6)
+        assert row["test_error"] <= 4e-3, (r, row)
+
+
+def test_beam_plain_opinf_is_harmless_on_fine_data_and_blows_up_on_coarse_data(beam_metrics):
+    """What plain OpInf does, as observed (the seed shows energy growth and blow-up)."""
+    metrics, _ = beam_metrics
+    lop, plain = _rows(metrics, "rom", "lopinf"), _rows(metrics, "rom", "plain_opinf")
+    for r in plain:
+        # fine data (dt = 1e-4): no blow-up, no drift beyond 1e-4 over 20 windows, the same test
+        # error as L-OpInf (observed within 0.2 %) ...
+        assert plain[r]["blowup_time"] is None and plain[r]["rom_energy_growth"] < 1 + 1e-4
+        assert plain[r]["test_error"] == pytest.approx(lop[r]["test_error"], rel=0.02)
+    # ... although nothing keeps its C^ semidefinite (observed min eigenvalue -9.7e-3 at r = 4)
+    assert min(row["damping_min_eig"] for r, row in plain.items() if r >= 4) < 0
+    coarse_lop, coarse_plain = _rows(metrics, "rom_coarse_data", "lopinf"), _rows(metrics, "rom_coarse_data",
+                                                                                  "plain_opinf")
+    # coarse data (dt = 4e-4): at r = 8 plain OpInf's negative damping (observed -970) blows up
+    # within the first training window (observed at 0.09 s), L-OpInf stays finite
+    assert coarse_plain[8]["blowup_time"] is not None and coarse_plain[8]["blowup_time"] < 0.2
+    assert coarse_lop[8]["blowup_time"] is None and coarse_lop[8]["test_error"] < 0.2
+
+
 def test_cli_lists_cases(capsys):
     assert "beam" in available_cases()
     assert main(["cases"]) == 0

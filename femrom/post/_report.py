@@ -123,3 +123,93 @@ def plot_accuracy_cost(path, rows: list[dict], cost: str, error: str, label: str
     fig.savefig(path, dpi=120)
     plt.close(fig)
     return path
+
+
+def plot_time_series(path, times, series: dict, *, ylabel: str = "", logy: bool = False,
+                     shade: tuple[float, float] | None = None, title: str = "",
+                     shade_label: str = "training window", envelope: int | None = None,
+                     ymax: float | None = None) -> Path:
+    """Several curves over time on one axis, e.g. errors of several ROMs.
+
+    Parameters
+    ----------
+    times : (k,) ndarray
+    series : dict of name -> (k,) ndarray
+    shade : (t0, t1), optional
+        A window to shade (the training window).
+    envelope : int, optional
+        Draw the maximum over ``envelope`` equal bins instead of every sample (fast
+        oscillating errors of long runs stay readable).
+    ymax : float, optional
+        Clip values above (a blow-up then runs along the top edge, marked "clipped").
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(8, 3.6))
+    styles = ("-", "--", ":", "-.")
+    for i, (name, values) in enumerate(series.items()):
+        values = np.asarray(values, dtype=float)
+        t = np.asarray(times, dtype=float)[:values.size]
+        if ymax is not None:
+            over = ~np.isfinite(values) | (values > ymax)
+            if over.any():
+                values = np.where(over, ymax, values)
+                name = f"{name} (clipped)"
+        if envelope is not None and values.size > 2 * envelope:
+            edges = np.linspace(0, values.size, envelope + 1).astype(int)
+            values = np.array([np.nanmax(values[a:b]) for a, b in zip(edges[:-1], edges[1:])])
+            t = np.array([t[(a + b) // 2] for a, b in zip(edges[:-1], edges[1:])])
+        if logy:
+            values = np.where(values > 0, values, np.nan)
+        ax.plot(t, values, styles[i % len(styles)], lw=1.2, label=name)
+    if shade is not None:
+        ax.axvspan(shade[0], shade[1], color="0.85", zorder=0, label=shade_label)
+    if logy:
+        ax.set_yscale("log")
+    ax.set_xlabel("t [s]")
+    ax.set_ylabel(ylabel)
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(loc="best", fontsize=8)
+    if title:
+        ax.set_title(title)
+    fig.tight_layout()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path
+
+
+def plot_accuracy_cost_groups(path, rows: list[dict], cost: str, error: str, label: str,
+                              group: str, title: str = "") -> Path:
+    """Log-log error against cost, one line per value of ``group`` (e.g. the method),
+    each point annotated with ``label`` (e.g. r). Non-finite errors are left out."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6.4, 4.2))
+    for name in dict.fromkeys(r[group] for r in rows):
+        sel = [r for r in rows if r[group] == name and np.isfinite(r[error]) and r[error] > 0]
+        if not sel:
+            continue
+        x, y = [r[cost] for r in sel], [r[error] for r in sel]
+        ax.loglog(x, y, "o-", label=str(name))
+        for r, xi, yi in zip(sel, x, y):
+            ax.annotate(str(r[label]), (xi, yi), textcoords="offset points", xytext=(3, 3), fontsize=7)
+    ax.set_xlabel(cost)
+    ax.set_ylabel(error)
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=8)
+    if title:
+        ax.set_title(title, fontsize=10)
+    fig.tight_layout()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path
