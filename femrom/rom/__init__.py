@@ -10,10 +10,14 @@
 - :class:`HamiltonianROM`: linear canonical Hamiltonian ROMs with symplectic
   Euler A/B, Stoermer-Verlet and the implicit midpoint rule;
 - :func:`select_regularization`: a grid of regularization weights scored by
-  training fit and by energy over an extended window.
+  training fit and by energy over an extended window;
+- :class:`HyperReducedPotential`, :func:`ecsw_weights`, :func:`sparse_nnls`:
+  structure-preserving hyper-reduction of a nodal potential (sampled nodes
+  and non-negative weights; the reduced force stays an exact gradient).
 """
 
 from femrom.rom._hamiltonian import HAMILTONIAN_SCHEMES, HamiltonianROM, hamiltonian_step_matrix
+from femrom.rom._hyper import HyperReducedPotential, ecsw_weights, sparse_nnls
 from femrom.rom._model import ReducedSolution, SecondOrderROM
 from femrom.rom._selection import RegularizationScore, select_regularization
 from femrom.rom._steppers import SCHEMES, linear_step_map, verlet_bound
@@ -21,4 +25,5 @@ from femrom.rom._steppers import SCHEMES, linear_step_map, verlet_bound
 __all__ = [
     "HAMILTONIAN_SCHEMES", "HamiltonianROM", "SCHEMES", "hamiltonian_step_matrix", "ReducedSolution", "RegularizationScore", "SecondOrderROM", "linear_step_map",
     "select_regularization", "verlet_bound",
+    "HyperReducedPotential", "ecsw_weights", "sparse_nnls",
 ]
