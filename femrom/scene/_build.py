@@ -97,7 +97,7 @@ def build(scene: Scene, *, mesh=None) -> FullOrderModel:
     input_matrix = inputs = None
     if "actuation" in names:
         tic = time.perf_counter()
-        columns = [condensation.vector(space.load_vector(i.load)) for i in scene.inputs]
+        columns = [condensation.vector(sum(space.load_vector(load) for load in i.loads)) for i in scene.inputs]
         input_matrix = np.column_stack(columns)
         signals = tuple(i.signal for i in scene.inputs)
         inputs = _SignalVector(signals)

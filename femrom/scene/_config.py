@@ -168,16 +168,34 @@ class LoadConfig:
 
 @dataclass(frozen=True)
 class InputConfig:
+    """One input ``u_j(t)``: its signal and its column of ``B``.
+
+    ``load`` is one load table or an array of them; the column is their sum,
+    ``b_j = sum_l f_l``, so one input can drive several surfaces with signs
+    (antagonistic chambers: ``magnitude = 1`` on one, ``-1`` on the other).
+    ``load`` is the first, ``extra_loads`` the rest; :attr:`loads` all of them.
+    """
+
     name: str
     load: LoadConfig
     signal: Signal
+    extra_loads: tuple[LoadConfig, ...] = ()
 
     @classmethod
     def from_dict(cls, data, index):
         where = f"inputs[{index}]"
         d = _take(data, where, {"name": f"u{index}", "load": None, "signal": None}, ("load", "signal"))
-        return cls(str(d["name"]), LoadConfig.from_dict(d["load"], f"{where}.load"),
-                   Signal.from_dict(d["signal"], f"{where}.signal"))
+        tables = d["load"] if isinstance(d["load"], list) else [d["load"]]
+        if not tables:
+            raise SceneError(f"[{where}] 'load' is an empty array; give at least one load table")
+        loads = [LoadConfig.from_dict(t, f"{where}.load[{k}]" if len(tables) > 1 else f"{where}.load")
+                 for k, t in enumerate(tables)]
+        return cls(str(d["name"]), loads[0], Signal.from_dict(d["signal"], f"{where}.signal"),
+                   tuple(loads[1:]))
+
+    @property
+    def loads(self) -> tuple[LoadConfig, ...]:
+        return (self.load, *self.extra_loads)
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,217 @@
+"""The soft-robotic fishtail: geometry, chamber loads, P1 locking, the pipeline, renders.
+
+The pipeline test runs ``cases/fishtail.py`` on the ``tiny`` mesh (about 4.8e3
+dofs) over a 0.12 s window; the bounds below were measured on that
+configuration (see each assertion) and are stated with their margin.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from femrom.fem import Condensation, SolidSpace, make_solver
+from femrom.fem import _vector_ops
+from femrom.mesh import build_mesh
+from femrom.scene import InputConfig, MaterialConfig, Scene, SceneError, build
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "cases"))
+import fishtail  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def tiny_model():
+    return build(fishtail.load_scene("tiny"))
+
+
+# -- geometry and loads ----------------------------------------------------------------
+def test_geometry_has_the_named_groups_and_closed_chambers(tiny_model):
+    mesh = tiny_model.space.mesh
+    assert {"clamp", "tip", "chamber_left", "chamber_right", "skin"} <= set(mesh.boundaries)
+    assert "body" in mesh.subdomains
+    septum = 0.004  # fishtail.geo default
+    for name, sign in (("chamber_left", 1), ("chamber_right", -1)):
+        facets = mesh.boundaries[name]
+        y = mesh.p[1, mesh.facets[:, facets]]
+        assert np.all(sign * y >= 0.5 * septum - 1e-9), name  # each chamber on its own side
+        # a uniform pressure on a closed cavity has no resultant: sum_I f_I = -p \oint n ds = 0
+        f = _vector_ops.surface_pressure(tiny_model.space.basis, name, 1.0)
+        resultant = np.array([f[c::3].sum() for c in range(3)])
+        assert np.max(np.abs(resultant)) < 1e-12 * np.abs(f).sum()
+    x = mesh.p[0, mesh.facets[:, mesh.boundaries["clamp"]]]
+    assert np.allclose(x, 0.0)
+
+
+def test_one_input_drives_both_chambers_with_opposite_signs(tiny_model):
+    space, cond = tiny_model.space, tiny_model.system.condensation
+    left = cond.vector(_vector_ops.surface_pressure(space.basis, "chamber_left", 1.0))
+    right = cond.vector(_vector_ops.surface_pressure(space.basis, "chamber_right", 1.0))
+    B = np.asarray(tiny_model.system.input_matrix)
+    assert B.shape == (tiny_model.system.n_dofs, 1)
+    np.testing.assert_allclose(B[:, 0], left - right, rtol=0, atol=1e-15 * np.abs(left).max())
+    # the antagonistic pair bends the tail sideways (-y for +p on the left): the tip moves in y
+    q = make_solver(tiny_model.system.stiffness).solve(B[:, 0])
+    tip = tiny_model.system.output_matrix @ q
+    assert tip[1] < 0 and abs(tip[1]) > 20 * max(abs(tip[0]), abs(tip[2]))
+
+
+def test_two_input_option_gives_one_column_per_chamber(tiny_model):
+    scene = fishtail.load_scene("tiny", n_inputs=2)
+    model = build(scene)
+    B = np.asarray(model.system.input_matrix)
+    np.testing.assert_allclose(B[:, 0] - B[:, 1], np.asarray(tiny_model.system.input_matrix)[:, 0],
+                               atol=1e-15 * np.abs(B).max())
+    u = fishtail.PressureInputs(fishtail.pressure_signal(scene, "step"), 2)
+    assert np.allclose(u(1.0), [2.0e4, -2.0e4])
+
+
+def test_step_input_is_seen_at_the_same_steps_by_the_fom_clock_and_the_rom_grid():
+    scene = fishtail.load_scene("tiny")
+    step = fishtail.pressure_signal(scene, "step")
+    dt, t, fom, rom = scene.time.dt, 0.0, [], []
+    for k in range(1, scene.time.n_steps + 1):
+        t += dt  # the integrators' clock
+        fom.append(float(step(t)))
+        rom.append(float(step(k * dt)))  # a reduced model's uniform grid
+    assert fom == rom
+    assert 0 < sum(v > 0 for v in rom) < len(rom)
+
+
+def test_input_load_arrays_are_checked():
+    load = {"kind": "surface_pressure", "at": "chamber_left"}
+    signal = {"kind": "step"}
+    config = InputConfig.from_dict({"load": [load, dict(load, magnitude=-2.0)], "signal": signal}, 0)
+    assert [x.magnitude for x in config.loads] == [1.0, -2.0]
+    assert InputConfig.from_dict({"load": load, "signal": signal}, 0).loads == (config.load,)
+    with pytest.raises(SceneError, match="empty"):
+        InputConfig.from_dict({"load": [], "signal": signal}, 0)
+    with pytest.raises(SceneError, match=r"inputs\[0\].load\[1\]"):
+        InputConfig.from_dict({"load": [load, dict(load, oops=1)], "signal": signal}, 0)
+
+
+# -- locking -----------------------------------------------------------------------------
+def _cantilever_ratio(mesh, element, nu):
+    """Tip deflection of a clamped 0.5 x 0.05 x 0.05 m block under an end shear force,
+    over the Timoshenko beam value F L^3 / (3 E I) + F L / (kappa G A), kappa = 5/6."""
+    length, width, height = 0.5, 0.05, 0.05
+    space = SolidSpace(mesh, element)
+    E, F = 1.0e6, 1.0
+    K = space.stiffness("elasticity", MaterialConfig(youngs_modulus=E, density=1000.0, poisson_ratio=nu))
+    cond = Condensation.from_fixed(space.n_total, space.boundary_dofs("left", clamped=True))
+    f = _vector_ops.surface_traction(space.basis, "right", [0.0, 0.0, -F / (width * height)])
+    q = make_solver(cond.matrix(K)).solve(cond.vector(f))
+    deflection = -(cond.columns(_vector_ops.average_rows(space.basis, "right", 2)) @ q)[0]
+    inertia, area, shear = width * height**3 / 12, width * height, E / (2 * (1 + nu))
+    return deflection / (F * length**3 / (3 * E * inertia) + F * length / (5 / 6 * shear * area))
+
+
+def test_p1_locks_near_incompressibility_and_p2_does_not():
+    mesh = build_mesh("beam_solid", {"length": 0.5, "width": 0.05, "height": 0.05, "mesh_size": 0.025})
+    p1 = {nu: _cantilever_ratio(mesh, "p1", nu) for nu in (0.3, 0.499)}
+    p2 = {nu: _cantilever_ratio(mesh, "p2", nu) for nu in (0.3, 0.499)}
+    # P2 on 2 elements through the depth: within 6 % of beam theory at both nu (measured
+    # 0.991 and 0.957; at nu -> 0.5 the clamped face also blocks the Poisson contraction
+    # at the root, which beam theory ignores: 0.969 on the mesh refined twice).
+    for nu, ratio in p2.items():
+        assert abs(ratio - 1) < 0.06, (nu, ratio)
+    # P1 on the same mesh: already stiff at nu = 0.3 (measured 0.53), and at nu = 0.499
+    # it locks: measured 0.078 of the beam deflection, 0.15 of its own nu = 0.3 value.
+    assert p1[0.499] < 0.2
+    assert p1[0.499] / p1[0.3] < 0.3
+    assert p2[0.499] / p2[0.3] > 0.9  # P2 hardly notices nu -> 0.5
+
+
+# -- the pipeline -------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def pipeline(tmp_path_factory):
+    out = tmp_path_factory.mktemp("fishtail")
+    metrics = fishtail.run(out, quick=True, level="tiny", ranks=(2, 4), ladders=False, render=True,
+                           t_end=0.12, extension=20.0)
+    return out, metrics
+
+
+def _row(metrics, r, learner):
+    return next(x for x in metrics["roms"] if x["r"] == r and x["learner"] == learner)
+
+
+def test_pipeline_writes_its_report(pipeline):
+    out, metrics = pipeline
+    for name in ("metrics.json", "report.md", "response.png", "rom_error.png", "energy.png",
+                 "accuracy_cost_r.png", "scene.toml", "paraview/fishtail.pvd"):
+        assert (out / name).is_file(), name
+    saved = json.loads((out / "metrics.json").read_text())
+    assert saved["n_dofs"] == metrics["n_dofs"] > 1000
+    assert saved["train"] == "sigmoid" and saved["test"] == "step"
+    pvd = (out / "paraview" / "fishtail.pvd").read_text()
+    assert pvd.count("<DataSet") == len(list((out / "paraview").glob("fishtail_*.vtu"))) > 5
+    assert "| r | learner |" in (out / "report.md").read_text()
+
+
+def test_rom_output_error_on_the_unseen_step_input(pipeline):
+    _, metrics = pipeline
+    gal, lop = _row(metrics, 4, "galerkin"), _row(metrics, 4, "lopinf")
+    # Measured on this configuration at r = 4: Galerkin 1.77e-3, L-OpInf 1.75e-3 (field
+    # errors 2.7e-3 and 2.6e-3; training output error 3.6e-5). Bound: about twice the
+    # measured value (timing-independent; a different gmsh may move the tiny mesh), and
+    # L-OpInf within 25 % (+1e-3) of the intrusive ROM in the same basis. (With the step
+    # on a grid point, a rounding shift of the input by one step gave 5.7e-2 for every
+    # ROM: the check that caught it is the Galerkin ROM's error in its own training basis.)
+    assert lop["test_output_error"] < 4e-3
+    assert lop["test_output_error"] < 1.25 * gal["test_output_error"] + 1e-3
+    # it is learned, and it learned the training data far better than it generalises
+    assert lop["train_output_error"] < 0.2 * lop["test_output_error"]
+    # fewer modes, larger error on the unseen input: r = 2 measured 1.6e-2
+    assert _row(metrics, 2, "lopinf")["test_output_error"] > 3 * lop["test_output_error"]
+
+
+def test_lopinf_operators_keep_their_structure(pipeline):
+    _, metrics = pipeline
+    for r in (2, 4):
+        row = _row(metrics, r, "lopinf")
+        assert row["stiffness_symmetric"] and row["stiffness_min_eig"] > 0
+        assert row["damping_min_eig"] > -1e-10
+
+
+def test_lopinf_energy_stays_bounded_over_the_extended_window(pipeline):
+    _, metrics = pipeline
+    for r in (2, 4):
+        for learner in ("lopinf", "lopinf_fd"):
+            row = _row(metrics, r, learner)
+            # 20 windows under the held step pressure: a damped, forced, stable model
+            # settles at its static energy, below the FOM's overshoot peak (measured
+            # ratios 0.07-0.6); a model with a negative stiffness or damping eigenvalue
+            # grows without bound (plain OpInf from finite differences: 1e285 on the
+            # small mesh at r = 8).
+            assert np.isfinite(row["test_energy_ratio"]) and row["test_energy_ratio"] < 1.5, (r, learner)
+
+
+# -- renders -------------------------------------------------------------------------------
+def test_render_is_a_non_blank_image_of_the_requested_size(tmp_path, tiny_model):
+    from femrom.post import mesh_arrays, render_available, render_grid, vertex_displacements
+
+    ok, reason = render_available()
+    if not ok:
+        pytest.skip(f"PyVista cannot render off-screen here: {reason}")
+    import matplotlib.image
+
+    space, cond = tiny_model.space, tiny_model.system.condensation
+    points, cells = mesh_arrays(space.mesh)
+    q = make_solver(tiny_model.system.stiffness).solve(np.asarray(tiny_model.system.input_matrix)[:, 0])
+    u = vertex_displacements(space.basis, cond.expand(q))
+    path = render_grid(tmp_path / "r.png", points, cells, [[u, 2 * u]], titles=["a", "b"],
+                       window_size=(400, 240))
+    image = matplotlib.image.imread(path)
+    assert image.shape[:2] == (240, 400)
+    gray = image[..., :3].mean(axis=2)
+    assert gray.std() > 0.05  # a blank frame has std 0; this one measured 0.36
+    # the tail covers a real part of the frame (measured 27 %), and the colour map is
+    # used: many distinct colours, not one flat shade
+    background = np.isclose(gray, np.median(gray[:5, :5]), atol=0.02)
+    assert 0.05 < 1 - background.mean() < 0.95
+    colours = np.unique((image[..., :3].reshape(-1, 3) * 255).round(), axis=0)
+    assert len(colours) > 50
