@@ -15,6 +15,7 @@ from femrom.fem._solvers import (
     STRATEGIES,
     LinearSolver,
     LinearSolverError,
+    SolverCache,
     choose_strategy,
     make_solver,
 )
@@ -30,7 +31,7 @@ from femrom.fem._vector_ops import (
 )
 
 __all__ = [
-    "STRATEGIES", "LinearSolver", "LinearSolverError", "choose_strategy", "make_solver",
+    "STRATEGIES", "LinearSolver", "LinearSolverError", "SolverCache", "choose_strategy", "make_solver",
     "Condensation", "LineSpace", "LocalPotential", "NonlinearForce", "SolidSpace", "SpaceError",
     "average_rows", "axial_stiffness", "bending_stiffness", "dirichlet_dofs", "elasticity_stiffness",
     "hrz_lumped", "lame_parameters", "line_basis", "line_mass", "point_load", "probe_rows",

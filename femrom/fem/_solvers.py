@@ -18,6 +18,11 @@ Strategies
     forward/backward substitution only (phase 33) for every solve.
 ``"cholmod"``
     Sparse Cholesky from ``scikit-sparse`` (SPD only), when importable.
+``"jacobi-cg"``
+    Conjugate gradients preconditioned by the inverse diagonal: no factor at
+    all, for matrices that diagonal scaling makes well conditioned whatever
+    the mesh, such as a consistent mass matrix (Wathen, IMA J. Numer. Anal. 7,
+    1987). SPD only.
 ``"amg-cg"``
     Conjugate gradients preconditioned by one V-cycle of a pyamg
     smoothed-aggregation hierarchy built with ``B = near_nullspace`` (the
@@ -39,7 +44,9 @@ from __future__ import annotations
 
 import ctypes
 import functools
+import hashlib
 import importlib.util
+from collections import OrderedDict
 import time
 from typing import Callable
 
@@ -48,7 +55,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 #: Strategy names accepted by :func:`make_solver`.
-STRATEGIES = ("auto", "diagonal", "superlu", "pardiso", "cholmod", "amg-cg")
+STRATEGIES = ("auto", "diagonal", "superlu", "pardiso", "cholmod", "amg-cg", "jacobi-cg")
 #: ``"auto"`` uses SuperLU below this size: factor and solve take milliseconds
 #: and locating and initialising MKL (about a second, once) is not worth it.
 AUTO_SMALL = 5_000
@@ -261,33 +268,17 @@ class CholmodSolver(LinearSolver):
         return self._factor(b)
 
 
-class AMGKrylovSolver(LinearSolver):
-    r"""Smoothed-aggregation AMG (pyamg) as a preconditioner of CG (or GMRES).
+class _PreconditionedKrylov(LinearSolver):
+    """CG (or GMRES when not SPD) with a fixed preconditioner ``self._preconditioner``.
 
     Stops when ``||b - A x|| <= rtol ||b||``; raises :class:`LinearSolverError`
     when ``maxiter`` iterations do not get there.
     """
 
-    name = "amg-cg"
-
-    def __init__(self, A, *, near_nullspace=None, rtol: float = 1e-10, maxiter: int = 500,
-                 spd: bool = True):
+    def __init__(self, A, *, rtol: float, maxiter: int, spd: bool):
         super().__init__(A)
-        import pyamg
-
-        A = sp.csr_matrix(A, dtype=float)
-        self._A = A
+        self._A = sp.csr_matrix(A, dtype=float)
         self._rtol, self._maxiter, self._spd = float(rtol), int(maxiter), spd
-        B = None if near_nullspace is None else np.asarray(near_nullspace, dtype=float)
-        if B is not None:
-            B = B.reshape(A.shape[0], -1)
-        start = time.perf_counter()
-        hierarchy = pyamg.smoothed_aggregation_solver(
-            A, B=B, symmetry="hermitian" if spd else "nonsymmetric")
-        self._preconditioner = hierarchy.aspreconditioner(cycle="V")
-        self.setup_seconds = time.perf_counter() - start
-        self.n_factorizations = 1
-        self.n_levels = len(hierarchy.levels)
         self.last_iterations = 0
         self.total_iterations = 0
 
@@ -315,6 +306,57 @@ class AMGKrylovSolver(LinearSolver):
                 f"{self.name} did not reach rtol={self._rtol:g} in {self._maxiter} iterations "
                 f"(relative residual {residual:.3g})")
         return x
+
+
+class AMGKrylovSolver(_PreconditionedKrylov):
+    r"""Smoothed-aggregation AMG (pyamg) as a preconditioner of CG (or GMRES).
+
+    Stops when ``||b - A x|| <= rtol ||b||``; raises :class:`LinearSolverError`
+    when ``maxiter`` iterations do not get there.
+    """
+
+    name = "amg-cg"
+
+    def __init__(self, A, *, near_nullspace=None, rtol: float = 1e-10, maxiter: int = 500,
+                 spd: bool = True):
+        super().__init__(A, rtol=rtol, maxiter=maxiter, spd=spd)
+        import pyamg
+
+        A = self._A
+        B = None if near_nullspace is None else np.asarray(near_nullspace, dtype=float)
+        if B is not None:
+            B = B.reshape(A.shape[0], -1)
+        start = time.perf_counter()
+        hierarchy = pyamg.smoothed_aggregation_solver(
+            A, B=B, symmetry="hermitian" if spd else "nonsymmetric")
+        self._preconditioner = hierarchy.aspreconditioner(cycle="V")
+        self.setup_seconds = time.perf_counter() - start
+        self.n_factorizations = 1
+        self.n_levels = len(hierarchy.levels)
+
+
+class JacobiCGSolver(_PreconditionedKrylov):
+    r"""CG preconditioned by ``diag(A)^{-1}``: no factorisation, O(nnz) memory.
+
+    For SPD matrices that diagonal scaling makes well conditioned independently
+    of the mesh: the consistent mass matrix of Lagrange elements (Wathen, IMA
+    J. Numer. Anal. 7, 1987). Used there, e.g. for the one mass solve of an
+    implicit scheme's initial acceleration, it avoids a second direct factor
+    next to the effective matrix's.
+    """
+
+    name = "jacobi-cg"
+
+    def __init__(self, A, *, rtol: float = 1e-10, maxiter: int = 500, spd: bool = True):
+        if not spd:
+            raise ValueError("strategy 'jacobi-cg' needs an SPD matrix (spd=True)")
+        super().__init__(A, rtol=rtol, maxiter=maxiter, spd=True)
+        start = time.perf_counter()
+        diagonal = self._A.diagonal()
+        if not np.all(diagonal > 0):
+            raise LinearSolverError("jacobi-cg needs a positive diagonal (an SPD matrix)")
+        self._preconditioner = sp.diags(1.0 / diagonal).tocsr()
+        self.setup_seconds = time.perf_counter() - start
 
 
 def is_available(strategy: str) -> bool:
@@ -396,7 +438,80 @@ def make_solver(A, strategy: str = "auto", *, near_nullspace=None, rtol: float =
         if not spd:
             raise ValueError("strategy 'cholmod' needs an SPD matrix (spd=True)")
         return CholmodSolver(A)
+    if strategy == "jacobi-cg":
+        return JacobiCGSolver(A, rtol=rtol, maxiter=maxiter, spd=spd)
     return AMGKrylovSolver(A, near_nullspace=near_nullspace, rtol=rtol, maxiter=maxiter, spd=spd)
+
+
+def matrix_digest(A) -> str:
+    """A BLAKE2 digest of a sparse matrix's shape, CSR structure and values (equal matrices, equal digests)."""
+    A = sp.csr_matrix(A)
+    h = hashlib.blake2b(digest_size=20)
+    h.update(np.asarray(A.shape, dtype=np.int64).tobytes())
+    for array in (A.indptr, A.indices, A.data):
+        h.update(np.ascontiguousarray(array).view(np.uint8))
+    return h.hexdigest()
+
+
+class _Reused(LinearSolver):
+    """Another user's view of a solver set up before: same solves, no new setup counted."""
+
+    def __init__(self, solver: LinearSolver):
+        super().__init__(solver)
+        self._solver = solver
+        self.name = solver.name
+
+    def _solve(self, b, x0):
+        before = self._solver.total_iterations
+        x = self._solver.solve(b, x0)
+        if before is not None:
+            self.last_iterations = self._solver.last_iterations
+            self.total_iterations = (self.total_iterations or 0) + self._solver.last_iterations
+        return x
+
+
+class SolverCache:
+    r"""A solver factory that sets up each distinct matrix once, for several runs.
+
+    Runs of one model with one time step solve with the same effective matrix
+    ``M + gamma dt C + beta dt^2 K``; at 7.6e5 P2 dofs its PARDISO factor takes
+    minutes and about 9 GB. Called like :func:`make_solver` by the integrators,
+    ``cache(A, spd=True)`` returns, for a matrix equal to one set up before
+    (same shape, structure and values: :func:`matrix_digest`), a view of that
+    solver that reports no new factorisation; otherwise it sets one up.
+
+    Parameters
+    ----------
+    strategy : str
+        Passed to :func:`make_solver`, as are ``options``.
+    size : int
+        Setups kept at most; the oldest is dropped first (each may be GBs).
+    """
+
+    def __init__(self, strategy: str = "auto", *, size: int = 1, **options):
+        if size < 1:
+            raise ValueError(f"size must be >= 1, got {size}")
+        self.strategy, self.size, self.options = strategy, int(size), options
+        self._solvers: OrderedDict[tuple, LinearSolver] = OrderedDict()
+        self.hits = self.misses = 0
+
+    def __call__(self, A, spd: bool = True) -> LinearSolver:
+        key = (matrix_digest(A), bool(spd))
+        solver = self._solvers.get(key)
+        if solver is not None:
+            self.hits += 1
+            self._solvers.move_to_end(key)
+            return _Reused(solver)
+        self.misses += 1
+        solver = make_solver(A, self.strategy, spd=spd, **self.options)
+        self._solvers[key] = solver
+        while len(self._solvers) > self.size:
+            self._solvers.popitem(last=False)
+        return solver
+
+    def clear(self) -> None:
+        """Drop every kept setup (frees the factors)."""
+        self._solvers.clear()
 
 
 #: Signature of a solver factory the integrators call: ``factory(A, spd=...)``.

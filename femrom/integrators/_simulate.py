@@ -43,12 +43,16 @@ class SimulationResult:
 
 
 def simulate(model, *, dt: float | None = None, t_end: float | None = None, consumers=(),
-             progress: bool | None = None) -> SimulationResult:
+             progress: bool | None = None, solver=None) -> SimulationResult:
     """Integrate a :class:`~femrom.scene.FullOrderModel` over its time window.
 
     Only what ``[outputs]`` lists is recorded: probe/average outputs, the
     energy, and full fields (in memory here; stream them to a store with an
     extra consumer). ``dt`` and ``t_end`` override the scene's (ladders).
+    ``solver`` is a factory ``solver(A, spd=...) -> LinearSolver`` in place of
+    :func:`~femrom.fem.make_solver` with the scene's strategy, e.g. a
+    :class:`~femrom.fem.SolverCache` shared by several runs so that they
+    factorise their common effective matrix once.
     """
     scene, system = model.scene, model.system
     dt = scene.time.dt if dt is None else float(dt)
@@ -69,7 +73,8 @@ def simulate(model, *, dt: float | None = None, t_end: float | None = None, cons
 
     modes = getattr(model.space, "rigid_body_modes", None)
     near_nullspace = None if modes is None else system.condensation.vector(modes())
-    solver = functools.partial(make_solver, strategy=scene.time.solver, near_nullspace=near_nullspace)
+    if solver is None:
+        solver = functools.partial(make_solver, strategy=scene.time.solver, near_nullspace=near_nullspace)
     summary = integrate(system, scheme_for(scene.time), model.initial_displacement, model.initial_velocity,
                         dt, n_steps, consumers=(*kept, *consumers), solver=solver, progress=progress)
     times = dt * np.arange(0, n_steps + 1, every)
