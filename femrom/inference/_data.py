@@ -17,6 +17,13 @@ The diagnostics record what the error split of Geng et al. (CMAME 427, 2024)
 needs: the projection error of the states and, when the full-order run
 stored them, the error of the finite-difference derivatives against the
 stored ones.
+
+Snapshots need not be in memory: every full-order argument of
+:func:`reduce_snapshots` may be any block source of
+:func:`femrom.linalg.as_block_source` (an array, a snapshot store's
+``iter_blocks``, a callable returning column blocks), read in one pass. For a
+nested basis (POD), project once with the largest basis and take
+:meth:`SecondOrderData.truncated` for each smaller r.
 """
 
 from __future__ import annotations
@@ -26,6 +33,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from femrom.inference._derivatives import finite_difference
+from femrom.linalg import as_block_source
 
 #: Where the reduced derivatives come from.
 DERIVATIVE_SOURCES = ("finite_difference", "stored")
@@ -49,7 +57,9 @@ class SecondOrderData:
     diagnostics : dict
         ``projection_error``, ``velocity_error``, ``acceleration_error``
         (relative, when known), ``derivative_source``, ``order``, ``dt``,
-        ``n_trajectories``.
+        ``n_trajectories``; from :func:`reduce_snapshots` also
+        ``projection_residual`` ``||Q - V Q^||_W`` and ``state_norm``
+        ``||Q||_W`` (Frobenius), which :meth:`truncated` updates.
     """
 
     states: np.ndarray
@@ -98,6 +108,52 @@ class SecondOrderData:
                        times=pick(self.times))
 
 
+    def truncated(self, r: int) -> "SecondOrderData":
+        r"""The data of the first ``r`` basis vectors, for a nested basis ``V_r = V[:, :r]`` (POD).
+
+        Rows ``:r`` of the states, derivatives and forces. The projection
+        error is updated exactly when the basis is orthonormal in the product
+        the data were projected with: the discarded coordinates add
+        orthogonally, ``||Q - V_r Q^_r||_W^2 = ||Q - V Q^||_W^2 + ||Q^_{r:}||_F^2``.
+        Derivative-error diagnostics (finite differences against stored
+        derivatives) are dropped: they are not separable by rows.
+        """
+        r = int(r)
+        if not 1 <= r <= self.r:
+            raise ValueError(f"cannot truncate data of r = {self.r} to r = {r}")
+        if r == self.r:
+            return self
+        rows = lambda A: None if A is None else A[:r]  # noqa: E731
+        d = {k: v for k, v in self.diagnostics.items() if k not in ("velocity_error", "acceleration_error")}
+        residual, norm = d.get("projection_residual"), d.get("state_norm")
+        if residual is not None and norm:
+            d["projection_residual"] = float(np.hypot(residual, np.linalg.norm(self.states[r:])))
+            d["projection_error"] = d["projection_residual"] / norm
+        else:
+            d.pop("projection_error", None)
+        return replace(self, states=rows(self.states), velocities=rows(self.velocities),
+                       accelerations=rows(self.accelerations),
+                       nonlinear_forces=rows(self.nonlinear_forces), diagnostics=d)
+
+    def with_finite_differences(self, order: int = 4) -> "SecondOrderData":
+        """The same states with velocities and accelerations by finite differences of order ``order``.
+
+        Needs one uniformly sampled trajectory (``diagnostics["dt"]``). When
+        the current derivatives are the run's stored ones, the relative error
+        of the differences against them goes into the diagnostics.
+        """
+        dt = self.diagnostics.get("dt")
+        if dt is None or self.diagnostics.get("n_trajectories", 1) != 1:
+            raise ValueError("finite differences need one trajectory with a known step dt")
+        Qd = finite_difference(self.states, dt, order=order, derivative=1)
+        Qdd = finite_difference(self.states, dt, order=order, derivative=2)
+        d = dict(self.diagnostics, derivative_source="finite_difference", order=order)
+        if self.diagnostics.get("derivative_source") == "stored":
+            d["velocity_error"] = _relative_norm(Qd - self.velocities, self.velocities)
+            d["acceleration_error"] = _relative_norm(Qdd - self.accelerations, self.accelerations)
+        return replace(self, velocities=Qd, accelerations=Qdd, diagnostics=d)
+
+
 def concatenate(datasets) -> SecondOrderData:
     """One data set from several trajectories (columns side by side).
 
@@ -131,10 +187,50 @@ def concatenate(datasets) -> SecondOrderData:
                            times=None, diagnostics=diagnostics)
 
 
-def reduced_coordinates(basis: np.ndarray, X: np.ndarray, product=None) -> np.ndarray:
-    """(r, K) ndarray ``V^T W X`` (``W = I`` when ``product`` is ``None``)."""
-    X = np.asarray(X, dtype=float)
-    return basis.T @ (X if product is None else np.asarray(product @ X))
+def reduced_coordinates(basis: np.ndarray, X, product=None) -> np.ndarray:
+    """(r, K) ndarray ``V^T W X`` (``W = I`` when ``product`` is ``None``).
+
+    ``X`` is an (n, K) array or any block source of
+    :func:`femrom.linalg.as_block_source` (read in one pass).
+    """
+    if isinstance(X, np.ndarray):
+        return basis.T @ (X if product is None else np.asarray(product @ X))
+    return project_columns(basis, X, product)[0]
+
+
+def project_columns(basis: np.ndarray, X, product=None) -> tuple[np.ndarray, float, float]:
+    r"""One pass over the columns of ``X``: ``(V^T W X, ||X - V V^T W X||_W, ||X||_W)``.
+
+    Parameters
+    ----------
+    basis : (n, r) ndarray
+        ``V``, orthonormal in ``W`` for the residual to be the projection error.
+    X : (n, K) array or block source
+        Read block by block (:func:`femrom.linalg.as_block_source`); memory
+        O(n (r + b)) for blocks of b columns.
+    product : (n, n) sparse or ndarray, optional
+        ``W``; ``W @`` is applied once per block, and ``W V`` once in all.
+
+    Returns
+    -------
+    coordinates : (r, K) ndarray
+    residual, norm : float
+        Frobenius norms in ``W`` of the projection residual and of ``X``.
+    """
+    V = np.asarray(basis, dtype=float)
+    WV = V if product is None else np.asarray(product @ V)
+    parts, residual2, norm2 = [], 0.0, 0.0
+    for block in as_block_source(X).blocks():
+        WX = block if product is None else np.asarray(product @ block)
+        coords = V.T @ WX
+        parts.append(coords)
+        # E = X - V c, and W E = W X - (W V) c: no second product with W
+        E = block - V @ coords
+        residual2 += float(np.sum(E * (WX - WV @ coords)))
+        norm2 += float(np.sum(block * WX))
+    if not parts:
+        raise ValueError("no snapshot columns to project")
+    return np.hstack(parts), float(np.sqrt(max(residual2, 0.0))), float(np.sqrt(max(norm2, 0.0)))
 
 
 def _relative_norm(E: np.ndarray, X: np.ndarray, product=None) -> float:
@@ -158,8 +254,11 @@ def reduce_snapshots(basis: np.ndarray, states: np.ndarray, dt: float, *, produc
     ----------
     basis : (n, r) ndarray
         ``V``, orthonormal in ``product``.
-    states : (n, K) ndarray
-        ``Q``: displacement snapshots at ``t0 + k dt``.
+    states : (n, K) array or block source
+        ``Q``: displacement snapshots at ``t0 + k dt``; like every full-order
+        argument here, an array or any block source of
+        :func:`femrom.linalg.as_block_source` (e.g. ``lambda:
+        store.iter_blocks("q", 64, ["run"])``), read once.
     dt : float
         Snapshot spacing.
     product : (n, n) sparse or ndarray, optional
@@ -183,11 +282,15 @@ def reduce_snapshots(basis: np.ndarray, states: np.ndarray, dt: float, *, produc
     if derivatives not in DERIVATIVE_SOURCES:
         raise ValueError(f"unknown derivative source {derivatives!r}; valid: {DERIVATIVE_SOURCES}")
     V = np.asarray(basis, dtype=float)
-    Q = np.asarray(states, dtype=float)
-    if V.ndim != 2 or Q.ndim != 2 or V.shape[0] != Q.shape[0]:
-        raise ValueError(f"basis {V.shape} and states {Q.shape} do not match: expected (n, r), (n, K)")
-    Qh = reduced_coordinates(V, Q, product)
-    diagnostics = {"projection_error": _relative_norm(Q - V @ Qh, Q, product),
+    if V.ndim != 2:
+        raise ValueError(f"basis must be (n, r), got shape {V.shape}")
+    source = as_block_source(states)
+    if source.n_rows is not None and source.n_rows != V.shape[0]:
+        raise ValueError(f"basis {V.shape} and states with {source.n_rows} rows do not match: "
+                         "expected (n, r), (n, K)")
+    Qh, residual, norm = project_columns(V, source, product)
+    diagnostics = {"projection_error": residual / norm if norm > 0 else 0.0,
+                   "projection_residual": residual, "state_norm": norm,
                    "derivative_source": derivatives, "order": order, "dt": float(dt),
                    "n_trajectories": 1}
     stored_v = None if velocities is None else reduced_coordinates(V, velocities, product)
@@ -203,9 +306,9 @@ def reduce_snapshots(basis: np.ndarray, states: np.ndarray, dt: float, *, produc
             diagnostics["velocity_error"] = _relative_norm(Qd - stored_v, stored_v)
         if stored_a is not None:
             diagnostics["acceleration_error"] = _relative_norm(Qdd - stored_a, stored_a)
-    F = None if nonlinear_forces is None else V.T @ np.asarray(nonlinear_forces, dtype=float)
+    F = None if nonlinear_forces is None else reduced_coordinates(V, nonlinear_forces)
     U = None if inputs is None else np.atleast_2d(np.asarray(inputs, dtype=float))
     Y = None if outputs is None else np.atleast_2d(np.asarray(outputs, dtype=float))
-    times = float(t0) + float(dt) * np.arange(Q.shape[1])
+    times = float(t0) + float(dt) * np.arange(Qh.shape[1])
     return SecondOrderData(states=Qh, velocities=Qd, accelerations=Qdd, inputs=U,
                            nonlinear_forces=F, outputs=Y, times=times, diagnostics=diagnostics)
