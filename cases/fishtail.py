@@ -1,24 +1,38 @@
-"""Soft-robotic fishtail: P2 FOM under chamber pressure, L-OpInf vs Galerkin vs OpInf ROMs, renders.
+"""Soft-robotic fishtail: P2 FOM under chamber pressure, snapshots streamed to HDF5, L-OpInf vs Galerkin vs OpInf.
 
 The tail of ``meshes/fishtail.geo`` (silicone, clamped at the head) is bent by
 two chambers driven antagonistically by one pressure input (``fishtail.toml``;
 ``n_inputs=2`` drives each chamber by its own input). The case
 
 1. builds the P2 FOM at a mesh level (``LEVELS``) and runs it twice, under the
-   sigmoid pressure of the scene file and under a pressure step;
-2. builds a mass-orthonormal POD basis from the training run's displacement
-   snapshots (``train="sigmoid"`` or ``"step"``), and for several r fits the
-   intrusive Galerkin ROM, L-OpInf (``K^ = K^^T > 0``, ``C^ = C^^T >= 0``)
-   and plain OpInf from finite differences of the reduced snapshots (no FOM
-   matrices are used by the learners);
-3. tests every ROM on the other input: output error (tip x, y, z), full-field
-   error in the mass norm, reduced energy over an extended window, time per
-   step and speedup over the FOM;
-4. measures the FOM's cost and accuracy over the time step and the mesh size;
-5. writes into its folder: ``metrics.json``, ``report.md``, ``response.png``
+   sigmoid pressure of the scene file and under a pressure step, factorising
+   the effective matrix once for both runs (:class:`femrom.fem.SolverCache`;
+   the mass solve of the initial acceleration by Jacobi-CG, no second factor);
+   ``q``, ``q'``, ``q''`` stream into an HDF5 snapshot store and are never
+   held in memory;
+2. builds a mass-orthonormal POD basis of the training run's displacements by
+   the out-of-core randomized SVD reading the store (``train="sigmoid"`` or
+   ``"step"``); projects each run once onto the largest basis (one pass over
+   the store) and takes the smaller r by truncation (the basis is nested);
+3. for several r fits the intrusive Galerkin ROM, L-OpInf (``K^ = K^^T > 0``,
+   ``C^ = C^^T >= 0``) and plain OpInf, from the run's stored Newmark ``q'``,
+   ``q''`` or from finite differences of the reduced displacements (the
+   learners see only reduced snapshots, inputs and outputs, never the FOM
+   matrices);
+4. tests every ROM on the other input: output error (tip x, y, z), full-field
+   error in the mass norm (from the reduced coordinates: ``V^T M V = I`` makes
+   it exact without another pass over the snapshots), reduced energy over an
+   extended window, time per step and speedup over the FOM;
+5. measures the FOM's cost and accuracy over the time step and the mesh size;
+6. writes into its folder: ``metrics.json``, ``report.md``, ``response.png``
    (FOM and ROM tip outputs), ``rom_error.png``, ``energy.png``, the
    accuracy-vs-cost plots, ``render.png`` (deformed tail coloured by ``|u|``,
-   FOM above, L-OpInf below, at several times) and ``paraview/fishtail.pvd``.
+   FOM above, L-OpInf below, at several times), ``paraview/fishtail.pvd`` and,
+   with ``keep_snapshots``, ``snapshots.h5``.
+
+Every level runs the same way, up to the papers' size (``--level large``,
+7.6e5 dofs: about 12 GB of memory for the factor, 2.7 GB of snapshots per
+field and run on disk; ``benchmarks/fishtail_ladder.py`` runs the ladder).
 
 Run ``python -m femrom run fishtail [--out DIR] [--quick] [--level small]``;
 tests import :func:`run`.
@@ -34,8 +48,11 @@ from pathlib import Path
 import numpy as np
 
 from femrom.basis import POD
+from femrom.fem import SolverCache, make_solver
 from femrom.inference import LagrangianOpInf, SecondOrderOpInf, reduce_snapshots
+from femrom.inference._data import project_columns
 from femrom.integrators import simulate
+from femrom.linalg import default_block_columns
 from femrom.post import (
     accuracy_cost_table,
     mesh_arrays,
@@ -48,7 +65,8 @@ from femrom.post import (
 )
 from femrom.post._report import machine_description
 from femrom.rom import SecondOrderROM
-from femrom.scene import InputConfig, LoadConfig, Scene, Signal, build
+from femrom.scene import InputConfig, Scene, Signal, build
+from femrom.snapshots import SnapshotStore
 
 SCENE = Path(__file__).with_suffix(".toml")
 
@@ -139,19 +157,49 @@ def load_scene(level="small", *, n_inputs: int = 1, quick: bool = False, scene_p
 
 
 # -- full-order runs ----------------------------------------------------------------
-def run_fom(model, signal: Signal, *, dt=None, fields=True, consumers=()) -> dict:
-    """Integrate the FOM under one pressure signal; snapshots ``Q``, ``Qv``, ``Qa`` in memory."""
+def solver_factory(model):
+    """The integrators' solver factory for a case: one cached setup of the effective matrix,
+    shared by every run with the same ``dt``, and Jacobi-CG for the mass.
+
+    The consistent mass is solved once per run (the initial acceleration); Jacobi-CG
+    does it in a few dozen iterations at any mesh size (Wathen 1987) without a second
+    direct factor next to the effective matrix's (at 7.6e5 dofs each is GBs).
+    ``factory.cache.clear()`` frees the factor.
+    """
+    cache = SolverCache(model.scene.time.solver)
+    mass = model.system.mass
+
+    def factory(A, spd=True):
+        if A is mass:
+            return make_solver(A, "jacobi-cg", rtol=1e-12)
+        return cache(A, spd=spd)
+
+    factory.cache = cache
+    return factory
+
+
+def run_fom(model, signal: Signal, *, dt=None, store: SnapshotStore | None = None, name: str | None = None,
+            solver=None, consumers=()) -> dict:
+    """Integrate the FOM under one pressure signal; fields ``q, v, a`` stream into ``store``.
+
+    Returns the times, outputs, energy, inputs (callable and sampled ``U``) and the
+    run's summary; full fields only in the store (trajectory ``name``).
+    """
     u = PressureInputs(signal, model.system.n_inputs)
     system = dataclasses.replace(model.system, inputs=u)
-    kept = ("displacement", "velocity", "acceleration") if fields else ()
-    outputs = dataclasses.replace(model.scene.outputs, fields=kept)
-    model = dataclasses.replace(model, system=system,
-                                scene=dataclasses.replace(model.scene, outputs=outputs))
-    result = simulate(model, dt=dt, consumers=consumers, progress=False)
+    outputs = dataclasses.replace(model.scene.outputs, fields=())
+    model = dataclasses.replace(model, system=system, scene=dataclasses.replace(model.scene, outputs=outputs))
+    writers = [] if store is None else [store.writer(name)]  # closed by the driver at the end
+    result = simulate(model, dt=dt, consumers=(*writers, *consumers), progress=None, solver=solver)
     return {"times": result.times, "outputs": result.outputs, "energy": result.energy,
-            "Q": result.fields.get("displacement"), "Qv": result.fields.get("velocity"),
-            "Qa": result.fields.get("acceleration"), "inputs": u, "U": u.sampled(result.times),
-            "summary": result.summary}
+            "inputs": u, "U": u.sampled(result.times), "summary": result.summary, "trajectory": name}
+
+
+def store_blocks(store: SnapshotStore, field: str, trajectory: str):
+    """A block source of one trajectory's field: about 128 MB column blocks of whole chunks."""
+    chunk = int(store.attrs(trajectory).get("chunk_steps", 1))
+    steps = max(chunk, default_block_columns(store.n_dofs) // chunk * chunk)
+    return lambda: store.iter_blocks(field, steps, [trajectory])
 
 
 # -- reduced models --------------------------------------------------------------------
@@ -165,74 +213,112 @@ def relative_error(reference: np.ndarray, approximation: np.ndarray) -> float:
     return float(np.linalg.norm(approximation - reference) / np.linalg.norm(reference))
 
 
-def fit_roms(system, basis, train: dict, dt: float, *, order: int = 4, regularization: float = 0.0,
+def pod_basis(store: SnapshotStore, trajectory: str, M, rank: int, *, power_iterations: int = 2) -> POD:
+    """Mass-orthonormal POD of one run's displacements by the randomized SVD reading the store
+    (``power_iterations + 2`` passes; with 2, the top singular values of these fast-decaying
+    spectra are exact to ~1e-11, docs/benchmarks_snapshots.md)."""
+    return POD(rank=rank, product=M, method="randomized", power_iterations=power_iterations).fit(
+        store_blocks(store, "q", trajectory))
+
+
+def project_runs(store: SnapshotStore, runs: dict, train: str, basis: np.ndarray, M, dt: float):
+    """One pass per run and field over the store: the training data in the largest basis
+    (stored Newmark derivatives), and every run's reduced displacements with the exact
+    mass-norm residual of the largest basis and the run's norm (for field errors)."""
+    train_run = runs[train]
+    data = reduce_snapshots(basis, store_blocks(store, "q", train), dt, product=M,
+                            velocities=store_blocks(store, "v", train),
+                            accelerations=store_blocks(store, "a", train), derivatives="stored",
+                            inputs=train_run["U"], outputs=train_run["outputs"])
+    projections = {train: (data.states, data.diagnostics["projection_residual"], data.diagnostics["state_norm"])}
+    for key in runs:
+        if key != train:
+            projections[key] = project_columns(basis, store_blocks(store, "q", key), M)
+    return data, projections
+
+
+def field_error(projection, q_rom: np.ndarray) -> float:
+    r"""Relative mass-norm error ``||Q - V_r Q^_rom||_M / ||Q||_M`` from reduced quantities.
+
+    With ``V`` (the largest basis) mass-orthonormal and ``V_r`` its first r columns,
+    ``||Q - V_r Q^||_M^2 = ||Q - V X^||_M^2 + ||X^_{r:}||^2 + ||X^_{:r} - Q^||^2`` with
+    ``X^ = V^T M Q``: the residual of the largest basis (computed exactly in the
+    projection pass), the coordinates the r-basis drops, and the ROM's own error.
+    """
+    coords, residual, norm = projection
+    r = q_rom.shape[0]
+    with np.errstate(over="ignore", invalid="ignore"):
+        err2 = residual**2 + np.sum(coords[r:] ** 2) + np.sum((coords[:r] - q_rom) ** 2)
+    return float(np.sqrt(err2) / norm) if np.isfinite(err2) else float("inf")
+
+
+def fit_roms(system, data_all, basis, r: int, *, order: int = 4, regularization: float = 0.0,
              learners=LEARNERS) -> dict:
-    """The ROMs of ``learners`` in one mass-orthonormal basis ``V`` (``V^T M V = I``).
+    """The ROMs of ``learners`` in the first ``r`` columns of one mass-orthonormal basis.
 
     ``galerkin`` projects the FOM matrices (the intrusive reference). The
-    learners see only snapshots: the reduced displacements ``V^T M Q``, the
-    sampled inputs and outputs, and either the run's stored Newmark velocities
-    and accelerations (``lopinf``, ``opinf``) or finite differences of order
-    ``order`` of the reduced displacements (``lopinf_fd``, ``opinf_fd``).
+    learners see only reduced snapshots: ``data_all`` truncated to r (the
+    reduced displacements, inputs, outputs and the run's stored Newmark
+    velocities and accelerations: ``lopinf``, ``opinf``), or the same
+    displacements with finite differences of order ``order`` (``_fd``).
     """
     M = system.mass
-    common = dict(product=M, inputs=train["U"], outputs=train["outputs"], order=order)
-    data = {}
-    if any(not name.endswith("_fd") and name != "galerkin" for name in learners):
-        data["stored"] = reduce_snapshots(basis, train["Q"], dt, velocities=train["Qv"],
-                                          accelerations=train["Qa"], derivatives="stored", **common)
+    V = basis[:, :r]
+    data = {"stored": data_all.truncated(r)}
     if any(name.endswith("_fd") for name in learners):
-        data["fd"] = reduce_snapshots(basis, train["Q"], dt, **common)
+        data["fd"] = data["stored"].with_finite_differences(order)
     roms, seconds = {}, {}
     for name in learners:
         tic = time.perf_counter()
         if name == "galerkin":
-            roms[name] = SecondOrderROM.galerkin(system, basis, product=M, mass_orthonormal=True)
+            roms[name] = SecondOrderROM.galerkin(system, V, product=M, mass_orthonormal=True)
         else:
             learner = LagrangianOpInf if name.startswith("lopinf") else SecondOrderOpInf
-            roms[name] = SecondOrderROM(basis=basis, product=M, learner=learner(
+            roms[name] = SecondOrderROM(basis=V, product=M, learner=learner(
                 damping=True, regularization=regularization)).fit(
                 data["fd" if name.endswith("_fd") else "stored"])
         seconds[name] = time.perf_counter() - tic
     return {"roms": roms, "fit_seconds": seconds, "data": data}
 
 
-def evaluate_rom(rom, system, run: dict, *, extension: float) -> dict:
-    """Errors of one ROM on one FOM run, and its energy over an ``extension``-times window."""
+def evaluate_rom(rom, run: dict, projection, *, extension: float) -> dict:
+    """Errors of one ROM on one FOM run, and its energy over an ``extension``-times window.
+
+    A ROM that blows up (plain OpInf can) gets infinite errors; the overflow on the way
+    is expected and not reported as a warning.
+    """
     times = run["times"]
-    solution = rom.predict(np.zeros(rom.r), times, inputs=run["inputs"])
-    Y = solution.outputs
-    Qr = rom.basis @ solution.q
-    M = system.mass
-    field_error = mass_norm(M, Qr - run["Q"]) / mass_norm(M, run["Q"])
     long_times = times[0] + (times[1] - times[0]) * np.arange(int(round(extension * (times.size - 1))) + 1)
     with np.errstate(all="ignore"):
+        solution = rom.predict(np.zeros(rom.r), times, inputs=run["inputs"])
         long = rom.predict(np.zeros(rom.r), long_times, inputs=run["inputs"])
-    energy = long.energy
-    finite = bool(np.all(np.isfinite(energy)))
-    fom_peak = float(np.max(run["energy"]))
-    return {
-        "output_error": relative_error(run["outputs"], Y) if np.all(np.isfinite(Y)) else float("inf"),
-        "field_error": field_error if np.isfinite(field_error) else float("inf"),
-        "energy_ratio": float(np.max(np.abs(energy)) / fom_peak) if finite else float("inf"),
-        "energy_final_ratio": float(abs(energy[-1]) / fom_peak) if finite else float("inf"),
-        "seconds_per_step": solution.info["seconds_per_step"],
-        "solution": solution,
-        "long_times": long_times, "long_energy": energy,
-    }
+        Y = solution.outputs
+        finite_y = bool(np.all(np.isfinite(Y)))
+        energy = long.energy
+        finite = bool(np.all(np.isfinite(energy)))
+        fom_peak = float(np.max(run["energy"]))
+        return {
+            "output_error": relative_error(run["outputs"], Y) if finite_y else float("inf"),
+            "field_error": field_error(projection, solution.q),
+            "energy_ratio": float(np.max(np.abs(energy)) / fom_peak) if finite else float("inf"),
+            "energy_final_ratio": float(abs(energy[-1]) / fom_peak) if finite else float("inf"),
+            "seconds_per_step": solution.info["seconds_per_step"],
+            "solution": solution,
+            "long_times": long_times, "long_energy": energy,
+        }
 
 
-def rom_study(system, basis_all, runs: dict, train: str, ranks, dt: float, *, extension: float,
+def rom_study(system, basis, data_all, projections: dict, runs: dict, train: str, ranks, *, extension: float,
               fom_seconds_per_step: float, learners=LEARNERS) -> tuple[list[dict], dict]:
     """ROM rows (one per r and learner) trained on ``runs[train]``, tested on every run."""
     rows, best = [], {}
     for r in ranks:
-        fitted = fit_roms(system, basis_all[:, :r], runs[train], dt, learners=learners)
+        fitted = fit_roms(system, data_all, basis, r, learners=learners)
         for name in learners:
             rom = fitted["roms"][name]
             row = {"r": r, "learner": name, "train": train, "fit_seconds": fitted["fit_seconds"][name]}
             for key, run in runs.items():
-                ev = evaluate_rom(rom, system, run, extension=extension)
+                ev = evaluate_rom(rom, run, projections[key], extension=extension)
                 tag = "train" if key == train else "test"
                 row[f"{tag}_output_error"] = ev["output_error"]
                 row[f"{tag}_field_error"] = ev["field_error"]
@@ -252,12 +338,19 @@ def rom_study(system, basis_all, runs: dict, train: str, ranks, dt: float, *, ex
 
 
 # -- FOM accuracy against cost --------------------------------------------------------------
-def time_step_ladder(model, signal: Signal, reference: dict, factors=(8, 4, 2)) -> list[dict]:
+def time_step_ladder(model, signal: Signal, reference: dict, factors=(10, 5, 2)) -> list[dict]:
     """Tip-output error of runs at ``factor * dt`` against the run at the scene's ``dt``
-    (``reference``, already computed), with their stepping time; and the observed order."""
-    dt0 = model.scene.time.dt
+    (``reference``, already computed), with their stepping time; and the observed order.
+
+    Every coarse step must divide the window (compared at the same final time).
+    """
+    dt0, t_end = model.scene.time.dt, model.scene.time.t_end
+    for factor in factors:
+        steps = t_end / (factor * dt0)
+        if abs(steps - round(steps)) > 1e-9 * steps:
+            raise ValueError(f"time step {factor * dt0:g} does not divide the window {t_end:g} s")
     coarse = max(factors) * dt0
-    t_common = np.arange(0.0, model.scene.time.t_end + 0.5 * coarse, coarse)
+    t_common = coarse * np.arange(int(round(t_end / coarse)) + 1)
 
     def on_grid(run):
         return np.vstack([np.interp(t_common, run["times"], y) for y in run["outputs"]])
@@ -265,7 +358,7 @@ def time_step_ladder(model, signal: Signal, reference: dict, factors=(8, 4, 2)) 
     ref = on_grid(reference)
     rows = []
     for factor in factors:
-        run = run_fom(model, signal, dt=factor * dt0, fields=False)
+        run = run_fom(model, signal, dt=factor * dt0)
         rows.append({"dt": factor * dt0, "steps": run["summary"]["n_steps"],
                      "output_error": relative_error(ref, on_grid(run)),
                      "stepping_seconds": run["summary"]["stepping_seconds"],
@@ -399,26 +492,30 @@ def plot_energy(path, best: dict, r: int, fom_run: dict, title: str):
 
 
 # -- renders -------------------------------------------------------------------------------
-def renders(out_dir: Path, model, run: dict, solution, r: int, *, n_times: int = 4,
+def renders(out_dir: Path, model, store: SnapshotStore, run: dict, solution, r: int, *, n_times: int = 4,
             every: int = 10) -> dict:
-    """PNG of FOM (top) and L-OpInf (bottom) deformed shapes, and a ParaView series of both."""
+    """PNG of FOM (top) and L-OpInf (bottom) deformed shapes, and a ParaView series of both.
+
+    FOM fields are read from the store one snapshot at a time; ROM fields are
+    reconstructed lazily, ``V q^``, at the same steps.
+    """
     space, cond = model.space, model.system.condensation
     points, cells = mesh_arrays(space.mesh)
     times = run["times"]
     picks = np.unique(np.linspace(0, times.size - 1, n_times + 1).round().astype(int)[1:])
 
-    def vertex(Qfree, k):
-        return vertex_displacements(space.basis, cond.expand(Qfree[:, k]))
+    def fom(k):
+        return vertex_displacements(space.basis, cond.expand(store.read(run["trajectory"], "q", k, k + 1)[:, 0]))
 
-    Qrom = solution.basis @ solution.q[:, picks]
-    fom_panels = [vertex(run["Q"], k) for k in picks]
-    rom_panels = [vertex(Qrom, j) for j in range(picks.size)]
+    def rom(k):
+        return vertex_displacements(space.basis, cond.expand(solution.basis @ solution.q[:, k]))
+
     info = {}
     ok, reason = render_available()
     info["render_backend"] = reason
     if ok:
         tic = time.perf_counter()
-        render_grid(out_dir / "render.png", points, cells, [fom_panels, rom_panels],
+        render_grid(out_dir / "render.png", points, cells, [[fom(k) for k in picks], [rom(k) for k in picks]],
                     titles=[f"t = {times[k]:.3f} s" for k in picks],
                     row_labels=["FOM", f"L-OpInf r={r}"], window_size=(320 * picks.size, 560))
         info["render_seconds"] = time.perf_counter() - tic
@@ -427,9 +524,8 @@ def renders(out_dir: Path, model, run: dict, solution, r: int, *, n_times: int =
         info["render"] = None
     tic = time.perf_counter()
     steps = np.arange(0, times.size, every)
-    fom_series = np.stack([vertex(run["Q"], k) for k in steps])
-    rom_full = solution.basis @ solution.q[:, steps]
-    rom_series = np.stack([vertex(rom_full, j) for j in range(steps.size)])
+    fom_series = np.stack([fom(k) for k in steps])
+    rom_series = np.stack([rom(k) for k in steps])
     write_vtu_series(out_dir / "paraview" / "fishtail.pvd", points, cells, times[steps],
                      {"displacement_fom": fom_series, "displacement_rom": rom_series,
                       "error": rom_series - fom_series})
@@ -441,12 +537,16 @@ def renders(out_dir: Path, model, run: dict, solution, r: int, *, n_times: int =
 # -- the case ---------------------------------------------------------------------------------
 def run(out_dir, *, quick: bool = False, level: str = "small", train: str = "sigmoid",
         n_inputs: int = 1, ranks=None, extension: float = 10.0, ladders: bool = True,
-        render: bool = True, t_end: float | None = None, scene_path=SCENE) -> dict:
+        render: bool = True, t_end: float | None = None, reverse: bool = True, learners=LEARNERS,
+        keep_snapshots: bool = False, store_path=None, svd_power_iterations: int = 2,
+        scene_path=SCENE) -> dict:
     """Run the case; return its metrics (also written to ``out_dir/metrics.json``).
 
     ``quick`` halves the window and shortens the ladders; ``t_end`` overrides
-    the window; ``ladders`` / ``render`` switch the FOM cost ladders and the
-    renders off (tests).
+    the window; ``ladders`` / ``render`` / ``reverse`` switch the FOM cost
+    ladders, the renders and the reverse study (trained on the other input)
+    off; ``store_path`` puts the snapshot store elsewhere than
+    ``out_dir/snapshots.h5`` (e.g. a larger disk), ``keep_snapshots`` keeps it.
     """
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -454,32 +554,50 @@ def run(out_dir, *, quick: bool = False, level: str = "small", train: str = "sig
     if t_end is not None:
         scene = with_time(scene, t_end=t_end)
     ranks = tuple(ranks or ((2, 4, 6, 8) if quick else (2, 4, 6, 8, 12)))
+    if train not in ("sigmoid", "step"):
+        raise ValueError(f"unknown training input {train!r}; valid: sigmoid, step")
     test = "step" if train == "sigmoid" else "sigmoid"
+    learners = tuple(learners)
+    unknown = [x for x in learners if x not in LEARNERS]
+    if unknown or "lopinf" not in learners:
+        raise ValueError(f"learners must include 'lopinf' and be among {', '.join(LEARNERS)}; got {learners}")
 
     tic = time.perf_counter()
     model = build(scene)
     build_seconds = time.perf_counter() - tic
     system = model.system
+    M = system.mass
+    dt = scene.time.dt
+    store_path = out_dir / "snapshots.h5" if store_path is None else Path(store_path)
+    store = SnapshotStore.create(store_path, model, fields=("q", "v", "a"), overwrite=True)
+    solver = solver_factory(model)
     runs = {}
     for kind in (train, test):
-        runs[kind] = run_fom(model, pressure_signal(scene, kind))
+        runs[kind] = run_fom(model, pressure_signal(scene, kind), store=store, name=kind, solver=solver)
+    solver.cache.clear()  # the factor is not needed any more: free it before the SVD
     fom = runs[train]["summary"]
     fom_seconds_per_step = fom["stepping_seconds"] / fom["n_steps"]
-    dt = scene.time.dt
+    store_bytes = store_path.stat().st_size
+    rss_after_fom = _peak_rss_gb()
 
     tic = time.perf_counter()
-    pod = POD(rank=max(ranks), product=system.mass, method="svd").fit(runs[train]["Q"])
+    pod = pod_basis(store, train, M, max(ranks), power_iterations=svd_power_iterations)
     svd_seconds = time.perf_counter() - tic
-    rows, best = rom_study(system, pod.basis_, runs, train, ranks, dt, extension=extension,
-                           fom_seconds_per_step=fom_seconds_per_step)
-    best["_train"] = train
-    # the reverse: the same two FOM runs, basis and ROMs from the other one
     tic = time.perf_counter()
-    pod_reverse = POD(rank=max(ranks), product=system.mass, method="svd").fit(runs[test]["Q"])
-    reverse_rows, _ = rom_study(system, pod_reverse.basis_, runs, test, ranks, dt, extension=extension,
-                                fom_seconds_per_step=fom_seconds_per_step,
-                                learners=("galerkin", "lopinf", "opinf"))
-    reverse_seconds = time.perf_counter() - tic
+    data_all, projections = project_runs(store, runs, train, pod.basis_, M, dt)
+    projection_seconds = time.perf_counter() - tic
+    rows, best = rom_study(system, pod.basis_, data_all, projections, runs, train, ranks, extension=extension,
+                           fom_seconds_per_step=fom_seconds_per_step, learners=learners)
+    best["_train"] = train
+    reverse_rows, reverse_seconds, pod_reverse = [], 0.0, None
+    if reverse:  # the same two FOM runs; basis and ROMs from the other one
+        tic = time.perf_counter()
+        pod_reverse = pod_basis(store, test, M, max(ranks), power_iterations=svd_power_iterations)
+        data_rev, projections_rev = project_runs(store, runs, test, pod_reverse.basis_, M, dt)
+        reverse_rows, _ = rom_study(system, pod_reverse.basis_, data_rev, projections_rev, runs, test, ranks,
+                                    extension=extension, fom_seconds_per_step=fom_seconds_per_step,
+                                    learners=[x for x in ("galerkin", "lopinf", "opinf") if x in learners])
+        reverse_seconds = time.perf_counter() - tic
     r_show = max(ranks)
     names = system.output_names
 
@@ -493,10 +611,18 @@ def run(out_dir, *, quick: bool = False, level: str = "small", train: str = "sig
                        "test_output_error", "r", title="L-OpInf: unseen-input output error vs s/step")
     (out_dir / "scene.toml").write_text(scene.source_text)
 
+    render_info = {}
+    if render:
+        render_info = renders(out_dir, model, store, runs[test], best[(r_show, "lopinf", "test")]["solution"],
+                              r_show)
+    store.close()
+    if not keep_snapshots:
+        store_path.unlink(missing_ok=True)
+
     dt_rows = mesh_rows = []
     if ladders:
         dt_rows = time_step_ladder(model, pressure_signal(scene, train), runs[train],
-                                   factors=(8, 4, 2) if not quick else (4, 2))
+                                   factors=(10, 5, 2) if not quick else (5, 2))
         plot_accuracy_cost(out_dir / "accuracy_cost_dt.png", dt_rows[:-1], "stepping_seconds",
                            "output_error", "dt",
                            title=f"FOM time step: tip error (vs dt = {dt:g}) vs stepping time")
@@ -507,13 +633,6 @@ def run(out_dir, *, quick: bool = False, level: str = "small", train: str = "sig
         plot_accuracy_cost(out_dir / "accuracy_cost_mesh.png", mesh_rows[:-1], "seconds", "tip_error",
                            "dofs", title="FOM mesh: static tip deflection error vs build + solve time")
 
-    render_info = {}
-    if render:
-        render_info = renders(out_dir, model, runs[test], best[(r_show, "lopinf", "test")]["solution"], r_show)
-
-    def strip(row):
-        return {k: v for k, v in row.items()}
-
     metrics = {
         "case": "fishtail", "scene": scene.name, "level": level, "quick": quick,
         "mesh_size": dict(scene.structure.parameters)["mesh_size"],
@@ -522,19 +641,34 @@ def run(out_dir, *, quick: bool = False, level: str = "small", train: str = "sig
         "build_seconds": build_seconds, "build_timings": model.timings,
         "fom": {k: v["summary"] for k, v in runs.items()},
         "fom_seconds_per_step": fom_seconds_per_step,
+        "factorization_seconds": fom["factorization_seconds"],
+        "solver_cache": {"hits": solver.cache.hits, "misses": solver.cache.misses},
         "fom_peak_tip_mm": {k: (1e3 * np.max(np.abs(v["outputs"]), axis=1)) for k, v in runs.items()},
+        "snapshots": {"path": str(store_path) if keep_snapshots else None, "bytes": store_bytes,
+                      "fields": ["q", "v", "a"]},
+        "peak_rss_gb_after_fom": rss_after_fom,
         "train": train, "test": test, "ranks": ranks, "extension": extension,
-        "pod": {"seconds": svd_seconds, "singular_values": pod.singular_values_[:max(ranks)],
+        "pod": {"seconds": svd_seconds, "method": "randomized", "passes": svd_power_iterations + 2,
+                "singular_values": pod.singular_values_[:max(ranks)],
                 "projection_error": pod.projection_error_},
-        "roms": [strip(r) for r in rows],
+        "projection_seconds": projection_seconds,
+        "roms": rows,
         "roms_reverse": reverse_rows, "reverse_seconds": reverse_seconds,
-        "pod_reverse_projection_error": pod_reverse.projection_error_,
+        "pod_reverse_projection_error": None if pod_reverse is None else pod_reverse.projection_error_,
         "time_step_ladder": dt_rows, "mesh_ladder": mesh_rows,
         "renders": render_info,
+        "peak_rss_gb": _peak_rss_gb(),
     }
     write_metrics(out_dir / "metrics.json", metrics)
     write_report(out_dir / "report.md", metrics, rows, dt_rows, mesh_rows, reverse_rows)
     return metrics
+
+
+def _peak_rss_gb() -> float:
+    """Peak resident memory of this process so far [GB] (``ru_maxrss``, Linux kB)."""
+    import resource
+
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20
 
 
 def write_report(path: Path, metrics: dict, rows, dt_rows, mesh_rows, reverse_rows=()):
@@ -547,6 +681,15 @@ def write_report(path: Path, metrics: dict, rows, dt_rows, mesh_rows, reverse_ro
         f"of {m['fom'][m['train']]['dt']:g} s with {m['fom'][m['train']]['scheme']} / "
         f"{m['fom'][m['train']]['solver']}: {m['fom_seconds_per_step'] * 1e3:.2f} ms per step, "
         f"build {m['build_seconds']:.2f} s.", "",
+        "## What the pipeline cost", "",
+        "| stage | cost |", "|---|---|",
+        f"| build (mesh, assembly) | {m['build_seconds']:.2f} s |",
+        f"| factorisation of the effective matrix (once for both runs) | {m['factorization_seconds']:.2f} s |",
+        f"| FOM step | {m['fom_seconds_per_step'] * 1e3:.2f} ms |",
+        f"| snapshot store (q, q', q'' of both runs, HDF5) | {m['snapshots']['bytes'] / 2**20:.1f} MiB |",
+        f"| randomized SVD of the store ({m['pod']['passes']} passes) | {m['pod']['seconds']:.2f} s |",
+        f"| projection of both runs (one pass each) | {m['projection_seconds']:.2f} s |",
+        f"| peak resident memory | {m['peak_rss_gb']:.2f} GiB |", "",
         f"Trained on the {m['train']} input, tested on the {m['test']} input. Errors are relative "
         "(outputs: Frobenius over the three tip components and all steps; fields: mass norm); "
         f"energy ratio = max reduced energy over {m['extension']:g}x the window / max FOM energy.", "",
@@ -576,17 +719,29 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="femrom run fishtail", description=__doc__.split("\n")[0])
     parser.add_argument("--out", type=Path, default=Path("results") / "fishtail")
     parser.add_argument("--quick", action="store_true", help="short window, coarse mesh ladder (tests)")
-    parser.add_argument("--level", default="small", choices=tuple(LEVELS))
+    parser.add_argument("--level", default="small", choices=tuple(LEVELS),
+                        help="mesh level: tiny 4.8e3, small 2e4 (default), medium 9e4, large 7.6e5 dofs")
     parser.add_argument("--train", default="sigmoid", choices=("sigmoid", "step"))
     parser.add_argument("--inputs", type=int, default=1, choices=(1, 2),
                         help="1: antagonistic chambers (default); 2: one input per chamber")
+    parser.add_argument("--ranks", type=int, nargs="+", help="basis sizes r (default 2 4 6 8 12)")
+    parser.add_argument("--ladders", action=argparse.BooleanOptionalAction, default=None,
+                        help="FOM time-step and mesh ladders (default: on for tiny and small)")
+    parser.add_argument("--reverse", action=argparse.BooleanOptionalAction, default=True,
+                        help="also train on the other input and test on the first")
+    parser.add_argument("--keep-snapshots", action="store_true", help="keep snapshots.h5 (q, q', q'')")
+    parser.add_argument("--store", type=Path, help="where the snapshot store goes (default OUT/snapshots.h5)")
     args = parser.parse_args(argv)
-    metrics = run(args.out, quick=args.quick, level=args.level, train=args.train, n_inputs=args.inputs)
+    ladders = args.level in ("tiny", "small") if args.ladders is None else args.ladders
+    metrics = run(args.out, quick=args.quick, level=args.level, train=args.train, n_inputs=args.inputs,
+                  ranks=args.ranks, ladders=ladders, reverse=args.reverse, keep_snapshots=args.keep_snapshots,
+                  store_path=args.store)
     r = max(metrics["ranks"])
     row = next(x for x in metrics["roms"] if x["r"] == r and x["learner"] == "lopinf")
-    print(f"fishtail ({args.level}): {metrics['n_dofs']} dofs, FOM {metrics['fom_seconds_per_step'] * 1e3:.1f} ms/step; "
-          f"L-OpInf r={r} on the unseen {metrics['test']} input: output error {row['test_output_error']:.2e}, "
-          f"speedup {row['speedup']:.0f}x; report in {args.out / 'report.md'}")
+    print(f"fishtail ({args.level}): {metrics['n_dofs']} dofs, FOM {metrics['fom_seconds_per_step'] * 1e3:.1f} "
+          f"ms/step; L-OpInf r={r} on the unseen {metrics['test']} input: output error "
+          f"{row['test_output_error']:.2e}, field error {row['test_field_error']:.2e}, speedup {row['speedup']:.0f}x")
+    print(f"report: {args.out / 'report.md'}")
     return 0
 
 
