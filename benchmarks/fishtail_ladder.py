@@ -1,227 +1,98 @@
 """Fishtail mesh ladder: what the FOM and its ROMs cost from 2e4 to the papers' 7.8e5 dofs.
 
-For each mesh level of ``cases/fishtail.py`` (small ~2e4, medium ~1e5, large
-~7.8e5 free P2 dofs; the MORwiki "Artificial Fishtail" of Siebelts, Kater &
-Meurer 2018 has n = 779,232), in its own subprocess (so that its peak memory
-is its own):
+Each mesh level of ``cases/fishtail.py`` (small ~2e4, medium ~1e5, large ~7.6e5
+free P2 dofs; the MORwiki "Artificial Fishtail" of Siebelts, Kater & Meurer 2018
+has n = 779,232) runs the case's own pipeline, :func:`fishtail.run`, in a
+subprocess of its own (so that its peak memory is its own):
 
 1. mesh generation (gmsh, cached) and assembly of K, M, C = a M + b K, B, E;
 2. two Newmark runs of ``--steps`` steps (sigmoid pressure: training; step:
-   test), the effective matrix factorised once by PARDISO and reused by both
-   runs; the mass solve of the initial acceleration by Jacobi-preconditioned
-   CG (a second direct factor would double the memory at the large size);
-   q, v, a streamed into an HDF5 snapshot store (``--store-dir``, default /tmp),
+   test), the effective matrix factorised once for both (``auto``: PARDISO),
+   the mass solve by Jacobi-CG; q, q', q'' streamed into an HDF5 snapshot
+   store in ``--store-dir`` (default: the system's temporary directory),
    never held in memory;
-3. a mass-orthonormal POD basis by the out-of-core randomized SVD
-   (femrom.linalg.randomized_svd through femrom.basis.POD) reading the store;
-4. reduced data (``V^T M Q``, stored Newmark ``q'``, ``q''``) block by block,
-   the intrusive Galerkin ROM, L-OpInf and plain OpInf for each r; each ROM
-   is run on the unseen step input: output error, full-field error in the
-   mass norm (streamed), time per step and speedup over the FOM;
+3. a mass-orthonormal POD basis by the out-of-core randomized SVD reading the
+   store;
+4. one projection pass per run; the intrusive Galerkin ROM, L-OpInf and plain
+   OpInf for each r from the stored Newmark derivatives; each ROM on the
+   unseen step input: output error, full-field error in the mass norm, time
+   per step and speedup over the FOM;
 5. peak resident memory (``ru_maxrss``) of the level's process; the parent
    samples the child's RSS and kills it above ``--memory-limit-gb``.
 
-Run from the repository root (femrom importable)::
+Run from the repository root::
 
-    python benchmarks/fishtail_ladder.py --levels small            # ~2 min
-    python benchmarks/fishtail_ladder.py --levels small medium large --steps 200
+    python benchmarks/fishtail_ladder.py --levels small                  # ~2 min
+    python benchmarks/fishtail_ladder.py --levels small medium large     # ~1 h on a quiet machine
 
 Results: ``benchmarks/results/fishtail_ladder.json`` (levels merged into the
-existing file) and a table on stdout.
+existing file) and a table on stdout; the discussion is in docs/cases/fishtail.md.
 """
 
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import json
 import os
-import resource
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
-
-import numpy as np
-import scipy.sparse as sp
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "cases"))
 sys.path.insert(0, str(ROOT))
 
 RESULTS = ROOT / "benchmarks" / "results" / "fishtail_ladder.json"
-#: mesh_size per level; large: 0.00122 gives about 7.7e5 free dofs (measured: 0.00125 -> 7.2e5 total)
-LADDER_SIZES = {"small": 0.006, "medium": 0.0028, "large": 0.00122}
+LEARNERS = ("galerkin", "lopinf", "opinf")
 
 
-# -- solvers ---------------------------------------------------------------------------
-def _solver_factory(system, log: dict):
-    """PARDISO for the effective matrix, cached across runs with the same dt; Jacobi-CG for M."""
-    from femrom.fem import LinearSolver, make_solver
-    from scipy.sparse.linalg import cg
-
-    class JacobiCG(LinearSolver):
-        name = "jacobi-cg"
-
-        def __init__(self, A):
-            super().__init__(A)
-            self._A = A
-            self._inv = 1.0 / A.diagonal()
-            self.total_iterations = 0
-
-        def _solve(self, b, x0):
-            count = [0]
-            x, info = cg(self._A, b, x0=x0, rtol=1e-12, atol=0.0, maxiter=2000,
-                         M=sp.diags(self._inv), callback=lambda _: count.__setitem__(0, count[0] + 1))
-            self.total_iterations += count[0]
-            if info != 0:
-                raise RuntimeError(f"Jacobi-CG on the mass did not converge ({count[0]} iterations)")
-            return x
-
-    cache = {}
-
-    def factory(A, spd=True):
-        if A is system.mass:
-            return JacobiCG(A)
-        key = (A.shape, A.nnz, float(A.data.sum()))
-        if key not in cache:
-            cache.clear()
-            tic = time.perf_counter()
-            cache[key] = make_solver(A, strategy="auto", spd=spd)
-            log["factorization_seconds"] = time.perf_counter() - tic
-            log["solver"] = cache[key].name
-        return cache[key]
-
-    return factory, cache
-
-
-# -- one level ---------------------------------------------------------------------------
-def run_level(level: str, *, steps: int, dt: float, ranks, store_dir: Path, svd_power: int) -> dict:
+def run_level(level: str, *, steps: int, ranks, store_dir: Path, out_dir: Path, svd_power: int) -> dict:
+    """One level through the case's pipeline; the numbers the ladder table needs."""
     import fishtail
-    from femrom.basis import POD
-    from femrom.inference import LagrangianOpInf, SecondOrderData, SecondOrderOpInf
-    from femrom.integrators import EnergyRecorder, Newmark, OutputRecorder, integrate
     from femrom.post._report import machine_description
-    from femrom.rom import SecondOrderROM
-    from femrom.scene import build
-    from femrom.snapshots import SnapshotStore
 
-    result = {"level": level, "mesh_size": LADDER_SIZES[level], "steps": steps, "dt": dt,
-              "machine": machine_description(), "load_before": os.getloadavg()}
-    scene = fishtail.with_time(fishtail.load_scene(LADDER_SIZES[level]), dt=dt, t_end=steps * dt)
+    load_before = os.getloadavg()
     tic = time.perf_counter()
-    model = build(scene)
-    result["build_seconds"] = time.perf_counter() - tic
-    result["build_timings"] = model.timings
-    system = model.system
-    n = system.n_dofs
-    result["n_dofs"] = n
-    print(f"[{level}] {n} free dofs, built in {result['build_seconds']:.1f} s", flush=True)
-
-    log = {}
-    factory, cache = _solver_factory(system, log)
-    store_path = store_dir / f"femrom_fishtail_{level}.h5"
-    store = SnapshotStore.create(store_path, model, fields=("q", "v", "a"), overwrite=True)
-    runs = {}
-    for kind in ("sigmoid", "step"):
-        u = fishtail.PressureInputs(fishtail.pressure_signal(scene, kind), system.n_inputs)
-        sys_u = dataclasses.replace(system, inputs=u)
-        outputs, energy = OutputRecorder(sys_u), EnergyRecorder(sys_u)
-        writer = store.writer(kind)
-        tic = time.perf_counter()
-        summary = integrate(sys_u, Newmark(), np.zeros(n), np.zeros(n), dt, steps,
-                            consumers=[writer, outputs, energy], solver=factory, progress=False)
-        wall = time.perf_counter() - tic
-        runs[kind] = {"outputs": outputs.outputs, "energy": energy.total, "inputs": u,
-                      "times": dt * np.arange(steps + 1), "U": u.sampled(dt * np.arange(steps + 1))}
-        result[f"fom_{kind}"] = {"wall_seconds": wall, "stepping_seconds": summary.stepping_seconds,
-                                 "setup_seconds": summary.setup_seconds,
-                                 "seconds_per_step": summary.stepping_seconds / steps,
-                                 "snapshot_seconds": summary.consumer_seconds}
-        print(f"[{level}] FOM {kind}: {summary.stepping_seconds / steps:.3f} s/step, "
-              f"setup {summary.setup_seconds:.1f} s, streaming {summary.consumer_seconds:.1f} s", flush=True)
-    result["factorization_seconds"] = log.get("factorization_seconds")
-    result["solver"] = log.get("solver")
-    result["rss_after_fom_gb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20
-    cache.clear()  # free the factor before the SVD
-    fom_sps = result["fom_sigmoid"]["seconds_per_step"]
-    result["fom_seconds_per_step"] = fom_sps
-    result["store_gb"] = store_path.stat().st_size / 2**30
-
-    block = max(8, min(steps + 1, int(2**28 // (8 * n))))
-    M = system.mass
-    tic = time.perf_counter()
-    pod = POD(rank=max(ranks), product=M, method="randomized", power_iterations=svd_power).fit(
-        lambda: store.iter_blocks("q", block, trajectories=["sigmoid"]))
-    result["svd_seconds"] = time.perf_counter() - tic
-    result["svd_passes"] = svd_power + 2
-    result["singular_values"] = pod.singular_values_
-    V_all = pod.basis_
-    print(f"[{level}] randomized SVD: {result['svd_seconds']:.1f} s", flush=True)
-
-    def reduced(field, trajectory, V):
-        return np.hstack([V.T @ (M @ b) for b in store.iter_blocks(field, block, trajectories=[trajectory])])
-
-    rows = []
-    test_q_norm2 = sum(float(np.sum(b * (M @ b))) for b in store.iter_blocks("q", block, ["step"]))
-    for r in ranks:
-        V = np.ascontiguousarray(V_all[:, :r])
-        tic = time.perf_counter()
-        train = runs["sigmoid"]
-        data = SecondOrderData(states=reduced("q", "sigmoid", V), velocities=reduced("v", "sigmoid", V),
-                               accelerations=reduced("a", "sigmoid", V), inputs=train["U"],
-                               outputs=train["outputs"], times=train["times"],
-                               diagnostics={"derivative_source": "stored", "dt": dt, "n_trajectories": 1})
-        reduce_seconds = time.perf_counter() - tic
-        for name in ("galerkin", "lopinf", "opinf"):
-            tic = time.perf_counter()
-            if name == "galerkin":
-                rom = SecondOrderROM.galerkin(system, V, product=M, mass_orthonormal=True)
-            else:
-                learner = LagrangianOpInf if name == "lopinf" else SecondOrderOpInf
-                rom = SecondOrderROM(basis=V, product=M, learner=learner(damping=True)).fit(data)
-            fit_seconds = time.perf_counter() - tic
-            test = runs["step"]
-            sps = []
-            for _ in range(3):  # min of repeats: the machine is shared
-                solution = rom.predict(np.zeros(r), test["times"], inputs=test["inputs"])
-                sps.append(solution.info["seconds_per_step"])
-            y = solution.outputs
-            out_err = float(np.linalg.norm(y - test["outputs"]) / np.linalg.norm(test["outputs"]))
-            err2, k0 = 0.0, 0
-            for b in store.iter_blocks("q", block, ["step"]):
-                e = b - V @ solution.q[:, k0:k0 + b.shape[1]]
-                err2 += float(np.sum(e * (M @ e)))
-                k0 += b.shape[1]
-            rows.append({"r": r, "learner": name, "fit_seconds": fit_seconds,
-                         "reduce_seconds": reduce_seconds,
-                         "test_output_error": out_err,
-                         "test_field_error": float(np.sqrt(err2 / test_q_norm2)),
-                         "rom_seconds_per_step": min(sps),
-                         "speedup": fom_sps / max(min(sps), 1e-12)})
-            print(f"[{level}] r={r} {name}: output error {out_err:.2e}, "
-                  f"speedup {rows[-1]['speedup']:.0f}", flush=True)
-    result["roms"] = rows
-    result["peak_rss_gb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20
-    result["load_after"] = os.getloadavg()
-    store.close()
-    if not KEEP_STORE:
-        store_path.unlink(missing_ok=True)
-    return result
+    store = store_dir / f"femrom_fishtail_{level}.h5"
+    dt = fishtail.load_scene(level).time.dt
+    metrics = fishtail.run(out_dir, level=level, t_end=steps * dt, ranks=ranks, ladders=False, render=False,
+                           reverse=False, learners=LEARNERS, store_path=store, svd_power_iterations=svd_power)
+    wall = time.perf_counter() - tic
+    rows = [{k: row.get(k) for k in ("r", "learner", "fit_seconds", "seconds_per_step", "speedup",
+                                     "train_output_error", "test_output_error", "test_field_error",
+                                     "test_energy_ratio", "stiffness_min_eig", "damping_min_eig")}
+            for row in metrics["roms"]]
+    fom = metrics["fom"]
+    return {
+        "level": level, "mesh_size": metrics["mesh_size"], "n_dofs": metrics["n_dofs"], "steps": steps,
+        "dt": fom["sigmoid"]["dt"], "machine": machine_description(),
+        "load_before": load_before, "load_after": os.getloadavg(), "wall_seconds": wall,
+        "build_seconds": metrics["build_seconds"], "build_timings": metrics["build_timings"],
+        "solver": fom["sigmoid"]["solver"],
+        "factorization_seconds": metrics["factorization_seconds"],
+        "setup_seconds": {k: v["setup_seconds"] for k, v in fom.items()},
+        "fom_seconds_per_step": metrics["fom_seconds_per_step"],
+        "fom_seconds_per_step_test_run": fom["step"]["stepping_seconds"] / fom["step"]["n_steps"],
+        "snapshot_seconds": {k: v["consumer_seconds"] for k, v in fom.items()},
+        "store_gb": metrics["snapshots"]["bytes"] / 2**30,
+        "svd_seconds": metrics["pod"]["seconds"], "svd_passes": metrics["pod"]["passes"],
+        "singular_values": metrics["pod"]["singular_values"],
+        "projection_seconds": metrics["projection_seconds"],
+        "peak_rss_gb_after_fom": metrics["peak_rss_gb_after_fom"], "peak_rss_gb": metrics["peak_rss_gb"],
+        "roms": rows,
+    }
 
 
-KEEP_STORE = False
-
-
-# -- driver ----------------------------------------------------------------------------------
-def _child(level, args) -> dict | None:
-    out = Path(args.store_dir) / f"fishtail_ladder_{level}.json"
-    out.unlink(missing_ok=True)
-    cmd = [sys.executable, __file__, "--worker", level, "--steps", str(args.steps), "--dt", str(args.dt),
-           "--ranks", *map(str, args.ranks), "--store-dir", str(args.store_dir),
-           "--svd-power", str(args.svd_power), "--worker-out", str(out)]
+def _child(level, args) -> dict:
     import psutil
 
+    out = Path(args.store_dir) / f"fishtail_ladder_{level}.json"
+    out.unlink(missing_ok=True)
+    cmd = [sys.executable, __file__, "--worker", level, "--steps", str(args.steps),
+           "--ranks", *map(str, args.ranks), "--store-dir", str(args.store_dir),
+           "--svd-power", str(args.svd_power), "--worker-out", str(out)]
     proc = subprocess.Popen(cmd)
     peak = 0.0
     while proc.poll() is None:
@@ -232,7 +103,7 @@ def _child(level, args) -> dict | None:
         peak = max(peak, rss)
         if rss > args.memory_limit_gb:
             proc.kill()
-            print(f"[{level}] killed: RSS {rss:.1f} GB above --memory-limit-gb {args.memory_limit_gb}")
+            print(f"[{level}] killed: RSS {rss:.1f} GB above --memory-limit-gb {args.memory_limit_gb}", flush=True)
             return {"level": level, "error": f"killed at {rss:.1f} GB RSS"}
         time.sleep(1.0)
     if proc.returncode != 0 or not out.exists():
@@ -243,32 +114,33 @@ def _child(level, args) -> dict | None:
 
 
 def table(results) -> str:
-    lines = ["| level | dofs | build s | factor s | FOM s/step | peak GB | SVD s | r | learner | fit s "
+    lines = ["| level | dofs | build s | factor s | FOM s/step | store GB | SVD s | peak GB | r | learner | fit s "
              "| ROM s/step | speedup | output err | field err |",
-             "|" + "---|" * 14]
+             "|" + "---|" * 15]
     for res in results:
         if "error" in res:
-            lines.append(f"| {res['level']} | failed: {res['error']} |" + " |" * 12)
+            lines.append(f"| {res['level']} | failed: {res['error']} |" + " |" * 13)
             continue
         for row in res["roms"]:
             lines.append(
                 f"| {res['level']} | {res['n_dofs']} | {res['build_seconds']:.1f} | "
                 f"{res['factorization_seconds']:.1f} | {res['fom_seconds_per_step']:.3f} | "
-                f"{res['peak_rss_gb']:.1f} | {res['svd_seconds']:.1f} | {row['r']} | {row['learner']} | "
-                f"{row['fit_seconds']:.2f} | {row['rom_seconds_per_step']:.2e} | {row['speedup']:.0f} | "
-                f"{row['test_output_error']:.2e} | {row['test_field_error']:.2e} |")
+                f"{res['store_gb']:.2f} | {res['svd_seconds']:.1f} | {res['peak_rss_gb']:.1f} | {row['r']} | "
+                f"{row['learner']} | {row['fit_seconds']:.2f} | {row['seconds_per_step']:.2e} | "
+                f"{row['speedup']:.0f} | {row['test_output_error']:.2e} | {row['test_field_error']:.2e} |")
     return "\n".join(lines)
 
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--levels", nargs="+", default=["small", "medium", "large"], choices=tuple(LADDER_SIZES))
-    parser.add_argument("--steps", type=int, default=200)
-    parser.add_argument("--dt", type=float, default=1e-3)
+    parser.add_argument("--levels", nargs="+", default=["small", "medium", "large"],
+                        choices=("tiny", "small", "medium", "large"))
+    parser.add_argument("--steps", type=int, default=150, help="Newmark steps of 1 ms per run")
     parser.add_argument("--ranks", type=int, nargs="+", default=[4, 8, 12])
-    parser.add_argument("--store-dir", default="/tmp")
-    parser.add_argument("--svd-power", type=int, default=1)
-    parser.add_argument("--memory-limit-gb", type=float, default=14.0)
+    parser.add_argument("--store-dir", default=tempfile.gettempdir(),
+                        help="where the snapshot stores go (the large level needs ~17 GB)")
+    parser.add_argument("--svd-power", type=int, default=2, help="power iterations of the randomized SVD")
+    parser.add_argument("--memory-limit-gb", type=float, default=20.0)
     parser.add_argument("--out", type=Path, default=RESULTS)
     parser.add_argument("--worker", help=argparse.SUPPRESS)
     parser.add_argument("--worker-out", help=argparse.SUPPRESS)
@@ -276,13 +148,15 @@ def main(argv=None) -> int:
     if args.worker:
         from femrom.post._report import _jsonable
 
-        res = run_level(args.worker, steps=args.steps, dt=args.dt, ranks=args.ranks,
-                        store_dir=Path(args.store_dir), svd_power=args.svd_power)
+        with tempfile.TemporaryDirectory(prefix=f"fishtail_{args.worker}_", dir=args.store_dir) as work:
+            res = run_level(args.worker, steps=args.steps, ranks=args.ranks, store_dir=Path(args.store_dir),
+                            out_dir=Path(work), svd_power=args.svd_power)
         Path(args.worker_out).write_text(json.dumps(_jsonable(res), indent=2))
         return 0
     merged = json.loads(args.out.read_text()) if args.out.exists() else {"levels": {}}
     results = []
     for level in args.levels:
+        print(f"[{level}] running ...", flush=True)
         res = _child(level, args)
         results.append(res)
         merged["levels"][level] = res

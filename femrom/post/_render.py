@@ -146,7 +146,10 @@ def render_grid(path, points: np.ndarray, cells: np.ndarray, panels, *, titles=(
             surface = _surface(grid)
             plotter.add_mesh(surface, scalars=scalar_label, clim=limits, cmap="viridis",
                              show_edges=False, show_scalar_bar=(i == rows - 1 and j == cols - 1),
-                             scalar_bar_args={"title": scalar_label, "vertical": True})
+                             scalar_bar_args={"title": scalar_label, "vertical": False, "fmt": "%.2g",
+                                              "position_x": 0.2, "position_y": 0.03, "width": 0.6,
+                                              "height": 0.08, "title_font_size": 12,
+                                              "label_font_size": 10})
             outline = _surface(base).extract_feature_edges(feature_angle=30)
             plotter.add_mesh(outline, color="grey", line_width=1, opacity=0.5)
             label = " ".join(x for x in ((row_labels[i] if i < len(row_labels) else ""),
