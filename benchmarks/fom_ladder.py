@@ -371,6 +371,28 @@ def task_newmark(size: str, element: str, strategy: str, fresh: bool, n_steps: i
     return result
 
 
+def task_naive_superlu(size: str, element: str, n_steps: int) -> dict:
+    """The naive baseline: scipy's SuperLU factorising ``A_eff`` afresh at every step.
+
+    What ``scipy.sparse.linalg.spsolve`` does per call; femrom's ``superlu``
+    strategy refuses this size (:data:`femrom.fem._solvers.SUPERLU_MAX_DOFS`),
+    so the limit is lifted in this child only. No reused SuperLU run here: the
+    reuse side of the ratio is PARDISO's, measured in the same ladder run.
+    """
+    from femrom.fem import _solvers, make_solver
+
+    _solvers.SUPERLU_MAX_DOFS = 10**9
+    system, _, assembly_seconds = _cantilever(size, element)
+
+    def make(A, spd=True):  # the initial acceleration's mass solve is not what is measured
+        return make_solver(A, "pardiso" if A is system.mass else "superlu", spd=spd)
+
+    gc.collect()
+    run = _newmark_run(system, make, True, n_steps)
+    return {**run, "runs": [run], "n_runs": 1, "n_free": int(system.n_dofs),
+            "system_assembly_seconds": assembly_seconds, "tip_uz_final": run["tip_uz"][-1]}
+
+
 def run_single(spec: str) -> dict:
     size, element, task, n_steps = spec.split(",")
     n_steps = int(n_steps)
@@ -381,6 +403,8 @@ def run_single(spec: str) -> dict:
         result = task_assemble(size, element)
     elif task == "stock":
         result = task_stock(size, element)
+    elif task == "naive-superlu":
+        result = task_naive_superlu(size, element, n_steps)
     elif task.startswith("fresh-"):
         result = task_newmark(size, element, task.removeprefix("fresh-"), True, n_steps)
     else:
@@ -470,7 +494,7 @@ def _stock_estimate(results: list[dict], size: str, element: str, n_elements: in
             STOCK_GB_PER_ELEMENT[element] * n_elements)
 
 
-def _plan(size: str, element: str, strategies: list[str]) -> list[str]:
+def _plan(size: str, element: str, strategies: list[str], naive: bool = False) -> list[str]:
     tasks = ["mesh", "assemble", "stock"]
     for strategy in strategies:
         if strategy == "superlu" and size != "small":
@@ -478,10 +502,14 @@ def _plan(size: str, element: str, strategies: list[str]) -> list[str]:
         tasks.append(strategy)
     if size in FRESH_SIZES:
         tasks += [f"fresh-{s}" for s in strategies if s != "superlu" or size == "small"]
+    if naive and size == "medium":
+        tasks.append("naive-superlu")
     return tasks
 
 
 def _steps_for(task: str, size: str, steps: int, amg_steps: int | None) -> int:
+    if task == "naive-superlu":
+        return 1  # one SuperLU factorisation of A_eff costs minutes and ~15 GB at this size
     if task.startswith("fresh-"):
         return FRESH_STEPS[size]
     if task == "amg-cg":
@@ -492,12 +520,12 @@ def _steps_for(task: str, size: str, steps: int, amg_steps: int | None) -> int:
 def run_ladder(sizes, elements, memory_limit_gb: float, timeout: float, log, *,
                steps: int = STEPS, amg_steps: int | None = None,
                stock_max_seconds: float = STOCK_MAX_SECONDS,
-               threads: int | None = None) -> list[dict]:
+               threads: int | None = None, naive: bool = False) -> list[dict]:
     strategies = _available_strategies()
     results: list[dict] = []
     for size in sizes:
         for element in elements:
-            for task in _plan(size, element, strategies):
+            for task in _plan(size, element, strategies, naive):
                 if task == "stock":
                     mesh = next(r for r in results if r["size"] == size
                                 and r["element"] == element and r["task"] == "mesh")
@@ -634,6 +662,17 @@ def reuse_table(results, sizes, elements) -> str:
                     f"{_fmt(reuse['step_seconds_median'])} | {ratio:.1f}x | "
                     f"{_fmt(long_run.get('step_seconds_median'))} | "
                     f"{_fmt(fresh['peak_rss_gb'])} |")
+            naive = _find(results, size, element, "naive-superlu")
+            pardiso = _find(results, size, element, "fresh-pardiso")
+            if naive is not None and naive["status"] == "ok" and pardiso is not None \
+                    and pardiso["status"] == "ok":
+                reuse = pardiso["reuse_run"]
+                lines.append(
+                    f"| {size} | {element.upper()} | {_fmt(naive['n_free'])} | fresh superlu (naive) "
+                    f"vs reused pardiso | {naive['n_steps']} | {_fmt(naive['step_seconds_median'])} | "
+                    f"{_fmt(reuse['step_seconds_median'])} | "
+                    f"{naive['step_seconds_median'] / reuse['step_seconds_median']:.0f}x | | "
+                    f"{_fmt(naive['peak_rss_gb'])} |")
     return "\n".join(lines)
 
 
@@ -688,6 +727,9 @@ def main(argv=None) -> int:
     parser.add_argument("--threads", type=int, default=None,
                         help="set MKL/OpenMP/OpenBLAS threads of every configuration "
                              "(default: leave the environment alone)")
+    parser.add_argument("--naive-baseline", action="store_true",
+                        help="also time scipy's SuperLU factorising afresh every step at the medium "
+                             "size (one step: minutes and ~15 GB), against PARDISO's reused factor")
     parser.add_argument("--single", help=argparse.SUPPRESS)  # child mode: size,element,task
     args = parser.parse_args(argv)
 
@@ -719,7 +761,7 @@ def main(argv=None) -> int:
         f"memory limit {limit:.1f} GB")
     results = run_ladder(sizes, elements, limit, args.timeout, log, steps=args.steps,
                          amg_steps=args.amg_steps, stock_max_seconds=args.stock_max_seconds,
-                         threads=args.threads)
+                         threads=args.threads, naive=args.naive_baseline)
     total_seconds = time.perf_counter() - tic
     tables = {"assembly": assembly_table(results, sizes, elements),
               "stepping": stepping_table(results, sizes, elements),
