@@ -63,7 +63,7 @@ from femrom.post import (
     write_metrics,
     write_vtu_series,
 )
-from femrom.post._report import machine_description
+from femrom.post._report import _pyplot, _save, machine_description
 from femrom.rom import SecondOrderROM
 from femrom.scene import InputConfig, Scene, Signal, build
 from femrom.snapshots import SnapshotStore
@@ -403,17 +403,8 @@ def mesh_ladder(scene: Scene, levels) -> list[dict]:
 
 
 # -- plots -------------------------------------------------------------------------------
-def _plt():
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
-
-
 def plot_outputs(path, runs: dict, best: dict, r: int, names, title: str):
-    plt = _plt()
+    plt = _pyplot()
     fig, axes = plt.subplots(len(runs), 2, figsize=(11, 3.3 * len(runs)), squeeze=False)
     for i, (key, run) in enumerate(runs.items()):
         for j, comp in enumerate((1, 0)):
@@ -441,13 +432,11 @@ def plot_outputs(path, runs: dict, best: dict, r: int, names, title: str):
     for ax in axes[-1]:
         ax.set_xlabel("t [s]")
     fig.suptitle(title, fontsize=10)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    _save(fig, path, dpi=110)
 
 
 def plot_errors(path, rows: list[dict], title: str):
-    plt = _plt()
+    plt = _pyplot()
     fig, axes = plt.subplots(1, 2, figsize=(10, 3.6))
     for name, marker in (("galerkin", "s"), ("lopinf", "o"), ("opinf", "^"), ("lopinf_fd", "x"),
                          ("opinf_fd", "v")):
@@ -463,13 +452,11 @@ def plot_errors(path, rows: list[dict], title: str):
         ax.grid(alpha=0.3, which="both")
         ax.legend(fontsize=8)
     fig.suptitle(title, fontsize=10)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    _save(fig, path, dpi=110)
 
 
 def plot_energy(path, best: dict, r: int, fom_run: dict, title: str):
-    plt = _plt()
+    plt = _pyplot()
     fig, ax = plt.subplots(figsize=(8, 3.6))
     ax.semilogy(fom_run["times"], np.maximum(fom_run["energy"], 1e-30), "k-", lw=2, label="FOM (test input)")
     for name, style in (("galerkin", "--"), ("lopinf", "-"), ("opinf", ":"), ("lopinf_fd", "-."),
@@ -486,9 +473,7 @@ def plot_energy(path, best: dict, r: int, fom_run: dict, title: str):
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=8)
     ax.set_title(title, fontsize=10)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    _save(fig, path, dpi=110)
 
 
 # -- renders -------------------------------------------------------------------------------

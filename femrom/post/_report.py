@@ -11,6 +11,28 @@ from pathlib import Path
 import numpy as np
 
 
+
+def _pyplot():
+    """matplotlib.pyplot on the non-interactive Agg backend (no display needed)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _save(fig, path, *, dpi: int) -> Path:
+    """Lay out, write (making the folder) and close a figure; returns the path."""
+    import matplotlib.pyplot as plt
+
+    fig.tight_layout()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=dpi)
+    plt.close(fig)
+    return path
+
 def _jsonable(value):
     if isinstance(value, dict):
         return {str(k): _jsonable(v) for k, v in value.items()}
@@ -54,10 +76,7 @@ def plot_response(path, times, outputs=None, output_names=(), energy=None, title
     outputs : (p, k) ndarray or None
     energy : (k,) ndarray or None
     """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = _pyplot()
 
     panels = [x for x in (outputs, energy) if x is not None]
     fig, axes = plt.subplots(max(len(panels), 1), 1, figsize=(8, 3.2 * max(len(panels), 1)),
@@ -80,12 +99,7 @@ def plot_response(path, times, outputs=None, output_names=(), energy=None, title
     axes[-1].set_xlabel("t [s]")
     if title:
         axes[0].set_title(title)
-    fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    return _save(fig, path, dpi=120)
 
 
 def accuracy_cost_table(rows: list[dict], columns: list[str]) -> str:
@@ -102,10 +116,7 @@ def accuracy_cost_table(rows: list[dict], columns: list[str]) -> str:
 
 def plot_accuracy_cost(path, rows: list[dict], cost: str, error: str, label: str, title="") -> Path:
     """Log-log error against cost, one point per row, annotated with ``label``."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = _pyplot()
 
     fig, ax = plt.subplots(figsize=(6, 4))
     x = [r[cost] for r in rows]
@@ -118,11 +129,7 @@ def plot_accuracy_cost(path, rows: list[dict], cost: str, error: str, label: str
     ax.grid(alpha=0.3, which="both")
     if title:
         ax.set_title(title)
-    fig.tight_layout()
-    path = Path(path)
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    return _save(fig, path, dpi=120)
 
 
 def plot_time_series(path, times, series: dict, *, ylabel: str = "", logy: bool = False,
@@ -143,10 +150,7 @@ def plot_time_series(path, times, series: dict, *, ylabel: str = "", logy: bool 
     ymax : float, optional
         Clip values above (a blow-up then runs along the top edge, marked "clipped").
     """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = _pyplot()
 
     fig, ax = plt.subplots(figsize=(8, 3.6))
     styles = ("-", "--", ":", "-.")
@@ -175,22 +179,14 @@ def plot_time_series(path, times, series: dict, *, ylabel: str = "", logy: bool 
     ax.legend(loc="best", fontsize=8)
     if title:
         ax.set_title(title)
-    fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
-    return path
+    return _save(fig, path, dpi=100)
 
 
 def plot_accuracy_cost_groups(path, rows: list[dict], cost: str, error: str, label: str,
                               group: str, title: str = "") -> Path:
     """Log-log error against cost, one line per value of ``group`` (e.g. the method),
     each point annotated with ``label`` (e.g. r). Non-finite errors are left out."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = _pyplot()
 
     fig, ax = plt.subplots(figsize=(6.4, 4.2))
     for name in dict.fromkeys(r[group] for r in rows):
@@ -207,9 +203,4 @@ def plot_accuracy_cost_groups(path, rows: list[dict], cost: str, error: str, lab
     ax.legend(fontsize=8)
     if title:
         ax.set_title(title, fontsize=10)
-    fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
-    return path
+    return _save(fig, path, dpi=100)
