@@ -441,6 +441,8 @@ def plot_errors(path, rows: list[dict], title: str):
     for name, marker in (("galerkin", "s"), ("lopinf", "o"), ("opinf", "^"), ("lopinf_fd", "x"),
                          ("opinf_fd", "v")):
         sel = [r for r in rows if r["learner"] == name]
+        if not sel:  # learner not run
+            continue
         ranks = [r["r"] for r in sel]
         for ax, key in zip(axes, ("test_output_error", "test_field_error")):
             ax.semilogy(ranks, [min(r[key], 1e3) if np.isfinite(r[key]) else 1e3 for r in sel],
@@ -461,7 +463,9 @@ def plot_energy(path, best: dict, r: int, fom_run: dict, title: str):
     ax.semilogy(fom_run["times"], np.maximum(fom_run["energy"], 1e-30), "k-", lw=2, label="FOM (test input)")
     for name, style in (("galerkin", "--"), ("lopinf", "-"), ("opinf", ":"), ("lopinf_fd", "-."),
                         ("opinf_fd", ":")):
-        ev = best[(r, name, "test")]
+        ev = best.get((r, name, "test"))
+        if ev is None:  # learner not run
+            continue
         e = np.abs(ev["long_energy"])
         e = np.where(np.isfinite(e), np.minimum(e, 1e30), np.nan)
         ax.semilogy(ev["long_times"], np.maximum(e, 1e-30), style, label=f"{LABELS[name]} r={r}")

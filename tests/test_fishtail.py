@@ -204,6 +204,20 @@ def test_field_errors_from_reduced_coordinates_equal_the_full_fields(pipeline):
         assert row["test_field_error"] == pytest.approx(slow, rel=1e-3), r
 
 
+def test_pipeline_with_a_subset_of_learners(tmp_path):
+    """What the mesh ladder runs (benchmarks/fishtail_ladder.py): no finite-difference learners,
+    no reverse study, no renders or ladders; every plot must still be drawn."""
+    metrics = fishtail.run(tmp_path, level="tiny", ranks=(2, 3), t_end=0.06, ladders=False, render=False,
+                           reverse=False, learners=("galerkin", "lopinf", "opinf"))
+    assert {row["learner"] for row in metrics["roms"]} == {"galerkin", "lopinf", "opinf"}
+    assert metrics["roms_reverse"] == []
+    for name in ("response.png", "rom_error.png", "energy.png", "report.md"):
+        assert (tmp_path / name).stat().st_size > 0, name
+    assert not (tmp_path / "snapshots.h5").exists()   # deleted unless kept
+    with pytest.raises(ValueError, match="learners"):
+        fishtail.run(tmp_path, level="tiny", learners=("galerkin", "opinf"))
+
+
 def test_rom_output_error_on_the_unseen_step_input(pipeline):
     _, metrics = pipeline
     gal, lop = _row(metrics, 4, "galerkin"), _row(metrics, 4, "lopinf")
