@@ -7,12 +7,14 @@ r = 10, 30, 60, 100, 150 from its snapshots; fourth-order finite-difference
 derivatives; L-OpInf with damping and input terms and a relative Tikhonov
 weight of 1e-8. Solvers:
 
-- ``fast``: :func:`femrom.inference.solve_fast`;
+- ``fast``: :func:`femrom.inference.solve_fast` (its ``method`` column says which
+  path ran: the interior-point method on ill-conditioned data, the first-order
+  path on well-conditioned data);
 - ``clarabel``, ``scs``: the cvxpy reference (:func:`femrom.inference.solve_conic`);
 - a solver is skipped where its time, extrapolated from the largest size it
-  ran as ``t ~ r^6`` (Clarabel: dense KKT of ~r^2 unknowns) or ``t ~ r^4``
-  (SCS, fast), would exceed ``--limit`` (two minutes by default; said so in
-  the table);
+  ran as ``t ~ r^6`` (Clarabel, and fast on its interior-point path: dense
+  Newton systems of ~r^2 unknowns) or ``t ~ r^4`` (SCS, fast on its first-order
+  path), would exceed ``--limit`` (two minutes by default; said so in the table);
 - ``least_squares``: plain second-order OpInf (no structure), for scale.
 
 The objective column is ``||M^ Q'' + C^ Q' + K^ Q - B^ U||^2 + Tikhonov``; the
@@ -49,8 +51,9 @@ from femrom.scene import SecondOrderSystem
 SIZES = (10, 30, 60, 100, 150)
 LIMIT_SECONDS = 120.0
 #: Assumed growth of a solver's time with r when predicting whether to skip it
-#: (Clarabel: dense KKT with ~r^2 unknowns; the others: r^4 covers what was measured).
-GROWTH = {"clarabel": 6, "scs": 4, "fast": 4}
+#: (Clarabel and the interior-point path of fast: dense systems with ~r^2
+#: unknowns; the others: r^4 covers what was measured).
+GROWTH = {"clarabel": 6, "scs": 4, "fast": 4, "fast/interior_point": 6}
 
 
 def string_data(n_elements: int = 601, dt: float = 2e-4, steps: int = 4000):
@@ -98,6 +101,7 @@ def run(sizes=SIZES, out_dir: Path | None = None, problem_kind: str = "string",
         M, Q, U, dt = string_data()
     rows = []
     times = {"fast": {}, "clarabel": {}, "scs": {}}
+    growth = dict(GROWTH)
     for r in sizes:
         if problem_kind == "string":
             V = mass_pod(M, Q, r)
@@ -110,13 +114,15 @@ def run(sizes=SIZES, out_dir: Path | None = None, problem_kind: str = "string",
             predicted = None
             if times[name]:
                 r0 = max(times[name])
-                predicted = times[name][r0] * (r / r0) ** GROWTH[name]
+                predicted = times[name][r0] * (r / r0) ** growth[name]
             if predicted is not None and predicted > limit:
                 results[name] = {"skipped": f"predicted {predicted:.0f} s > {limit:.0f} s"}
                 continue
             _, info = solve_fast(problem) if name == "fast" else solve_conic(problem, name.upper())
             results[name] = info
             times[name][r] = info["seconds"]
+            if name == "fast":
+                growth["fast"] = GROWTH.get(f"fast/{info.get('method')}", GROWTH["fast"])
         plain = SecondOrderOpInf(regularization=1e-8)
         tic = time.perf_counter()
         plain.fit(data)
@@ -134,6 +140,11 @@ def run(sizes=SIZES, out_dir: Path | None = None, problem_kind: str = "string",
                            gap=None if best is None else float((info["objective"] - best) / best),
                            status=str(info.get("status")),
                            gap_estimate=info.get("gap_estimate"))
+                if name == "fast":
+                    row.update(method=info.get("method"), condition=info.get("condition"),
+                               ipm_iterations=info.get("ipm_iterations"),
+                               admm_iterations=info.get("iterations"),
+                               certificate=info.get("certificate"), active=info.get("active"))
             rows.append(row)
             print(_format(row), flush=True)
         if out_dir is not None:
@@ -147,17 +158,25 @@ def _write(out_dir, problem_kind, rows):
         out_dir.mkdir(parents=True, exist_ok=True)
         payload = {"benchmark": "fit_ladder", "machine": platform.platform(),
                    "date": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "load_average": os.getloadavg(),
+                   "load_average_at_start": _LOAD_AT_START,
                    "processor": platform.processor(), "problem": problem_kind,
                    "description": __doc__.split("\n\n")[1], "rows": rows}
         name = "fit_ladder.json" if problem_kind == "string" else f"fit_ladder_{problem_kind}.json"
         (out_dir / name).write_text(json.dumps(payload, indent=2))
 
 
+_LOAD_AT_START = os.getloadavg()
+
+
 def _format(row) -> str:
     seconds = "skipped" if row["seconds"] is None else f"{row['seconds']:9.3f}"
     objective = "" if row["objective"] is None else f"{row['objective']:.9e}"
     gap = "" if row["gap"] is None else f"{row['gap']:+.1e}"
-    return f"r={row['r']:4d}  {row['solver']:14s} {seconds:>9s} s  f={objective:17s} gap={gap:9s} {row['status']}"
+    extra = ""
+    if row.get("method"):
+        extra = f"  [{row['method']}, kappa {row['condition']:.1e}, certified gap {row['gap_estimate']:.1e}]"
+    return (f"r={row['r']:4d}  {row['solver']:14s} {seconds:>9s} s  f={objective:17s} gap={gap:9s} "
+            f"{row['status']}{extra}")
 
 
 def main(argv=None) -> int:

@@ -1,25 +1,44 @@
 r"""A dedicated solver for the structured regression of :mod:`._problem`.
 
 It aims at the same optimum as the conic program of :mod:`._sdp`, working on
-the (p, p) Gram matrix and r x r eigendecompositions only:
+the (p, p) Gram matrix, r x r eigendecompositions and, on ill-conditioned
+data, dense Newton systems in the ``r (r + 1) / 2`` entries of each symmetric
+block. After scaling (:meth:`GramProblem.scaled`):
 
 1. **Free blocks eliminated.** The input operator ``B`` is unconstrained, so
    it is minimised out in closed form (a Schur complement of ``G``) and
    recovered at the end: ``X_F = -(X_S G_SF + H_F^T) G_FF^{-1}``.
-2. **Symmetric least squares.** Ignoring definiteness, the optimality
+2. **Method chosen** (``FastOptions.method = "auto"``) from the condition
+   number of the reduced Gram matrix and the number of unknowns
+   ``m = b r (r + 1) / 2``:
+
+   - **interior point** (:mod:`._ipm`: Nesterov-Todd scaling, Mehrotra
+     predictor-corrector, dense Cholesky of the Newton matrix) when
+     ``kappa(G) > ipm_condition`` (POD data: ``kappa ~ 1e5-1e10``) or
+     ``m <= ipm_small_unknowns``, as long as ``m <= ipm_max_unknowns``. Newton
+     steps solved directly do not care about ``kappa(G)``; the method finds
+     the active faces by itself and stops in 9-15 iterations at a certified
+     gap. Cost ``~m^3 / 3`` flops a step (r = 30: 0.03 s; r = 60: 0.6 s;
+     r = 100: ~10 s).
+   - **first order** (steps 3-6) otherwise: cheap per iteration, fast when
+     ``G`` is well conditioned (random data: r = 100 in ~0.35 s).
+
+   If the first method does not certify its point the other one runs and
+   the better point is returned.
+3. **Symmetric least squares.** Ignoring definiteness, the optimality
    conditions of the symmetric blocks are coupled Lyapunov equations
    ``sym((X G + H^T)_j) = 0``. They are solved by conjugate gradients
    preconditioned by the exact block-diagonal Lyapunov inverse (diagonal in
    the eigenbasis of each ``G_jj``). When the solution already satisfies
    ``X_j >= eps_j I`` it is the optimum (the problem is convex) and the
    solver stops.
-3. **Active set on eigenspaces** otherwise: the faces ``X_j = eps_j I +
+4. **Active set on eigenspaces** otherwise: the faces ``X_j = eps_j I +
    U_j A_j U_j^T`` read off the clipped solution turn the problem into a
-   symmetric least-squares problem in the ``A_j`` again (step 2's solver);
+   symmetric least-squares problem in the ``A_j`` again (step 3's solver);
    faces shrink where ``A_j`` has negative eigenvalues and grow where the
    multiplier ``Lambda_j = sym(grad f)_j`` is negative on the complement or
    couples to the face.
-4. **ADMM** if that is not certified, on ``min f(X) + indicator_S(Z)  s.t.  X = Z``:
+5. **ADMM** if that is not certified, on ``min f(X) + indicator_S(Z)  s.t.  X = Z``:
 
    .. math::
 
@@ -32,21 +51,22 @@ the (p, p) Gram matrix and r x r eigendecompositions only:
    ``alpha = 1.6`` over-relaxes and ``rho = sqrt(g_min g_max)``; the fixed-point
    map is Anderson-accelerated (coefficients from the (m, m) normal equations
    of the residual differences), and the positive eigenspaces of the projected
-   matrices seed step 3 after 10, 20, ..., 50 iterations, then every
+   matrices seed step 4 after 10, 20, ..., 50 iterations, then every
    ``polish_every``: on well-conditioned data the active set is right after
    10-20 iterations, so early polishes end the run.
-5. **Certificate.** A candidate is accepted when its relative duality gap
-   (:func:`_gap_estimate`) is below ``tol``; the best feasible candidate by
-   objective is returned in any case, with its gap in ``info``.
+6. **Certificate.** A candidate is accepted when its relative duality gap is
+   below ``tol``: first the rigorous bound :func:`femrom.inference._ipm.gap_bound`
+   (no linear solve; it needs ``G > 0``), else the estimate of
+   :func:`_gap_estimate`; the best feasible candidate by objective is
+   returned in any case, with its gap in ``info``.
 
-Where it is fast and where it is not (``docs/inference.md``): steps 2-3 are
-exact and cheap when the constraints are inactive or the active set is found
-after a few ADMM iterations (random problems with half the eigenvalues on
-the bounds: certified optimum at r = 100 in 0.1-0.35 s); on very
-ill-conditioned Gram matrices (POD data of a string, ``kappa(G) ~ 1e7-1e10``
-even after Jacobi scaling ~1e6) every linear solve needs thousands of
-conjugate-gradient iterations and ADMM converges slowly: there the solver is
-slow and, past r ~ 30, not at the optimum (docs/inference.md).
+Why two methods (``docs/inference.md``): on POD data of a damped string
+(``kappa(G) ~ 1e7-1e10`` after block scaling) the first-order path needed
+thousands of conjugate-gradient iterations per face solve, its active-set
+search did not find the right face, and it stopped 5e-6 to 0.18 above the
+optimum (r = 12-60); the interior-point path reaches a certified gap below
+1e-8 there, but its dense Newton matrix (``8 m^2`` bytes, ``m^3 / 3`` flops)
+limits it to ``r`` of about 100.
 
 BLAS threads are limited to one inside the solver when ``threadpoolctl`` is
 importable: at these sizes (r <= a few hundred) threading only adds
@@ -58,11 +78,17 @@ from __future__ import annotations
 
 import contextlib
 import time
+import weakref
 from dataclasses import dataclass, replace
 
 import numpy as np
 
+from femrom.inference._ipm import gap_bound, smallest_eigenvalue, solve_ipm
 from femrom.inference._problem import GramProblem
+
+
+#: Solution methods of :func:`solve_fast`.
+METHODS = ("auto", "first_order", "interior_point")
 
 
 @dataclass(frozen=True)
@@ -96,6 +122,24 @@ class FastOptions:
         Anderson-acceleration memory of the ADMM fixed-point map (0: plain ADMM).
     rho_updates : int
         Residual-balancing updates of the ADMM penalty (at the first polishes).
+    method : {"auto", "first_order", "interior_point"}
+        ``"first_order"``: steps 2-5 of the module docstring; ``"interior_point"``:
+        :func:`femrom.inference._ipm.solve_ipm`; ``"auto"``: the interior-point
+        method when the scaled, reduced Gram matrix has ``kappa > ipm_condition``
+        or the problem has at most ``ipm_small_unknowns`` unknowns, the
+        first-order path otherwise, and the other one whenever the first does
+        not certify its point (the better point is returned).
+    ipm_condition : float
+        ``kappa(G)`` above which "auto" starts with the interior-point method
+        (random data: ~6; POD data of a string: 1e5-1e10).
+    ipm_small_unknowns : int
+        Problems with at most this many symmetric unknowns (``m = b r (r+1)/2``;
+        600: ``r <= 24`` with two blocks) take the interior-point method under
+        "auto" whatever their conditioning (10-50 ms there).
+    ipm_max_unknowns : int
+        The interior-point method is not used above this many unknowns (its
+        dense Newton matrix takes ``8 m^2`` bytes: 1.2 GB at 12 000, ``r = 108``).
+    ipm_max_iterations : int
     """
 
     tol: float = 1e-8
@@ -111,6 +155,15 @@ class FastOptions:
     anderson_memory: int = 10
     rho_updates: int = 0
     stall_tol: float = 1e-12
+    method: str = "auto"
+    ipm_condition: float = 1e4
+    ipm_small_unknowns: int = 600
+    ipm_max_unknowns: int = 12_000
+    ipm_max_iterations: int = 60
+
+    def __post_init__(self):
+        if self.method not in METHODS:
+            raise ValueError(f"unknown method {self.method!r}; valid: {METHODS}")
 
 
 def _single_thread():
@@ -129,10 +182,14 @@ def solve_fast(problem: GramProblem, options: FastOptions = FastOptions()):
     X : (r, p) ndarray
         The operators, symmetric blocks exactly symmetric and feasible.
     info : dict
-        ``solver`` ("fast"), ``status`` (``"optimal"``, ``"optimal (unconstrained)"``
-        or ``"max_iterations"``), ``seconds``, ``objective``, ``iterations``
-        (ADMM), ``cg_iterations``, ``gap_estimate`` (relative), ``active``
-        (per block: eigenvalues held at the bound).
+        ``solver`` ("fast"), ``method`` ("first_order" or "interior_point": the one
+        whose point is returned), ``status`` (``"optimal"``, ``"optimal
+        (unconstrained)"``, ``"optimal (least squares)"``, ``"max_iterations"``,
+        ``"stalled"``), ``seconds``, ``objective``, ``condition`` (``kappa`` of
+        the scaled, reduced Gram matrix), ``iterations`` (ADMM),
+        ``cg_iterations``, ``ipm_iterations``, ``gap_estimate`` (relative
+        duality gap: a rigorous bound when ``certificate`` is "bound"),
+        ``active`` (per "psd" block: eigenvalues held at the bound).
     """
     tic = time.perf_counter()
     with _single_thread():
@@ -147,10 +204,9 @@ def solve_fast(problem: GramProblem, options: FastOptions = FastOptions()):
             Xr, status = _solve_square(reduced, options, info)
             Xs = recover(Xr)
             info["status"] = status
-        X = unscale(Xs)
-        for b, s in zip(problem.blocks, problem.slices()):
-            if b.square:   # exact symmetry (eigen-reconstructions are symmetric to round-off)
-                X[:, s] = 0.5 * (X[:, s] + X[:, s].T)
+        # exact symmetry (eigen-reconstructions are symmetric to round-off), and
+        # eigenvalues clipped at the bound should round-off have crossed it
+        X = problem.project(unscale(Xs))
     info["seconds"] = time.perf_counter() - tic
     info["objective"] = problem.objective(X)
     return X, info
@@ -335,6 +391,44 @@ def _solve_faces_dense(problem, faces, As0, res, info):
 
 
 def _solve_square(problem: GramProblem, options: FastOptions, info):
+    """Choose the method (``FastOptions.method``), fall back to the other one if
+    the first does not certify its point, and return the better point."""
+    g = np.linalg.eigvalsh(problem.gram)
+    info["condition"] = float(g[-1] / g[0]) if g[0] > 0 else np.inf
+    m = sum(b.size * (b.size + 1) // 2 for b in problem.blocks)
+    ipm_allowed = m <= options.ipm_max_unknowns and any(b.structure == "psd" for b in problem.blocks)
+    if options.method == "auto":
+        order = ["interior_point", "first_order"] if ipm_allowed and (
+            info["condition"] > options.ipm_condition or m <= options.ipm_small_unknowns) \
+            else ["first_order"] + (["interior_point"] if ipm_allowed else [])
+    else:
+        order = [options.method]
+    best = None
+    for method in order:
+        sub = {"iterations": 0, "cg_iterations": 0, "gap_estimate": 0.0, "active": {}}
+        if method == "interior_point":
+            X, status = solve_ipm(problem, tol=options.tol, max_iterations=options.ipm_max_iterations,
+                                  info=sub)
+        else:
+            X, status = _solve_first_order(problem, options, sub)
+        sub["method"] = method
+        f = problem.objective(X)
+        for key in ("iterations", "cg_iterations", "ipm_iterations"):   # work done by all
+            info[key] = info.get(key, 0) + sub.pop(key, 0)
+        if best is None or (_certified(status), -f) > (_certified(best[1]), -best[2]):
+            best = (X, status, f, sub)
+        if status.startswith("optimal"):    # "optimal_inaccurate" too: see solve_ipm
+            break
+    X, status, _, sub = best
+    info.update(sub)
+    return X, status
+
+
+def _certified(status: str) -> bool:
+    return status.startswith("optimal") and status != "optimal_inaccurate"
+
+
+def _solve_first_order(problem: GramProblem, options: FastOptions, info):
     r = problem.r
     nb = len(problem.blocks)
     full = _make_faces(problem, ([None] * nb, [0.0] * nb))
@@ -448,9 +542,21 @@ def _polish(problem: GramProblem, face_bases, Z: np.ndarray, options: FastOption
     return best
 
 
+_G_MIN = weakref.WeakKeyDictionary()
+
+
+def _g_min(problem: GramProblem) -> float:
+    """:func:`smallest_eigenvalue` of ``problem.gram``, computed once per problem."""
+    if problem not in _G_MIN:
+        _G_MIN[problem] = smallest_eigenvalue(problem.gram)
+    return _G_MIN[problem]
+
+
 def _gap_estimate(problem: GramProblem, X: np.ndarray, options: FastOptions, info) -> float:
     r"""Relative duality gap of a feasible ``X``, from the multipliers it suggests.
 
+    First the rigorous bound :func:`femrom.inference._ipm.gap_bound` (no linear
+    solve; accepted when it is below ``tol``), otherwise the estimate below.
     Take ``Lambda_j = Pi_PSD(sym(grad f(X))_j)`` for the ``"psd"`` blocks
     (zero for the others) as dual point; its dual value is
     ``g = min_{X' symmetric} f(X') - sum_j <Lambda_j, X'_j - eps_j I>``, whose
@@ -463,6 +569,10 @@ def _gap_estimate(problem: GramProblem, X: np.ndarray, options: FastOptions, inf
         f(X) - g = \langle \nabla f(X'), D\rangle + \langle D G, D\rangle
                    + \sum_j \langle \Lambda_j, X'_j - \varepsilon_j I\rangle .
     """
+    bound = gap_bound(problem, X, g_min=_g_min(problem))
+    relative = bound / max(problem.objective(X), np.finfo(float).tiny)
+    if relative <= options.tol:
+        return relative
     grad = problem.gradient(X)
     r = problem.r
     multipliers = []

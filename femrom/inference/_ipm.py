@@ -1,0 +1,531 @@
+r"""A primal-dual interior-point method for the structured regression (dense Newton steps).
+
+The problem of :mod:`._problem` after the free blocks are eliminated
+(:func:`femrom.inference._fast._eliminate_free`) has square blocks only,
+
+.. math::
+
+    \min_{X = [X_1, \dots, X_b]} \; f(X) = \langle X G, X\rangle + 2\langle X, H^\top\rangle + c
+    \quad\text{s.t.}\quad X_j = X_j^\top, \qquad
+    S_j := X_j - \varepsilon_j I \succeq 0 \;\; (\text{"psd" blocks}),
+
+a convex quadratic program over a product of semidefinite cones. On POD
+data ``G`` is very ill-conditioned (``kappa(G) ~ 1e7 - 1e10``); first-order
+methods then crawl, while a Newton method whose linear systems are solved
+directly is insensitive to ``kappa(G)``. This module is such a method:
+
+- **Coordinates.** Every symmetric block is written in the orthonormal
+  basis ``E_ii = e_i e_i^T``, ``E_ik = (e_i e_k^T + e_k e_i^T) / sqrt 2``
+  (``svec``), so ``x`` has ``m = b r (r + 1) / 2`` entries and
+  ``f = x^T P x + 2 q^T x + c`` with the Hessian blocks
+  ``P_jl[a, b] = <E_a, G_jl E_b>``: sparse (``O(r)`` entries a row, a
+  Lyapunov operator), assembled once from ``kron(I, G_jl)``.
+- **Primal-dual path following** with Nesterov-Todd scaling and Mehrotra's
+  predictor-corrector, as in Todd, Toh & Tutuncu (SIAM J. Optim. 8, 1998)
+  and Vandenberghe's notes on the cone QP solver of CVXOPT ("The CVXOPT
+  linear and quadratic cone program solvers", 2010). The primal iterate is
+  always feasible (``S_j = X_j - eps_j I`` is the slack, kept positive
+  definite), so only the dual residual ``sym(grad f)_j - Z_j`` and the
+  complementarity ``<S_j, Z_j>`` are driven to zero. With the scaling
+  ``R_j`` (``R^{-1} S R^{-T} = R^T Z R = Lambda`` diagonal), a Newton step
+  solves the dense symmetric positive-definite system
+
+  .. math::
+
+      (2 P + \mathrm{blockdiag}_j(W_j^{-1} \otimes_s W_j^{-1}))\, \Delta x
+      = -r_{\mathrm{dual}} + \mathrm{svec}(R_j^{-\top} Y_j R_j^{-1}),
+      \qquad W_j = R_j R_j^\top,
+
+  by one Cholesky factorisation (``m^3 / 3`` flops) shared by the
+  predictor and the corrector.
+- **Start.** The unconstrained symmetric least-squares point (one solve with
+  ``2 P``; if it is feasible it is the optimum and nothing else runs), its slack
+  eigenvalues floored at ``START_FLOOR`` times the largest, and
+  ``Z_j = mu_0 S_j^{-1}`` (on the central path).
+- **Certificate.** For any feasible ``X`` and multipliers ``Lambda_j >= 0``
+  (zero on "symmetric" blocks), with ``N = Lambda - sym(grad f(X))``,
+
+  .. math::
+
+      f(X) - f^\star \le \sum_j \langle \Lambda_j, X_j - \varepsilon_j I\rangle
+                         + \frac{\|N\|_F^2}{4\, g_{\min}(G)}
+
+  (:func:`gap_bound`: the Lagrangian ``f(X + D) - <Lambda, X + D - eps I>`` is
+  bounded below over all symmetric ``D`` using ``<D G, D> >= g_min ||D||^2``; no
+  linear solve). With ``Lambda = Z`` it is evaluated at every iterate, which
+  is feasible, so the returned point carries a rigorous bound whatever the
+  conditioning; it is tight because the dual residual ``N`` of the iterates
+  falls to round-off (1e-15) while ``<S, Z>`` goes to zero.
+
+Cost: the dense Newton matrix has ``m^2`` entries and its factorisation
+``m^3 / 3`` flops (two blocks: ``r = 30``: ``m = 930``, 10 ms; ``r = 60``: 3660,
+0.4 s; ``r = 100``: 10100, 0.8 GB and ~8 s on one core), about 10-15 iterations.
+:func:`femrom.inference.solve_fast` uses this method for ill-conditioned data
+up to ``FastOptions.ipm_max_unknowns``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.linalg as sla
+import scipy.sparse as sp
+
+from femrom.inference._problem import GramProblem
+
+
+def _sym(A: np.ndarray) -> np.ndarray:
+    return 0.5 * (A + A.T)
+
+
+# -- svec coordinates --------------------------------------------------------
+def svec_index(k: int):
+    """``(i, l, c)``: the upper-triangle pairs of a (k, k) symmetric matrix and the
+    coefficients ``c`` of ``E = c (e_i e_l^T + e_l e_i^T)`` (1/2 on the diagonal,
+    ``1/sqrt 2`` off it), so that the ``E`` are orthonormal."""
+    i, l = np.triu_indices(k)
+    return i, l, np.where(i == l, 0.5, np.sqrt(0.5))
+
+
+def svec(A: np.ndarray, index) -> np.ndarray:
+    """``<E_a, A>`` for every basis matrix ``E_a`` (``A`` need not be symmetric)."""
+    i, l, c = index
+    return c * (A[i, l] + A[l, i])
+
+
+def smat(v: np.ndarray, index, k: int) -> np.ndarray:
+    """``sum_a v_a E_a``: exactly symmetric (k, k)."""
+    i, l, c = index
+    A = np.zeros((k, k))
+    A[i, l] = c * v
+    A[l, i] += c * v
+    return A
+
+
+def sym_kron(A: np.ndarray, index, out: np.ndarray | None = None) -> np.ndarray:
+    r"""Dense ``M[a, b] = <E_a, A E_b A>`` for symmetric ``A``: the symmetrised
+    Kronecker product ``A (x)_s A`` of Todd, Toh & Tutuncu (1998) in svec coordinates.
+
+    With ``E_a = c_a (e_i e_l^T + e_l e_i^T)`` and ``E_b = c_b (e_p e_q^T + e_q e_p^T)``,
+    ``M[a, b] = 2 c_a c_b (A_ip A_lq + A_iq A_lp)``; ``A[l, i]`` (all pairs) is the
+    transpose of ``A[i, l]``, so three gathers suffice. Written into ``out`` if given.
+    """
+    i, l, c = index
+    M = np.multiply(A[np.ix_(i, i)], A[np.ix_(l, l)], out=out)
+    T = A[np.ix_(i, l)]
+    T *= T.T.copy()
+    M += T
+    del T
+    M *= 2.0 * c[:, None]
+    M *= c[None, :]
+    return M
+
+
+def _svec_matrix(k: int) -> sp.csr_matrix:
+    """(k^2, k (k+1)/2) sparse ``vec(E_a)`` (column-major ``vec``)."""
+    i, l, c = svec_index(k)
+    a = np.arange(i.size)
+    rows = np.concatenate([i + l * k, l + i * k])
+    data = np.concatenate([c, c])
+    return sp.csr_matrix((data, (rows, np.concatenate([a, a]))), shape=(k * k, i.size))
+
+
+def lyapunov_block(A: np.ndarray, k: int) -> sp.csr_matrix:
+    """Sparse ``[<E_a, A E_b>]_{ab}`` for (k, k) ``A``: ``S^T kron(I, A) S``."""
+    S = _svec_matrix(k)
+    return (S.T @ sp.kron(sp.identity(k, format="csr"), sp.csr_matrix(A)) @ S).tocsr()
+
+
+def hessian(problem: GramProblem) -> sp.csr_matrix:
+    """(m, m) sparse Hessian ``2 P`` of ``f`` in svec coordinates (square blocks only)."""
+    r, nb = problem.r, len(problem.blocks)
+    slices = problem.slices()
+    rows = []
+    for j in range(nb):
+        rows.append([2.0 * lyapunov_block(problem.gram[slices[j], slices[l]], r)
+                     for l in range(nb)])
+    return sp.bmat(rows, format="csr")
+
+
+# -- the certificate -----------------------------------------------------------
+def smallest_eigenvalue(G: np.ndarray) -> float:
+    """A lower bound of ``lambda_min(G)``: the computed one minus the backward error
+    of ``eigvalsh`` (``p eps ||G||``, generous); ``0`` if that is not positive."""
+    g = np.linalg.eigvalsh(G)
+    value = float(g[0] - G.shape[0] * np.finfo(float).eps * max(abs(g[-1]), abs(g[0])))
+    return max(value, 0.0)
+
+
+def gap_bound(problem: GramProblem, X: np.ndarray, multipliers=None, g_min: float | None = None):
+    r"""Rigorous bound of ``f(X) - f*`` for a feasible ``X`` (module docstring), absolute.
+
+    ``multipliers``: per block ``Lambda_j`` (zero on "symmetric" blocks); by default
+    the minimiser of the bound over ``Lambda_j >= 0``,
+    ``Pi_PSD(sym grad f(X)_j - 2 g_min (X_j - eps_j I))`` (complete the square in
+    ``<Lambda, S> + ||Lambda - L0||^2 / (4 g_min)``). "free" blocks enter with
+    their whole gradient. ``inf`` when ``G`` is singular.
+    """
+    if g_min is None:
+        g_min = smallest_eigenvalue(problem.gram)
+    if not g_min > 0:
+        return np.inf
+    grad = problem.gradient(X)
+    eye = np.eye(problem.r)
+    slack = residual = 0.0
+    for j, (b, s) in enumerate(zip(problem.blocks, problem.slices())):
+        if b.structure == "free":       # unconstrained: its whole gradient is residual
+            residual += float(np.sum(grad[:, s] ** 2))
+            continue
+        L0 = _sym(grad[:, s])
+        if b.structure != "psd":
+            residual += float(np.sum(L0 * L0))
+            continue
+        S = X[:, s] - b.shift * eye
+        if multipliers is None:
+            g, P = np.linalg.eigh(L0 - 2.0 * g_min * _sym(S))
+            Lam = (P * np.maximum(g, 0.0)) @ P.T
+        else:
+            Lam = multipliers[j]
+        residual += float(np.sum((Lam - L0) ** 2))
+        slack += float(np.sum(Lam * S))
+    return max(slack, 0.0) + residual / (4.0 * g_min)
+
+
+# -- Nesterov-Todd scaling ---------------------------------------------------------
+def _factor(S: np.ndarray) -> np.ndarray:
+    """``L`` with ``S = L L^T`` (Cholesky; a symmetric square root if that fails)."""
+    try:
+        return np.linalg.cholesky(S)
+    except np.linalg.LinAlgError:
+        g, P = np.linalg.eigh(S)
+        return P * np.sqrt(np.maximum(g, np.finfo(float).tiny))
+
+
+def nt_scaling(S: np.ndarray, Z: np.ndarray):
+    r"""``(R, R^{-1}, lambda)`` with ``R^{-1} S R^{-T} = R^T Z R = diag(lambda)``.
+
+    From ``S = L_s L_s^T``, ``Z = L_z L_z^T`` and the SVD ``L_z^T L_s = U diag(lambda) V^T``:
+    ``R = L_s V diag(lambda)^{-1/2}``, ``R^{-1} = diag(lambda)^{-1/2} U^T L_z^T``
+    (Todd, Toh & Tutuncu 1998; Vandenberghe 2010, sec. 4.3). ``W = R R^T`` is the
+    Nesterov-Todd scaling point, ``W Z W = S``.
+    """
+    Ls, Lz = _factor(S), _factor(Z)
+    U, lam, Vt = np.linalg.svd(Lz.T @ Ls)
+    root = np.sqrt(lam)
+    return (Ls @ Vt.T) / root, (U.T @ Lz.T) / root[:, None], lam
+
+
+def _max_step(lam: np.ndarray, D: np.ndarray) -> float:
+    """Largest ``alpha`` with ``diag(lam) + alpha D >= 0``."""
+    root = 1.0 / np.sqrt(lam)
+    t = np.linalg.eigvalsh(root[:, None] * D * root[None, :])[0]
+    return np.inf if t >= 0 else -1.0 / t
+
+
+def _jordan(A: np.ndarray, B: np.ndarray) -> np.ndarray:
+    return 0.5 * (A @ B + B @ A)
+
+
+def _assemble(problem: GramProblem, blocks) -> np.ndarray:
+    X = np.zeros((problem.r, problem.p))
+    for A, s in zip(blocks, problem.slices()):
+        X[:, s] = A
+    return X
+
+
+# -- Newton systems --------------------------------------------------------------
+class DenseNewton:
+    r"""``2 P + sum_j D_j`` assembled densely and factored by Cholesky (``m^3 / 3`` flops).
+
+    ``D_j = W_j^{-1} (x)_s W_j^{-1}`` is the Nesterov-Todd term of the cone
+    ``X_j - eps_j I >= 0``. The sparse ``2 P`` is added entry by entry. Close to
+    the optimum the matrix mixes entries of size ``1/mu`` with the data Hessian
+    (``kappa ~ 1e8-1e10`` itself), and Cholesky can break down: then the diagonal
+    is raised by ``delta N_ii`` (``delta = 1e-12``, ``1e-10``, ...: a relative
+    perturbation, as in SDP codes), and every solve is followed by two steps of
+    iterative refinement with the exact matrix, applied blockwise
+    (``2 P x + svec(W^{-1} X W^{-1})``).
+    """
+
+    def __init__(self, problem: GramProblem, index):
+        self.r, self.index = problem.r, index
+        self.n = index[0].size
+        self.nb = len(problem.blocks)
+        self.m = self.nb * self.n
+        self.hess = hessian(problem).tocoo()
+        self.hess_csr = self.hess.tocsr()
+        self.cut = [slice(j * self.n, (j + 1) * self.n) for j in range(self.nb)]
+        self.matrix = np.empty((self.m, self.m), order="F")   # LAPACK factors it in place
+        self.fac = None
+        self.terms = [None] * self.nb
+
+    def factor(self, terms) -> None:
+        """``terms[j]``: ``None`` (no cone term) or ``W_j^{-1}``."""
+        N = self.matrix
+        self.terms = list(terms)
+        for delta in (0.0, 1e-12, 1e-10, 1e-8, 1e-6):
+            N[:] = 0.0
+            for c, term in zip(self.cut, terms):
+                if term is not None:
+                    sym_kron(term, self.index, out=N[c, c])
+            N[self.hess.row, self.hess.col] += self.hess.data
+            if delta:
+                diagonal = N[np.diag_indices(self.m)]
+                N[np.diag_indices(self.m)] = diagonal + delta * np.maximum(
+                    diagonal, np.finfo(float).tiny)
+            try:
+                self.fac = sla.cho_factor(N, lower=True, overwrite_a=True, check_finite=False)
+                return
+            except np.linalg.LinAlgError:
+                continue
+        raise np.linalg.LinAlgError("Newton matrix is not positive definite")
+
+    def apply(self, x: np.ndarray) -> np.ndarray:
+        """The exact (unregularised) Newton matrix times ``x``."""
+        y = self.hess_csr @ x
+        for c, term in zip(self.cut, self.terms):
+            if term is not None:
+                y[c] += svec(term @ smat(x[c], self.index, self.r) @ term, self.index)
+        return y
+
+    def solve(self, rhs_blocks, refinements: int = 2) -> list[np.ndarray]:
+        rhs = np.concatenate([svec(R, self.index) for R in rhs_blocks])
+        dx = sla.cho_solve(self.fac, rhs, check_finite=False)
+        for _ in range(refinements):
+            dx += sla.cho_solve(self.fac, rhs - self.apply(dx), check_finite=False)
+        return [smat(dx[c], self.index, self.r) for c in self.cut]
+
+
+# -- the interior-point iteration ----------------------------------------------------
+#: A point whose certified relative gap is above ``tol`` but below this is
+#: reported "optimal_inaccurate" (the vocabulary of cvxpy): seen on rank-deficient
+#: data, where the dual residual of the Newton solves stalls near 1e-8.
+INACCURATE = 1e-6
+
+#: Starting point: slack eigenvalues are floored at this fraction of the largest
+#: one, and ``mu_0`` is this fraction of ``f(X_0) / nu`` (chosen on string POD and
+#: random problems, r = 10-30: 8-13 iterations against 9-22 for the
+#: identity-scaled start of Vandenberghe's notes).
+START_FLOOR = 1e-2
+START_MU = 1e-2
+
+
+def solve_ipm(problem: GramProblem, *, tol: float = 1e-8, max_iterations: int = 60,
+              info: dict | None = None):
+    """Minimise ``problem`` (square blocks only) by the interior-point method above.
+
+    Parameters
+    ----------
+    problem : GramProblem
+        "psd" and "symmetric" blocks of size r, no "free" block.
+    tol : float
+        Stop at a point whose certified gap (:func:`gap_bound`) is below ``tol``
+        times its objective.
+    max_iterations : int
+    info : dict, optional
+        Receives ``ipm_iterations``, ``gap_estimate`` (relative, certified when
+        ``G`` is nonsingular), ``certificate`` and ``active`` (per "psd" block,
+        the eigenvalues held at the bound).
+
+    Returns
+    -------
+    X : (r, p) ndarray
+        Feasible; blocks exactly symmetric.
+    status : {"optimal", "optimal (unconstrained)", "optimal_inaccurate", "max_iterations", "stalled"}
+    """
+    info = {} if info is None else info
+    r, nb = problem.r, len(problem.blocks)
+    g_min = smallest_eigenvalue(problem.gram)
+    info["certificate"] = "bound" if g_min > 0 else "complementarity"
+    newton = DenseNewton(problem, svec_index(r))
+    # unconstrained symmetric least squares: the optimum if it is feasible, else
+    # the starting point
+    newton.factor([None] * nb)
+    grad0 = problem.gradient(np.zeros((r, problem.p)))
+    X_ls = newton.solve([-_sym(grad0[:, s]) for s in problem.slices()])
+    X = _assemble(problem, X_ls)
+    if problem.is_feasible(X, tol=0.0):
+        # the gap is round-off of the solve; bounded all the same when G > 0
+        gap = gap_bound(problem, X, g_min=g_min) if g_min > 0 else 0.0
+        info.update(ipm_iterations=0, gap_estimate=gap / max(abs(problem.objective(X)), 1e-300),
+                    active={b.name: 0 for b in problem.blocks if b.structure == "psd"})
+        return X, "optimal (unconstrained)"
+    Xb, status, state = _path_following(problem, newton, X_ls, tol, max_iterations, g_min)
+    info.update(state)
+    return _assemble(problem, Xb), status
+
+
+def _path_following(problem, newton, X_ls, tol, max_iterations, g_min):
+    """Mehrotra predictor-corrector iterations from the least-squares point ``X_ls``;
+    returns the best certified iterate, the status and an ``info`` update."""
+    r, nb = problem.r, len(problem.blocks)
+    eye = np.eye(r)
+    shifts = [b.shift for b in problem.blocks]
+    cone = [b.structure == "psd" for b in problem.blocks]
+    nu = r * sum(cone)
+
+    # starting point: slack eigenvalues floored, Z = mu_0 S^{-1} (on the central path)
+    Xb = [A.copy() for A in X_ls]
+    spectra = {j: np.linalg.eigh(Xb[j] - shifts[j] * eye) for j in range(nb) if cone[j]}
+    floor = START_FLOOR * max(max(np.abs(g).max(), np.finfo(float).tiny)
+                              for g, _ in spectra.values())
+    for j, (g, P) in spectra.items():
+        Xb[j] = shifts[j] * eye + (P * np.maximum(g, floor)) @ P.T
+    mu0 = START_MU * max(problem.objective(_assemble(problem, Xb)), np.finfo(float).tiny) / nu
+    Zb = [None] * nb
+    for j, (g, P) in spectra.items():
+        Zb[j] = (P * (mu0 / np.maximum(g, floor))) @ P.T
+
+    best = (np.inf, None, None)
+    status = "max_iterations"
+    it = best_iteration = 0
+    for it in range(1, max_iterations + 1):
+        X = _assemble(problem, Xb)
+        grad = problem.gradient(X)
+        S = [Xb[j] - shifts[j] * eye if cone[j] else None for j in range(nb)]
+        rdual = [_sym(grad[:, s]) - (Zb[j] if cone[j] else 0.0)
+                 for j, s in enumerate(problem.slices())]
+        comp = sum(float(np.sum(S[j] * Zb[j])) for j in range(nb) if cone[j])
+        mu = comp / nu
+        f = problem.objective(X)
+        residual = sum(float(np.sum(R * R)) for R in rdual)
+        if g_min > 0:   # gap_bound with Lambda = Z, and with the best Lambda for X
+            bound = min(comp + residual / (4.0 * g_min), gap_bound(problem, X, g_min=g_min))
+        else:           # no certificate: the interior-point gap at a tiny dual residual
+            bound = comp if residual <= (1e-10 * max(abs(f), 1.0)) ** 2 else np.inf
+        rel = bound / max(abs(f), np.finfo(float).tiny)
+        if rel < best[0] and _feasible(problem, Xb):
+            best = (rel, [A.copy() for A in Xb], [None if Zj is None else Zj.copy() for Zj in Zb])
+            best_iteration = it
+        if best[0] <= tol:
+            status = "optimal"
+            break
+        if g_min > 0 and comp <= 0.1 * tol * abs(f) and best[1] is not None:
+            # complementarity is done but the dual residual (round-off of the Newton
+            # solves) keeps the ball bound above tol: evaluate the dual function
+            # exactly instead, and stop either way (smaller mu only worsens N)
+            exact = exact_gap_bound(problem, newton, best[1], best[2], g_min)
+            exact /= max(abs(f), np.finfo(float).tiny)
+            status = "optimal" if exact <= tol else "stalled"
+            best = (min(best[0], exact), best[1], best[2])
+            break
+        if it - best_iteration >= 5:
+            status = "stalled"
+            break
+        try:
+            scalings = [nt_scaling(S[j], Zb[j]) if cone[j] else None for j in range(nb)]
+            newton.factor([sc[1].T @ sc[1] if sc is not None else None for sc in scalings])
+        except (np.linalg.LinAlgError, ValueError):
+            status = "stalled"
+            break
+
+        def direction(Ys):
+            """Newton step for the scaled complementarity right-hand side ``Ys``."""
+            rhs = [-rdual[j] + (scalings[j][1].T @ Ys[j] @ scalings[j][1] if cone[j] else 0.0)
+                   for j in range(nb)]
+            dX = newton.solve(rhs)
+            ds, dz, alpha = [None] * nb, [None] * nb, np.inf
+            for j in range(nb):
+                if cone[j]:
+                    Rinv, lam = scalings[j][1], scalings[j][2]
+                    ds[j] = _sym(Rinv @ dX[j] @ Rinv.T)
+                    dz[j] = Ys[j] - ds[j]
+                    alpha = min(alpha, _max_step(lam, ds[j]), _max_step(lam, dz[j]))
+            return dX, ds, dz, alpha
+
+        # predictor (affine scaling): Lambda o (ds + dz) = -Lambda o Lambda, so Y = -Lambda
+        Ya = [-np.diag(sc[2]) if sc is not None else None for sc in scalings]
+        try:
+            _, dsa, dza, alpha_a = direction(Ya)
+        except (np.linalg.LinAlgError, ValueError):
+            status = "stalled"
+            break
+        alpha_a = min(1.0, alpha_a)
+        mu_a = sum(float(np.sum((np.diag(sc[2]) + alpha_a * dsa[j])
+                                * (np.diag(sc[2]) + alpha_a * dza[j])))
+                   for j, sc in enumerate(scalings) if sc is not None) / nu
+        sigma = min(1.0, max(0.0, mu_a / mu)) ** 3
+        # corrector: Mehrotra's second-order term and centring, same factorisation
+        Yc = [None] * nb
+        for j, sc in enumerate(scalings):
+            if sc is not None:
+                lam = sc[2]
+                rc = -np.diag(lam * lam) - _jordan(dsa[j], dza[j]) + sigma * mu * eye
+                Yc[j] = rc / (0.5 * (lam[:, None] + lam[None, :]))
+        try:
+            dX, ds, dz, alpha = direction(Yc)
+        except (np.linalg.LinAlgError, ValueError):
+            status = "stalled"
+            break
+        alpha = min(1.0, 0.99 * alpha)
+        if not alpha > 1e-10:      # no progress possible (or non-finite directions)
+            status = "stalled"
+            break
+        for j in range(nb):
+            Xb[j] = Xb[j] + alpha * dX[j]
+            if cone[j]:
+                Rinv = scalings[j][1]
+                Zb[j] = Zb[j] + alpha * _sym(Rinv.T @ dz[j] @ Rinv)
+    rel, Xb, Zb = best
+    if status != "optimal" and rel <= INACCURATE:
+        status = "optimal_inaccurate"
+    if Xb is None:          # no iterate passed the feasibility check (round-off): project
+        Xb = _blocks_of(problem, problem.project(_assemble(problem, X_ls)))
+    active = {}
+    for j, b in enumerate(problem.blocks):
+        if cone[j] and Zb is not None:
+            sv, P = np.linalg.eigh(Xb[j] - shifts[j] * eye)
+            zv = np.einsum("ij,ik,kj->j", P, Zb[j], P)
+            active[b.name] = int(np.sum(sv < zv))
+    return Xb, status, {"ipm_iterations": it, "gap_estimate": float(rel), "active": active}
+
+
+def exact_gap_bound(problem: GramProblem, newton: DenseNewton, Xb, Zb, g_min: float) -> float:
+    r"""Rigorous bound of ``f(X) - f*`` from the dual function at ``Lambda = Z``, absolute.
+
+    ``g(Lambda) = min_{X'} L(X') = f(X') - <Lambda, X' - eps I>`` over symmetric
+    ``X'``: its minimiser ``X' = X + D`` solves ``2 P D = -(sym grad f(X) - Lambda)``
+    (``newton`` is refactored without cone terms). With ``R = grad L(X')`` (the
+    residual of that solve),
+
+    .. math::
+
+        f(X) - f^\star \le f(X) - g(\Lambda) \le \langle \Lambda, X - \varepsilon I\rangle
+            + \langle R, -D\rangle + \langle D G, D\rangle + \|R\|^2 / (4 g_{\min}),
+
+    each term evaluated without cancellation. Tighter than :func:`gap_bound`
+    when the dual residual is not aligned with the smallest eigenvalues of ``G``.
+    """
+    r, slices = problem.r, problem.slices()
+    eye = np.eye(r)
+    X = _assemble(problem, Xb)
+    grad = problem.gradient(X)
+    lam = [Zb[j] if Zb[j] is not None else np.zeros((r, r)) for j in range(len(Xb))]
+    newton.factor([None] * len(Xb))
+    D = newton.solve([-(_sym(grad[:, s]) - lam[j]) for j, s in enumerate(slices)])
+    Xp = X + _assemble(problem, D)
+    gradp = problem.gradient(Xp)
+    Dm = X - Xp
+    bound = float(np.sum((Dm @ problem.gram) * Dm))
+    residual = 0.0
+    for j, (b, s) in enumerate(zip(problem.blocks, slices)):
+        R = _sym(gradp[:, s]) - lam[j]
+        bound += float(np.sum(R * Dm[:, s]))
+        residual += float(np.sum(R * R))
+        if b.structure == "psd":
+            bound += float(np.sum(lam[j] * (Xb[j] - b.shift * eye)))
+    return max(bound, 0.0) + residual / (4.0 * g_min)
+
+
+def _blocks_of(problem: GramProblem, X: np.ndarray) -> list[np.ndarray]:
+    return [X[:, s] for s in problem.slices()]
+
+
+def _feasible(problem: GramProblem, Xb) -> bool:
+    """Every "psd" block at or above its shift (a Cholesky attempt of ``X_j - eps_j I``)."""
+    for b, A in zip(problem.blocks, Xb):
+        if b.structure == "psd":
+            try:
+                np.linalg.cholesky(A - b.shift * np.eye(problem.r))
+            except np.linalg.LinAlgError:
+                return False
+    return True
