@@ -62,8 +62,10 @@ AUTO_SMALL = 5_000
 #: Without PARDISO or CHOLMOD, ``"auto"`` still uses SuperLU below this size
 #: and switches to AMG-preconditioned CG above it.
 AUTO_DIRECT_THRESHOLD = 20_000
-#: SuperLU refuses larger matrices: on 3D P1 elasticity it took 269 s and 15 GB
-#: at ~1e5 dofs on this project's machine (see the project notes).
+#: SuperLU refuses larger matrices. The project notes report 269 s and 15 GB at
+#: 1.37e5 dofs of 3D elasticity; measured here with scipy 1.17 (COLAMD): 17.8 s,
+#: 1.7 GB (P1) and 31.4 s, 2.3 GB (P2) at 1.0e5 dofs, 12-15x PARDISO's factor time
+#: and growing faster with n (docs/benchmarks.md, section 4b). A conservative guard.
 SUPERLU_MAX_DOFS = 60_000
 
 
