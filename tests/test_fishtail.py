@@ -17,7 +17,7 @@ import pytest
 from femrom.fem import Condensation, SolidSpace, make_solver
 from femrom.fem import _vector_ops
 from femrom.mesh import build_mesh
-from femrom.scene import InputConfig, MaterialConfig, Scene, SceneError, build
+from femrom.scene import InputConfig, MaterialConfig, SceneError, build
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "cases"))

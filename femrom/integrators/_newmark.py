@@ -63,7 +63,7 @@ class _NewmarkFamily:
 
     def step(self, system, cache: NewmarkCache, t, q, v, a, state):
         """One step from ``(t, q, v, a)``: returns ``(q1, v1, a1, state1, newton_iterations)``."""
-        h, beta, gamma, am, af = cache.dt, self.beta, self.gamma, self.alpha_m, self.alpha_f
+        h, beta, gamma, af = cache.dt, self.beta, self.gamma, self.alpha_f
         q_pred = q + h * v + ((0.5 - beta) * h * h) * a
         v_pred = v + ((1.0 - gamma) * h) * a
         t_balance = t + (1.0 - af) * h
