@@ -12,20 +12,25 @@ child's RSS and kills it above ``--memory-limit-gb``.
    (``--keep`` keeps it).
 2. **Multi-pass rSVD against one sequential read** of the same file, both
    through the store's read path (``iter_blocks``) and, for reference, a raw
-   ``readinto`` of the file's bytes. Page cache: "cold" evicts the file with
-   ``posix_fadvise(POSIX_FADV_DONTNEED)`` before the baseline read and before
-   *every* pass of the rSVD (a file larger than RAM); "warm" reads the file
-   once untimed first so that it is (mostly) cached; ``fincore`` reports the
-   cached fraction at each start.
+   ``readinto`` of the file's bytes, for each (scheme, q) of ``FILE_RUNS``
+   (classical q = 1, 2; pass-efficient with 2 and 3 passes). Page cache:
+   "cold" evicts the file with ``posix_fadvise(POSIX_FADV_DONTNEED)`` before
+   the baseline read and before *every* pass of the rSVD (a file larger than
+   RAM); "warm" reads the file once untimed first so that it is (mostly)
+   cached; ``fincore`` reports the cached fraction at each start. The top-r
+   singular values of each run are compared with a converged reference of
+   the same file (classical rSVD, rank 50 + 10, q = 3: convergence factor
+   (sigma_61 / sigma_r)^14, sigma_61 at the noise floor).
 3. **Real FOM.** The clamped steel beam of ``fom_ladder.py`` (P1, about 2e4
    and 1e5 dofs) is run with Newmark for ``--fom-steps`` steps three ways:
    plain, with a :class:`~femrom.linalg.StreamingSketch` consumer, and with a
    snapshot writer plus the sketch. The sketch's overhead is its consumer
    time over the stepping time; the top-r singular values of the sketch and
-   of the multi-pass rSVD of the stored snapshots are compared with LAPACK's
-   SVD of the whole snapshot matrix.
-4. **In memory, same run:** femrom ``randomized_svd`` (and its Dask backend
-   and streaming sketch) against ``sklearn.utils.extmath.randomized_svd`` and
+   of the multi-pass rSVD of the stored snapshots (both schemes,
+   ``ACCURACY_RUNS``) are compared with LAPACK's SVD of the whole snapshot
+   matrix.
+4. **In memory, same run:** femrom ``randomized_svd`` (both schemes, several
+   q; its Dask backend and streaming sketch) against ``sklearn.utils.extmath.randomized_svd`` and
    ``dask.array.linalg.svd_compressed`` on an (n, K) matrix with exactly known
    singular values (A = H [diag(s) V^T; 0], H a product of three Householder
    reflections, V random orthogonal; the randomized methods' error does not
@@ -34,7 +39,7 @@ child's RSS and kills it above ``--memory-limit-gb``.
 Usage::
 
     python benchmarks/snapshot_ladder.py --quick       # small sizes, 1-3 min
-    python benchmarks/snapshot_ladder.py               # full: 16 GB file, ~30-40 min
+    python benchmarks/snapshot_ladder.py               # full: 16 GB file, 40-60 min
 
 See ``benchmarks/README.md`` and ``docs/benchmarks_snapshots.md``.
 """
@@ -70,8 +75,8 @@ FULL = {
     # synthetic file: n x K, planted rank, noise level, chunk and block steps
     "n": 1_000_000, "K": 2000, "planted": 50, "noise": 1e-6,
     "chunk_steps": 8, "block_steps": 32,
-    # rSVD of the file: rank, oversampling, power iterations (q + 2 passes)
-    "rank": 20, "oversampling": 10, "q": (1, 0),
+    # rSVD of the file: rank, oversampling (q + 2 passes, runs in FILE_RUNS)
+    "rank": 20, "oversampling": 10,
     # FOM: fom_ladder sizes (P1) and Newmark steps
     "fom_sizes": ("small", "medium"), "fom_steps": 1000, "fom_rank": 10,
     # in-memory comparison
@@ -80,12 +85,18 @@ FULL = {
 QUICK = {
     "n": 20_000, "K": 200, "planted": 50, "noise": 1e-6,
     "chunk_steps": 8, "block_steps": 32,
-    "rank": 20, "oversampling": 10, "q": (1, 0),
+    "rank": 20, "oversampling": 10,
     "fom_sizes": ("small",), "fom_steps": 100, "fom_rank": 10,
     "mem_n": 20_000, "mem_K": 400, "mem_rank": 20,
 }
-#: Power iterations and oversampling of every accuracy comparison (FOM, in memory).
-ACCURACY_Q, ACCURACY_P = 2, 10
+#: (scheme, q) of the timed runs on the file: q + 2 passes each.
+FILE_RUNS = (("classical", 1), ("classical", 2), ("pass_efficient", 0), ("pass_efficient", 1))
+#: Reference singular values of the file: classical rSVD, rank + oversampling, q.
+FILE_REFERENCE = {"rank": 50, "oversampling": 10, "q": 3}
+#: (scheme, q) of the accuracy comparisons (FOM, in memory) and their oversampling.
+ACCURACY_RUNS = (("classical", 1), ("classical", 2), ("pass_efficient", 0),
+                 ("pass_efficient", 1), ("pass_efficient", 2))
+ACCURACY_Q, ACCURACY_P = 2, 10  # q of the other libraries in part 4
 #: Geometric spectrum of the in-memory matrix: s_j = 10^(-j/10), j = 0..K-1
 #: (s_{r+p}/s_r = 0.1 at r = 20, p = 10).
 MEM_DECAY = 10.0
@@ -201,14 +212,14 @@ def _raw_read(path) -> tuple[float, int]:
     return time.perf_counter() - tic, total
 
 
-def task_rsvd_file(path, mode, rank, oversampling, q, block_steps) -> dict:
+def task_rsvd_file(path, mode, rank, oversampling, q, block_steps, scheme="classical") -> dict:
     """Sequential reads, then the multi-pass rSVD of the same file, in one page-cache mode."""
     from femrom.linalg import randomized_svd
     from femrom.snapshots import SnapshotStore
 
     store = SnapshotStore.open(path)
     out = {"task": "rsvd_file", "mode": mode, "rank": rank, "oversampling": oversampling,
-           "q": q, "passes": q + 2, "block_steps": block_steps}
+           "scheme": scheme, "q": q, "passes": q + 2, "block_steps": block_steps}
     if mode == "warm":
         _store_read(store, block_steps)  # untimed: bring the file into the cache
     reads = {}
@@ -233,8 +244,9 @@ def task_rsvd_file(path, mode, rank, oversampling, q, block_steps) -> dict:
 
     tic = time.perf_counter()
     result = randomized_svd(open_pass, rank, oversampling=oversampling, power_iterations=q,
-                            progress=False)
+                            scheme=scheme, progress=False)
     seconds = time.perf_counter() - tic
+    assert result.passes == len(pass_log) == q + 2
     starts = [p["start"] for p in pass_log] + [tic + seconds]
     out.update({
         "seconds": seconds, "pass_seconds": [b - a for a, b in zip(starts[:-1], starts[1:])],
@@ -246,6 +258,27 @@ def task_rsvd_file(path, mode, rank, oversampling, q, block_steps) -> dict:
     })
     store.close()
     return out
+
+
+def task_reference_file(path, rank, oversampling, q, block_steps) -> dict:
+    """Converged singular values of the file (classical rSVD with a large sketch), untimed."""
+    from femrom.linalg import randomized_svd
+    from femrom.snapshots import SnapshotStore
+
+    store = SnapshotStore.open(path)
+    tic = time.perf_counter()
+    result = randomized_svd(lambda: store.iter_blocks("q", block_steps), rank,
+                            oversampling=oversampling, power_iterations=q, scheme="classical",
+                            seed=12345, progress=False)
+    seconds = time.perf_counter() - tic
+    store.close()
+    s = result.s
+    return {"task": "reference_file", "rank": rank, "oversampling": oversampling, "q": q,
+            "passes": result.passes, "seconds": seconds, "s": s.tolist(),
+            # Ritz values converge like (sigma_{k+1} / sigma_i)^(2(2q+1)); sigma_{k+1} <= s[-1]
+            # of this run, so this bounds the factor for sigma_20 (up to HMT's constants).
+            "convergence_factor_s20": float((s[-1] / s[19]) ** (2 * (2 * q + 1))),
+            "peak_rss_gb": _peak_rss_gb()}
 
 
 # -- 3. the FOM -------------------------------------------------------------------
@@ -312,12 +345,14 @@ def task_fom(size, steps, rank, workdir) -> dict:
     svd_seconds = time.perf_counter() - tic
     del data
     accuracy = {}
-    for q in (1, ACCURACY_Q):
+    for scheme, q in ACCURACY_RUNS:
         tic = time.perf_counter()
         result = randomized_svd(lambda: store.iter_blocks("q", 64 * chunk), rank,
-                                oversampling=ACCURACY_P, power_iterations=q, progress=False)
-        accuracy[f"rsvd_q{q}"] = {"seconds": time.perf_counter() - tic,
-                                  "rel_err": _relative_errors(result.s, reference)}
+                                oversampling=ACCURACY_P, power_iterations=q, scheme=scheme,
+                                progress=False)
+        accuracy[f"rsvd {scheme} q={q}"] = {"seconds": time.perf_counter() - tic,
+                                            "scheme": scheme, "q": q, "passes": result.passes,
+                                            "rel_err": _relative_errors(result.s, reference)}
     for name, sk in (("sketch", sketch), ("sketch(store run)", sketch2)):
         tic = time.perf_counter()
         result = sk.finalize()
@@ -350,8 +385,11 @@ def known_spectrum_matrix(n, K, seed=0):
     return a, s
 
 
-def task_memory(method, n, K, rank) -> dict:
-    """One randomized SVD of the known-spectrum matrix: time, peak RSS, error of the top-r values."""
+def task_memory(method, n, K, rank, scheme="classical", q=ACCURACY_Q) -> dict:
+    """One randomized SVD of the known-spectrum matrix: time, peak RSS, error of the top-r values.
+
+    ``scheme`` and ``q`` apply to ``method="femrom"`` (the other libraries use ACCURACY_Q).
+    """
     a, s_exact = known_spectrum_matrix(n, K)
     import dask  # noqa: F401  (imports outside the timed region for every method)
     import dask.array as da
@@ -360,10 +398,13 @@ def task_memory(method, n, K, rank) -> dict:
     from femrom.linalg import StreamingSketch, randomized_svd, randomized_svd_dask
 
     rss_data = _rss_gb()
-    p, q = ACCURACY_P, ACCURACY_Q
+    p = ACCURACY_P
+    q = q if method == "femrom" else None if method == "femrom-sketch" else ACCURACY_Q
+    passes = 1 if q is None else q + 2 if method == "femrom" else 2 * q + 2
     tic = time.perf_counter()
     if method == "femrom":
-        s = randomized_svd(a, rank, oversampling=p, power_iterations=q, progress=False).s
+        s = randomized_svd(a, rank, oversampling=p, power_iterations=q, scheme=scheme,
+                           progress=False).s
     elif method == "femrom-dask":
         s = randomized_svd_dask(a, rank, oversampling=p, power_iterations=q,
                                 chunks=(max(K, n // 8), K)).s
@@ -382,14 +423,15 @@ def task_memory(method, n, K, rank) -> dict:
     seconds = time.perf_counter() - tic
     errors = _relative_errors(s, s_exact)
     return {"task": "memory", "method": method, "n": n, "K": K, "rank": rank,
-            "oversampling": p, "q": q, "seconds": seconds, "max_rel_err": max(errors),
+            "oversampling": p, "q": q, "scheme": scheme if method == "femrom" else None,
+            "passes": passes, "seconds": seconds, "max_rel_err": max(errors),
             "rel_err": errors, "rss_data_gb": rss_data, "peak_rss_gb": _peak_rss_gb(),
             "data_gb": a.nbytes / 2**30}
 
 
 # -- running children -----------------------------------------------------------------
-TASKS = {"build": task_build, "rsvd_file": task_rsvd_file, "fom": task_fom,
-         "memory": task_memory}
+TASKS = {"build": task_build, "rsvd_file": task_rsvd_file, "reference_file": task_reference_file,
+         "fom": task_fom, "memory": task_memory}
 
 
 def run_single(spec: str) -> dict:
@@ -459,20 +501,32 @@ def table(header, rows) -> str:
     return "\n".join(lines)
 
 
+def file_reference(results) -> np.ndarray | None:
+    for r in results:
+        if r.get("task") == "reference_file" and "error" not in r:
+            return np.asarray(r["s"])
+    return None
+
+
 def file_table(results) -> str:
     rows = []
+    reference = file_reference(results)
     for r in results:
         if r.get("task") != "rsvd_file" or "error" in r:
             continue
-        rows.append([r["mode"], f"{r['rank']}+{r['oversampling']}", r["q"], r["passes"],
+        errors = _relative_errors(r["s"], reference) if reference is not None else None
+        rows.append([r["mode"], r.get("scheme", "classical"), f"{r['rank']}+{r['oversampling']}",
+                     r["q"], r["passes"],
                      r["reads"]["raw"]["seconds"], r["reads"]["raw"]["gb_per_s"],
                      r["reads"]["store"]["seconds"], r["reads"]["store"]["gb_per_s"],
                      r["seconds"], " / ".join(f"{x:.1f}" for x in r["pass_seconds"]),
                      f"{r['ratio_to_store_read']:.2f}x", f"{r['ratio_to_raw_read']:.2f}x",
-                     r["peak_rss_gb"]])
-    return table(["cache", "r+p", "q", "passes", "raw read [s]", "raw GB/s", "store read [s]",
-                  "store GB/s", "rSVD [s]", "per pass [s]", "rSVD / store read",
-                  "rSVD / raw read", "peak RSS [GiB]"], rows)
+                     r["peak_rss_gb"], max(errors) if errors else None,
+                     " / ".join(f"{x:.2f}" for x in (r.get("load_before") or [])[:1] + r["load_after"][:1])])
+    return table(["cache", "scheme", "r+p", "q", "passes", "raw read [s]", "raw GB/s",
+                  "store read [s]", "store GB/s", "rSVD [s]", "per pass [s]", "rSVD / store read",
+                  "rSVD / raw read", "peak RSS [GiB]", "max rel. err top-r vs reference",
+                  "load 1 min before / after"], rows)
 
 
 def fom_tables(results) -> tuple[str, str]:
@@ -486,13 +540,13 @@ def fom_tables(results) -> tuple[str, str]:
                          f"{100 * run['consumer_over_stepping']:.1f} %",
                          f"{100 * run['wall_over_plain']:+.1f} %"])
         for name, a in r["accuracy"].items():
-            acc.append([r["size"], r["n"], r["K"], name, r["rank"], a["seconds"],
+            acc.append([r["size"], r["n"], r["K"], name, a.get("passes", 1), r["rank"], a["seconds"],
                         max(a["rel_err"]), a["rel_err"][0], a["rel_err"][-1]])
-        acc.append([r["size"], r["n"], r["K"], "LAPACK SVD (reference)", "all",
+        acc.append([r["size"], r["n"], r["K"], "LAPACK SVD (reference)", "-", "all",
                     r["reference_svd_seconds"], "-", "-", "-"])
     return (table(["size", "dofs", "consumers", "steps", "stepping [s]", "per step [s]",
                    "consumer [s]", "consumer / stepping", "run vs plain"], rows),
-            table(["size", "dofs", "K", "method", "r", "time [s]", "max rel. err top-r",
+            table(["size", "dofs", "K", "method", "passes", "r", "time [s]", "max rel. err top-r",
                    "rel. err s_1", "rel. err s_r"], acc))
 
 
@@ -501,11 +555,11 @@ def memory_table(results) -> str:
     for r in results:
         if r.get("task") != "memory" or "error" in r:
             continue
-        rows.append([r["method"], r["n"], r["K"], r["rank"], r["oversampling"], r["q"],
-                     r["seconds"], r["peak_rss_gb"], r["peak_rss_gb"] - r["rss_data_gb"],
-                     r["max_rel_err"]])
-    return table(["method", "n", "K", "r", "p", "q", "time [s]", "peak RSS [GiB]",
-                  "peak - after data [GiB]", "max rel. err top-r"], rows)
+        rows.append([r["method"], r.get("scheme") or "-", r["n"], r["K"], r["rank"],
+                     r["oversampling"], r["q"], r.get("passes"), r["seconds"], r["peak_rss_gb"],
+                     r["peak_rss_gb"] - r["rss_data_gb"], r["max_rel_err"]])
+    return table(["method", "scheme", "n", "K", "r", "p", "q", "passes", "time [s]",
+                  "peak RSS [GiB]", "peak - after data [GiB]", "max rel. err top-r"], rows)
 
 
 def machine() -> dict:
@@ -555,6 +609,17 @@ def main(argv=None) -> int:
                         help="FOM sizes of fom_ladder.py (default small,medium; --quick: small)")
     parser.add_argument("--fom-steps", type=int, default=None,
                         help="Newmark steps of the FOM runs (default 1000; --quick: 100)")
+    parser.add_argument("--file-runs", default=None,
+                        help="scheme:q pairs of the file part (default "
+                        + ",".join(f"{s}:{q}" for s, q in FILE_RUNS) + ")")
+    parser.add_argument("--file-modes", default="cold,warm",
+                        help="page-cache modes of the file part: cold, warm")
+    parser.add_argument("--reuse", action="store_true",
+                        help="reuse WORKDIR/synthetic.h5 if it exists (with --workdir, --keep)")
+    parser.add_argument("--history", action="store_true",
+                        help="keep the existing OUT file's run under 'previous_runs'")
+    parser.add_argument("--quiet-flag", default="/tmp/quiet_ok",
+                        help="file whose presence (machine declared quiet) is recorded per child")
     parser.add_argument("--memory-limit-gb", type=float, default=6.0)
     parser.add_argument("--timeout", type=float, default=3600.0)
     parser.add_argument("--single", default=None, help=argparse.SUPPRESS)
@@ -564,6 +629,9 @@ def main(argv=None) -> int:
         return 0
 
     cfg = dict(QUICK if args.quick else FULL)
+    cfg["file_runs"] = FILE_RUNS if args.file_runs is None else tuple(
+        (item.split(":")[0], int(item.split(":")[1])) for item in args.file_runs.split(","))
+    cfg["file_modes"] = tuple(args.file_modes.split(","))
     if args.fom_sizes:
         cfg["fom_sizes"] = tuple(args.fom_sizes.split(","))
     if args.fom_steps:
@@ -579,39 +647,57 @@ def main(argv=None) -> int:
     def log(message):
         print(f"[{time.perf_counter() - started:7.1f} s] {message}", flush=True)
 
+    previous = []
+    if args.history and out.exists():
+        old = json.loads(out.read_text())
+        previous = old.pop("previous_runs", []) + [old]
+    quiet_flag = Path(args.quiet_flag)
     info = {"machine": machine(), "config": {k: list(v) if isinstance(v, tuple) else v
                                              for k, v in cfg.items()},
+            "file_reference": FILE_REFERENCE, "accuracy_runs": ACCURACY_RUNS,
+            "quiet_flag": str(quiet_flag), "quiet_flag_at_start": quiet_flag.exists(),
             "quick": args.quick, "started": datetime.now(timezone.utc).isoformat(timespec="seconds"),
             "load_at_start": os.getloadavg(), "workdir": str(workdir), "results": []}
     results = info["results"]
 
     def child(spec):
         log(f"{spec['task']}: {json.dumps({k: v for k, v in spec.items() if k != 'task'})}")
+        load_before, quiet_before = os.getloadavg(), quiet_flag.exists()
         r = run_child(spec, args.memory_limit_gb, args.timeout, log)
-        r["load_after"] = os.getloadavg()
+        r["load_before"], r["load_after"] = load_before, os.getloadavg()
+        r["quiet_flag_before"], r["quiet_flag_after"] = quiet_before, quiet_flag.exists()
         results.append(r)
-        log(f"  done in {r['wall_seconds']:.1f} s, peak RSS {r.get('peak_rss_gb', float('nan')):.2f} GiB")
+        log(f"  done in {r['wall_seconds']:.1f} s, peak RSS {r.get('peak_rss_gb', float('nan')):.2f} GiB, "
+            f"load {load_before[0]:.2f} -> {r['load_after'][0]:.2f}, quiet flag "
+            f"{quiet_before} -> {r['quiet_flag_after']}")
         return r
 
     path = workdir / "synthetic.h5"
     try:
         if "file" in parts:
-            child({"task": "build", "path": str(path), "n": cfg["n"], "K": cfg["K"],
-                   "planted": cfg["planted"], "noise": cfg["noise"],
-                   "chunk_steps": cfg["chunk_steps"]})
-            for q in cfg["q"]:
-                for mode in ("cold", "warm"):
+            if args.reuse and path.exists():
+                log(f"reusing {path}")
+            else:
+                child({"task": "build", "path": str(path), "n": cfg["n"], "K": cfg["K"],
+                       "planted": cfg["planted"], "noise": cfg["noise"],
+                       "chunk_steps": cfg["chunk_steps"]})
+            for mode in cfg["file_modes"]:
+                for scheme, q in cfg["file_runs"]:
                     child({"task": "rsvd_file", "path": str(path), "mode": mode,
                            "rank": cfg["rank"], "oversampling": cfg["oversampling"], "q": q,
-                           "block_steps": cfg["block_steps"]})
+                           "scheme": scheme, "block_steps": cfg["block_steps"]})
+            child({"task": "reference_file", "path": str(path), **FILE_REFERENCE,
+                   "block_steps": cfg["block_steps"]})
         sizes = list(cfg["fom_sizes"]) if "fom" in parts else []
         if sizes:  # the smallest FOM first, the largest last (the longest part)
             child({"task": "fom", "size": sizes.pop(0), "steps": cfg["fom_steps"],
                    "rank": cfg["fom_rank"], "workdir": str(workdir)})
         if "memory" in parts:
-            for method in ("femrom", "femrom-dask", "femrom-sketch", "sklearn", "dask"):
-                child({"task": "memory", "method": method, "n": cfg["mem_n"], "K": cfg["mem_K"],
-                       "rank": cfg["mem_rank"]})
+            memory = {"task": "memory", "n": cfg["mem_n"], "K": cfg["mem_K"], "rank": cfg["mem_rank"]}
+            for scheme, q in ACCURACY_RUNS:
+                child({**memory, "method": "femrom", "scheme": scheme, "q": q})
+            for method in ("femrom-dask", "femrom-sketch", "sklearn", "dask"):
+                child({**memory, "method": method})
         for size in sizes:
             child({"task": "fom", "size": size, "steps": cfg["fom_steps"],
                    "rank": cfg["fom_rank"], "workdir": str(workdir)})
@@ -622,6 +708,9 @@ def main(argv=None) -> int:
             shutil.rmtree(workdir, ignore_errors=True)
 
     info["load_at_end"] = os.getloadavg()
+    info["quiet_flag_at_end"] = quiet_flag.exists()
+    if previous:
+        info["previous_runs"] = previous
     info["total_seconds"] = time.perf_counter() - started
     tables = {"file": file_table(results)}
     tables["fom_overhead"], tables["fom_accuracy"] = fom_tables(results)

@@ -142,6 +142,10 @@ class POD:
         tolerance (required then).
     oversampling, power_iterations, seed, block_columns
         Passed to the randomized methods.
+    scheme : {"pass_efficient", "classical"}, optional
+        Last-pass scheme of the multi-pass ``"randomized"`` method (see
+        :func:`~femrom.linalg.randomized_svd`; ``None``: its default). Only
+        that method has it: giving it with another method raises.
     options : dict, optional
         Extra keyword arguments for the chosen method (e.g. ``dataset``,
         ``scheduler`` for dask; ``range_size``, ``test_matrix`` for streaming).
@@ -160,8 +164,11 @@ class POD:
         sum_{i<=r} sigma_i^2 / ||A||_W^2.
     projection_error_ : float
         sqrt(1 - retained_energy_): the relative W-Frobenius projection error
-        of the training snapshots (exact for "svd" and "randomized", whose
-        sigma_i are those of V^T W A; an estimate for "streaming").
+        of the training snapshots (exact for "svd" and for "randomized" with
+        scheme "classical", whose sigma_i are those of V^T W A; an upper bound
+        for scheme "pass_efficient", whose sigma_i are those of
+        W^{1/2} A P_Z with ||V^T W A||_F >= ||V^T W A P_Z||_F, equal once the
+        iteration has converged; an estimate for "streaming").
     svd_ : LowRankSVD
         The decomposition (with ``passes`` and ``method``).
     inner_product_ : InnerProduct
@@ -171,7 +178,8 @@ class POD:
     def __init__(self, rank: int | None = None, *, energy: float | None = None,
                  tolerance: float | None = None, product: Any = None, method: str = "auto",
                  max_rank: int | None = None, oversampling: int = 10, power_iterations: int = 2,
-                 seed: int = 0, block_columns: int | None = None, options: dict | None = None):
+                 seed: int = 0, block_columns: int | None = None, scheme: str | None = None,
+                 options: dict | None = None):
         if method not in METHODS:
             raise ValueError(f"unknown POD method {method!r}; valid: {', '.join(METHODS)}")
         given = [v for v in (rank, energy, tolerance) if v is not None]
@@ -183,6 +191,7 @@ class POD:
         self.max_rank = max_rank
         self.oversampling, self.power_iterations = oversampling, power_iterations
         self.seed, self.block_columns = seed, block_columns
+        self.scheme = scheme
         self.options = dict(options or {})
 
     # -- fitting -------------------------------------------------------------
@@ -196,15 +205,20 @@ class POD:
         return int(self.max_rank)
 
     def _decompose(self, data: Any, method: str, inner: InnerProduct) -> LowRankSVD:
+        if self.scheme is not None and method != "randomized":
+            raise ValueError(f"scheme={self.scheme!r} applies to method 'randomized' only, "
+                             f"this POD uses {method!r}")
         if method == "svd":
             if not isinstance(data, np.ndarray):
                 raise TypeError(f"method 'svd' needs an in-memory ndarray, got {type(data).__name__}; "
                                 "use method='randomized' for block sources")
             return exact_svd(data, inner)
         if method == "randomized":
+            scheme = {} if self.scheme is None else {"scheme": self.scheme}
             return randomized_svd(data, self._computed_rank(method), oversampling=self.oversampling,
                                   power_iterations=self.power_iterations, product=inner.matrix,
-                                  seed=self.seed, block_columns=self.block_columns, **self.options)
+                                  seed=self.seed, block_columns=self.block_columns, **scheme,
+                                  **self.options)
         if method == "dask":
             return randomized_svd_dask(data, self._computed_rank(method), oversampling=self.oversampling,
                                        power_iterations=self.power_iterations, product=inner.matrix,

@@ -1,7 +1,9 @@
 """Randomized linear algebra for snapshot matrices that do not fit in memory.
 
 - :func:`randomized_svd`: out-of-core multi-pass randomized SVD reading column
-  blocks (q + 2 passes, memory O((n + K) k));
+  blocks (q + 2 passes, memory O((n + K) k)); ``scheme="pass_efficient"``
+  (default) folds the last pass into one more half power step, ``"classical"``
+  ends with B = Q^T W A;
 - :class:`StreamingSketch`: single-pass sketch fed column by column, also as an
   integrator consumer;
 - :func:`randomized_svd_dask`: the same on a ``dask.array`` (HDF5 file, cluster);
