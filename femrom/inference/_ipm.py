@@ -408,7 +408,9 @@ def _path_following(problem, newton, X_ls, tol, max_iterations, g_min):
             status = "optimal" if exact <= tol else "stalled"
             best = (min(best[0], exact), best[1], best[2])
             break
-        if it - best_iteration >= 5:
+        if best[1] is not None and it - best_iteration >= 5:
+            # five iterations without a better certified point; before the first one
+            # (singular G: no bound until the dual residual is tiny) keep going
             status = "stalled"
             break
         try:
