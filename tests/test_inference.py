@@ -413,6 +413,36 @@ def test_error_split_and_outputs(beam):
     np.testing.assert_allclose(learner.output_matrix_, E @ Phi[:, :r], rtol=0.05)
 
 
+def test_optimization_residual_resolves_a_near_exact_fit():
+    """Data from a feasible model (K SPD, C PSD on the cone's boundary, B) plus a
+    1e-10 perturbation: the learner must report that residual. Through the Gram
+    expansion ``<X G, X> + 2 <X, H^T> + c`` it cannot be resolved below
+    ``sqrt(eps) ~ 1.5e-8`` relative (cancellation; the old report was 0.0), and the
+    objective itself comes out as round-off: the gap must stay finite and small."""
+    rng = np.random.default_rng(3)
+    r, m, K = 6, 2, 400
+    A = rng.standard_normal((r, r))
+    stiffness = A @ A.T + r * np.eye(r)
+    P = rng.standard_normal((r, 2))
+    damping = P @ P.T
+    B = rng.standard_normal((r, m))
+    Q, V, U = (rng.standard_normal((r, K)), rng.standard_normal((r, K)),
+               rng.standard_normal((m, K)))
+    Acc = B @ U - damping @ V - stiffness @ Q              # M^ = I
+    noise = 1e-10 * np.linalg.norm(Acc) / np.sqrt(Acc.size) * rng.standard_normal(Acc.shape)
+    data = SecondOrderData(states=Q, velocities=V, accelerations=Acc + noise, inputs=U)
+    learner = LagrangianOpInf().fit(data)
+    # least squares leaves the part of the noise outside the data's row space:
+    # sqrt(1 - p / K) = 0.98 of it (p = 2 r + m = 14 unknowns a row); the true model
+    # is within 1e-10 of feasible-optimal, so the fit is too
+    expected = np.linalg.norm(noise) / np.linalg.norm(Acc + noise)
+    assert 0.9 * expected < learner.error_split_.optimization < 1.01 * expected
+    assert relative(learner.stiffness_, stiffness) < 1e-8
+    assert relative(learner.input_matrix_, B) < 1e-8
+    gap = learner.solver_info_["gap_estimate"]
+    assert np.isfinite(gap) and abs(gap) < 1e-6, gap
+
+
 def test_block_structures_are_validated():
     with pytest.raises(ValueError, match="unknown block structure"):
         Block("stiffness", 3, "spd")

@@ -83,7 +83,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from femrom.inference._ipm import gap_bound, smallest_eigenvalue, solve_ipm
+from femrom.inference._ipm import gap_bound, relative_gap, smallest_eigenvalue, solve_ipm
 from femrom.inference._problem import GramProblem
 
 
@@ -570,7 +570,7 @@ def _gap_estimate(problem: GramProblem, X: np.ndarray, options: FastOptions, inf
                    + \sum_j \langle \Lambda_j, X'_j - \varepsilon_j I\rangle .
     """
     bound = gap_bound(problem, X, g_min=_g_min(problem))
-    relative = bound / max(problem.objective(X), np.finfo(float).tiny)
+    relative = relative_gap(bound, problem.objective(X), problem)
     if relative <= options.tol:
         return relative
     grad = problem.gradient(X)
@@ -592,7 +592,7 @@ def _gap_estimate(problem: GramProblem, X: np.ndarray, options: FastOptions, inf
     for b, s, Lam in zip(problem.blocks, problem.slices(), multipliers):
         shift = b.shift if b.structure == "psd" else 0.0
         gap += float(np.sum(Lam * (Xd[:, s] - shift * np.eye(r))))
-    return max(gap, 0.0) / max(problem.objective(X), np.finfo(float).tiny)
+    return relative_gap(max(gap, 0.0), problem.objective(X), problem)
 
 
 def _admm(problem: GramProblem, start, options: FastOptions, info):

@@ -147,6 +147,14 @@ def hessian(problem: GramProblem) -> sp.csr_matrix:
 
 
 # -- the certificate -----------------------------------------------------------
+def relative_gap(bound: float, f: float, problem: GramProblem) -> float:
+    """``bound / |f|``, with ``|f|`` floored at ``eps * c``: the objective comes from the
+    expansion ``<X G, X> + 2 <X, H^T> + c``, which cannot resolve values below that
+    (data that a model fits to round-off give ``f = 0.0``)."""
+    floor = max(np.finfo(float).eps * abs(problem.target), np.finfo(float).tiny)
+    return float(bound / max(abs(f), floor))
+
+
 def smallest_eigenvalue(G: np.ndarray) -> float:
     """A lower bound of ``lambda_min(G)``: the computed one minus the backward error
     of ``eigvalsh`` (``p eps ||G||``, generous); ``0`` if that is not positive."""
@@ -346,7 +354,7 @@ def solve_ipm(problem: GramProblem, *, tol: float = 1e-8, max_iterations: int = 
     if problem.is_feasible(X, tol=0.0):
         # the gap is round-off of the solve; bounded all the same when G > 0
         gap = gap_bound(problem, X, g_min=g_min) if g_min > 0 else 0.0
-        info.update(ipm_iterations=0, gap_estimate=gap / max(abs(problem.objective(X)), 1e-300),
+        info.update(ipm_iterations=0, gap_estimate=relative_gap(gap, problem.objective(X), problem),
                     active={b.name: 0 for b in problem.blocks if b.structure == "psd"})
         return X, "optimal (unconstrained)"
     Xb, status, state = _path_following(problem, newton, X_ls, tol, max_iterations, g_min)
@@ -392,7 +400,7 @@ def _path_following(problem, newton, X_ls, tol, max_iterations, g_min):
             bound = min(comp + residual / (4.0 * g_min), gap_bound(problem, X, g_min=g_min))
         else:           # no certificate: the interior-point gap at a tiny dual residual
             bound = comp if residual <= (1e-10 * max(abs(f), 1.0)) ** 2 else np.inf
-        rel = bound / max(abs(f), np.finfo(float).tiny)
+        rel = relative_gap(bound, f, problem)
         if rel < best[0] and _feasible(problem, Xb):
             best = (rel, [A.copy() for A in Xb], [None if Zj is None else Zj.copy() for Zj in Zb])
             best_iteration = it
@@ -404,7 +412,7 @@ def _path_following(problem, newton, X_ls, tol, max_iterations, g_min):
             # solves) keeps the ball bound above tol: evaluate the dual function
             # exactly instead, and stop either way (smaller mu only worsens N)
             exact = exact_gap_bound(problem, newton, best[1], best[2], g_min)
-            exact /= max(abs(f), np.finfo(float).tiny)
+            exact = relative_gap(exact, f, problem)
             status = "optimal" if exact <= tol else "stalled"
             best = (min(best[0], exact), best[1], best[2])
             break
