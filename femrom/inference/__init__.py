@@ -10,7 +10,8 @@
 - :class:`SecondOrderOpInf`: plain least-squares inference (the baseline);
 - :class:`HamiltonianOpInf`: symmetric ``D^_q``, ``D^_p`` of a canonical
   Hamiltonian ROM from Lyapunov equations (Bartels-Stewart);
-- :class:`ErrorSplit`: projection, derivative and optimisation errors.
+- :class:`ErrorSplit`, :class:`HamiltonianErrorSplit`: projection, derivative
+  and optimisation errors of a second-order or Hamiltonian fit.
 """
 
 from femrom.inference._data import (
@@ -24,6 +25,8 @@ from femrom.inference._derivatives import finite_difference, stencil_weights
 from femrom.inference._fast import FastOptions, solve_fast
 from femrom.inference._hamiltonian import (
     GRADIENT_DATA,
+    HAMILTONIAN_DERIVATIVE_SOURCES,
+    HamiltonianErrorSplit,
     HamiltonianOperators,
     HamiltonianOpInf,
     ProjectedPotential,
@@ -57,5 +60,6 @@ __all__ = [
     "SecondOrderOpInf", "Stiffness", "concatenate", "finite_difference", "galerkin",
     "reduce_snapshots", "reduced_coordinates", "solve_conic", "solve_fast", "stencil_weights",
     "symmetric_lyapunov_fit",
-    "GRADIENT_DATA", "ProjectedPotential", "project_potential_gradient",
+    "GRADIENT_DATA", "HAMILTONIAN_DERIVATIVE_SOURCES", "HamiltonianErrorSplit",
+    "ProjectedPotential", "project_potential_gradient",
 ]

@@ -39,6 +39,11 @@ the projected gradients ``F^_q = Phi^T dH_nl/dp (Q, P)`` and
 term through :class:`ProjectedPotential`, ``H^_nl(q^, p^) = H_nl(Phi q^, Phi p^)``,
 so its right-hand side stays ``J_{2r} grad H^``.
 
+Every fit reports its error split (:class:`HamiltonianErrorSplit`, after Geng,
+Singh, Ju, Kramer & Wang, CMAME 427, 2024): the projection error of the
+training states, the error of finite-difference derivatives against given
+ones, and the optimisation residual.
+
 ``shared=True`` (an option of femrom, not of the paper) fits one symmetric
 ``D^ = D^_q = D^_p`` to both residuals, for systems whose full operators are
 equal (the NLS: ``D_q = D_p = -Laplacian``). The reduced Hamiltonian is then
@@ -49,7 +54,7 @@ q^ sin a + p^ cos a)`` whenever ``H_nl`` is, and the reduced mass
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import scipy.linalg as sl
@@ -144,6 +149,54 @@ def project_potential_gradient(basis: np.ndarray, potential, Q: np.ndarray,
 #: Where :meth:`HamiltonianOpInf.fit_snapshots` evaluates the known gradient.
 GRADIENT_DATA = ("snapshots", "reconstructed")
 
+#: Where :meth:`HamiltonianOpInf.fit_snapshots` takes the time derivatives from.
+HAMILTONIAN_DERIVATIVE_SOURCES = ("finite_difference", "stored")
+
+
+@dataclass(frozen=True)
+class HamiltonianErrorSplit:
+    r"""The error sources of a Hamiltonian fit (Geng, Singh, Ju, Kramer & Wang, CMAME 427, 2024).
+
+    The counterpart of :class:`~femrom.inference.ErrorSplit` for canonical
+    data ``y = [q; p]`` (first derivatives only). Relative Frobenius norms:
+
+    Attributes
+    ----------
+    projection : float or None
+        ``||[Q; P] - blkdiag(Phi, Phi) [Q^; P^]||_F / ||[Q; P]||_F`` of the
+        training states (``None`` for data that came reduced).
+    derivative : float or None
+        ``||[Q^'; P^']_fd - Phi^T [Q'; P']|| / ||Phi^T [Q'; P']||``: finite
+        differences against the given full derivatives (``0`` when those were
+        the training data, ``None`` when no reference is known).
+    position_derivative, momentum_derivative : float or None
+        The same for ``Q^'`` and ``P^'`` alone.
+    optimization : float
+        ``||[R_p - D^_p P^; R_q - D^_q Q^]||_F / ||[R_p; R_q]||_F``: the
+        residual the fitted operators leave, from the data columns (a Gram
+        expansion cancels below ``sqrt(eps)``).
+    """
+
+    projection: float | None
+    derivative: float | None
+    position_derivative: float | None
+    momentum_derivative: float | None
+    optimization: float
+
+
+def _relative(E: np.ndarray, X: np.ndarray) -> float:
+    den = float(np.sum(X * X))
+    return float(np.sqrt(np.sum(E * E) / den)) if den > 0 else 0.0
+
+
+def _projection_residual2(V: np.ndarray, X: np.ndarray, Xh: np.ndarray, block: int = 1024) -> float:
+    """``||X - V Xh||_F^2`` from the columns, ``block`` at a time (memory (n, block))."""
+    total = 0.0
+    for start in range(0, X.shape[1], block):
+        E = X[:, start:start + block] - V @ Xh[:, start:start + block]
+        total += float(np.sum(E * E))
+    return total
+
 
 class HamiltonianOpInf:
     r"""Learn ``D^_q``, ``D^_p`` (symmetric) from reduced canonical data.
@@ -159,8 +212,13 @@ class HamiltonianOpInf:
     ----------
     operators_ : HamiltonianOperators
     residual_ : float
-        Relative residual of both regressions together.
+        Relative residual of both regressions together (``error_split_.optimization``).
+    error_split_ : HamiltonianErrorSplit
+        Projection, derivative and optimisation errors (projection and
+        derivative only from :meth:`fit_snapshots`).
     """
+
+    method = "hamiltonian_opinf"
 
     def __init__(self, regularization: float = 0.0, shared: bool = False):
         if not regularization >= 0:
@@ -172,6 +230,14 @@ class HamiltonianOpInf:
             ddt_p: np.ndarray, forces_q: np.ndarray | None = None,
             forces_p: np.ndarray | None = None) -> "HamiltonianOpInf":
         """Fit from reduced (r, K) data ``Q^, P^, Q^', P^'`` and known ``F^_q, F^_p``."""
+        states_q, states_p = np.asarray(states_q, float), np.asarray(states_p, float)
+        shape = states_q.shape
+        if states_q.ndim != 2:
+            raise ValueError(f"states_q must be (r, K), got shape {shape}")
+        for name, A in (("states_p", states_p), ("ddt_q", ddt_q), ("ddt_p", ddt_p),
+                        ("forces_q", forces_q), ("forces_p", forces_p)):
+            if A is not None and np.shape(A) != shape:
+                raise ValueError(f"{name} has shape {np.shape(A)}, expected {shape} like states_q")
         Rp = ddt_q - (0.0 if forces_q is None else forces_q)
         Rq = -ddt_p - (0.0 if forces_p is None else forces_p)
         lam_p = self.regularization * np.sum(states_p**2) / states_p.shape[0]
@@ -183,57 +249,82 @@ class HamiltonianOpInf:
             Dp = symmetric_lyapunov_fit(states_p, Rp, lam_p)
             Dq = symmetric_lyapunov_fit(states_q, Rq, lam_q)
         self.operators_ = HamiltonianOperators(position=Dq, momentum=Dp)
+        # from the data columns, not from the Gram matrices (cancellation below sqrt(eps))
         num = np.linalg.norm(Rp - Dp @ states_p) ** 2 + np.linalg.norm(Rq - Dq @ states_q) ** 2
         den = np.linalg.norm(Rp) ** 2 + np.linalg.norm(Rq) ** 2
         self.residual_ = float(np.sqrt(num / den)) if den > 0 else 0.0
+        self.error_split_ = HamiltonianErrorSplit(projection=None, derivative=None,
+                                                  position_derivative=None,
+                                                  momentum_derivative=None,
+                                                  optimization=self.residual_)
+        self.data_ = {"forces": forces_q is not None or forces_p is not None,
+                      "n_samples": int(shape[1])}
         return self
 
     def fit_snapshots(self, basis: np.ndarray, Q: np.ndarray, P: np.ndarray, dt: float | None = None,
                       *, ddt_q: np.ndarray | None = None, ddt_p: np.ndarray | None = None,
-                      potential=None, order: int = 4,
-                      gradient_data: str = "snapshots") -> "HamiltonianOpInf":
+                      potential=None, order: int = 4, gradient_data: str = "snapshots",
+                      derivatives: str | None = None) -> "HamiltonianOpInf":
         r"""Project full snapshots through ``Phi`` and fit.
 
         ``Q^ = Phi^T Q``, ``P^ = Phi^T P``; derivative data ``Phi^T Q'``,
-        ``Phi^T P'`` from the given full derivatives or, when absent, finite
-        differences of order ``order`` of the reduced snapshots (uniform
-        ``dt``); forcing data from :func:`project_potential_gradient` at the
-        snapshots (``gradient_data="snapshots"``, the paper's choice) or at
-        ``Phi Q^``, ``Phi P^`` (``"reconstructed"``, what the ROM evaluates).
+        ``Phi^T P'`` from the given full derivatives (``derivatives="stored"``,
+        the default when they are given) or finite differences of order
+        ``order`` of the reduced snapshots (``"finite_difference"``, uniform
+        ``dt``; the given derivatives, if any, are then the reference of the
+        derivative error); forcing data from :func:`project_potential_gradient`
+        at the snapshots (``gradient_data="snapshots"``, the paper's choice) or
+        at ``Phi Q^``, ``Phi P^`` (``"reconstructed"``, what the ROM evaluates).
 
         Parameters
         ----------
         basis : (n, r) ndarray
-            ``Phi`` of the cotangent lift.
+            ``Phi`` of the cotangent lift (``Phi^T Phi = I``).
         Q, P : (n, K) ndarray
         dt : float, optional
-            Snapshot spacing (needed without ``ddt_q``, ``ddt_p``).
+            Snapshot spacing (needed for finite differences).
         ddt_q, ddt_p : (n, K) ndarray, optional
             Full time derivatives.
         potential : object, optional
             The known ``H_nl``.
         order : {2, 4, 6}
         gradient_data : {"snapshots", "reconstructed"}
+        derivatives : {"stored", "finite_difference"}, optional
+            Default: ``"stored"`` when ``ddt_q``, ``ddt_p`` are given.
 
         Attributes set
         --------------
         basis_ : (n, r) ndarray
         potential_ : ProjectedPotential or None
+        error_split_ : HamiltonianErrorSplit
+            With the projection error of ``[Q; P]`` and the derivative error.
         """
         from femrom.inference._derivatives import finite_difference
 
         if gradient_data not in GRADIENT_DATA:
             raise ValueError(f"unknown gradient_data {gradient_data!r}; valid: {GRADIENT_DATA}")
-        V = np.asarray(basis, dtype=float)
-        Qh, Ph = V.T @ Q, V.T @ P
         if (ddt_q is None) != (ddt_p is None):
             raise ValueError("give both ddt_q and ddt_p, or neither")
-        if ddt_q is None:
+        if derivatives is None:
+            derivatives = "finite_difference" if ddt_q is None else "stored"
+        if derivatives not in HAMILTONIAN_DERIVATIVE_SOURCES:
+            raise ValueError(f"unknown derivatives {derivatives!r}; valid: "
+                             f"{HAMILTONIAN_DERIVATIVE_SOURCES}")
+        if derivatives == "stored" and ddt_q is None:
+            raise ValueError("derivatives='stored' needs ddt_q and ddt_p")
+        V = np.asarray(basis, dtype=float)
+        Q, P = np.asarray(Q, dtype=float), np.asarray(P, dtype=float)
+        if V.ndim != 2 or Q.ndim != 2 or Q.shape != P.shape or Q.shape[0] != V.shape[0]:
+            raise ValueError(f"basis {V.shape}, Q {Q.shape} and P {P.shape} do not match: "
+                             "expected (n, r), (n, K), (n, K)")
+        Qh, Ph = V.T @ Q, V.T @ P
+        stored = None if ddt_q is None else (V.T @ ddt_q, V.T @ ddt_p)
+        if derivatives == "stored":
+            dQ, dP = stored
+        else:
             if dt is None:
                 raise ValueError("finite-difference derivatives need dt")
             dQ, dP = finite_difference(Qh, dt, order), finite_difference(Ph, dt, order)
-        else:
-            dQ, dP = V.T @ ddt_q, V.T @ ddt_p
         Fq = Fp = None
         if potential is not None:
             at = (Q, P) if gradient_data == "snapshots" else (V @ Qh, V @ Ph)
@@ -241,4 +332,30 @@ class HamiltonianOpInf:
         self.fit(Qh, Ph, dQ, dP, Fq, Fp)
         self.basis_ = V
         self.potential_ = None if potential is None else ProjectedPotential(potential, V)
+        # the error split: projection residual from the columns (||X||^2 - ||Phi^T X||^2 cancels)
+        residual2 = _projection_residual2(V, Q, Qh) + _projection_residual2(V, P, Ph)
+        norm2 = float(np.sum(Q * Q) + np.sum(P * P))
+        split = {"projection": float(np.sqrt(residual2 / norm2)) if norm2 > 0 else 0.0}
+        if derivatives == "stored":
+            split.update(derivative=0.0, position_derivative=0.0, momentum_derivative=0.0)
+        elif stored is not None:
+            split.update(derivative=_relative(np.vstack([dQ - stored[0], dP - stored[1]]),
+                                              np.vstack(stored)),
+                         position_derivative=_relative(dQ - stored[0], stored[0]),
+                         momentum_derivative=_relative(dP - stored[1], stored[1]))
+        self.error_split_ = replace(self.error_split_, **split)
+        self.data_.update(derivative_source=derivatives, gradient_data=gradient_data,
+                          order=int(order) if derivatives == "finite_difference" else None,
+                          dt=None if dt is None else float(dt))
         return self
+
+    def describe(self) -> dict:
+        """What was fitted how (stored with a saved :class:`~femrom.rom.HamiltonianROM`)."""
+        out = {"method": self.method, "regularization": self.regularization,
+               "shared": self.shared}
+        if hasattr(self, "error_split_"):
+            out["residual"] = self.residual_
+            out["error_split"] = {k: getattr(self.error_split_, k)
+                                  for k in self.error_split_.__dataclass_fields__}
+            out["data"] = dict(self.data_)
+        return out

@@ -7,8 +7,12 @@
 - :class:`ReducedSolution`: what ``predict`` returns;
 - reduced schemes (:data:`SCHEMES`): Newmark average acceleration, the
   implicit midpoint rule, Stoermer-Verlet, as precomputed linear step maps;
-- :class:`HamiltonianROM`: linear canonical Hamiltonian ROMs with symplectic
-  Euler A/B, Stoermer-Verlet and the implicit midpoint rule;
+- :class:`HamiltonianROM`: canonical Hamiltonian ROMs, intrusive
+  (:meth:`HamiltonianROM.galerkin`) or learned (``fit`` through
+  :class:`~femrom.inference.HamiltonianOpInf`), with symplectic Euler A/B,
+  Stoermer-Verlet, the implicit midpoint rule and AVF, outputs, the reduced
+  Hamiltonian, lazy full fields (:class:`HamiltonianSolution`) and HDF5
+  ``save``/``load``;
 - :func:`select_regularization`: a grid of regularization weights scored by
   training fit and by energy over an extended window;
 - :class:`HyperReducedPotential`, :func:`ecsw_weights`, :func:`sparse_nnls`:
@@ -16,14 +20,19 @@
   and non-negative weights; the reduced force stays an exact gradient).
 """
 
-from femrom.rom._hamiltonian import HAMILTONIAN_SCHEMES, HamiltonianROM, hamiltonian_step_matrix
+from femrom.rom._hamiltonian import (
+    HAMILTONIAN_SCHEMES,
+    HamiltonianROM,
+    HamiltonianSolution,
+    hamiltonian_step_matrix,
+)
 from femrom.rom._hyper import HyperReducedPotential, ecsw_weights, sparse_nnls
 from femrom.rom._model import ReducedSolution, SecondOrderROM
 from femrom.rom._selection import RegularizationScore, select_regularization
 from femrom.rom._steppers import SCHEMES, linear_step_map, verlet_bound
 
 __all__ = [
-    "HAMILTONIAN_SCHEMES", "HamiltonianROM", "SCHEMES", "hamiltonian_step_matrix", "ReducedSolution", "RegularizationScore", "SecondOrderROM", "linear_step_map",
+    "HAMILTONIAN_SCHEMES", "HamiltonianROM", "HamiltonianSolution", "SCHEMES", "hamiltonian_step_matrix", "ReducedSolution", "RegularizationScore", "SecondOrderROM", "linear_step_map",
     "select_regularization", "verlet_bound",
     "HyperReducedPotential", "ecsw_weights", "sparse_nnls",
 ]

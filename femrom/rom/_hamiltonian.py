@@ -22,24 +22,48 @@ by ``O(h^2)`` without drift) or ``"avf"`` (average vector field: ``H^``
 conserved to the Newton tolerance, not symplectic). The explicit symplectic
 Euler and Stoermer-Verlet splittings need a separable ``H^ = T(p) + V(q)``;
 a potential coupling ``q`` and ``p`` (the NLS) is not, so they are refused.
+Without a potential ``"avf"`` is the midpoint rule (the average of a linear
+gradient is its midpoint value).
+
+:class:`HamiltonianROM` is built intrusively (:meth:`HamiltonianROM.galerkin`,
+``D~ = Phi^T D Phi``) or learned (``HamiltonianROM(basis=Phi,
+learner=HamiltonianOpInf()).fit(Q, P, dt)``); :meth:`HamiltonianROM.predict`
+returns a :class:`HamiltonianSolution` (reduced trajectories, ``H^``, outputs;
+full fields rebuilt only on request) and :meth:`HamiltonianROM.save` /
+:meth:`HamiltonianROM.load` keep the model in HDF5 with its metadata.
 """
 
 from __future__ import annotations
 
+import dataclasses
+import json
+import time
+from dataclasses import dataclass, field
+from typing import Iterator
+
 import numpy as np
 import scipy.linalg as sl
 
-from femrom.inference._hamiltonian import HamiltonianOperators, ProjectedPotential
+from femrom.inference._hamiltonian import HamiltonianOperators, HamiltonianOpInf, ProjectedPotential
 from femrom.integrators._hamiltonian import CANONICAL_SCHEMES, CanonicalSystem, integrate_canonical
 from femrom.integrators._newton import Newton
+from femrom.rom._model import _jsonable
 from femrom.rom._steppers import run_linear
 
 #: Symplectic schemes for Hamiltonian ROMs.
 HAMILTONIAN_SCHEMES = ("symplectic_euler_a", "symplectic_euler_b", "verlet", "midpoint")
 
+#: What :meth:`HamiltonianROM.predict` accepts without a potential (``"avf"`` = midpoint there).
+_LINEAR_SCHEMES = HAMILTONIAN_SCHEMES + ("avf",)
+
+#: Largest ``max |Phi^T Phi - I|`` accepted for a cotangent lift: SVD bases are
+#: orthonormal to ~1e-15 sqrt(n), randomized ones to ~1e-12; beyond 1e-8 the
+#: lift's symplecticity ``A^T J A = J`` (and ``Q^ = Phi^T Q``) fails at that level.
+_ORTHONORMALITY = 1e-8
+
 
 def hamiltonian_step_matrix(ops: HamiltonianOperators, dt: float, scheme: str) -> np.ndarray:
-    """(2r, 2r) ndarray ``S`` with ``[q; p]_{k+1} = S [q; p]_k``."""
+    """(2r, 2r) ndarray ``S`` with ``[q; p]_{k+1} = S [q; p]_k`` (``"avf"``: the midpoint rule)."""
     r, h = ops.r, float(dt)
     I, Z = np.eye(r), np.zeros((r, r))
     Dq, Dp = ops.position, ops.momentum
@@ -51,68 +75,431 @@ def hamiltonian_step_matrix(ops: HamiltonianOperators, dt: float, scheme: str) -
         return drift(1.0) @ kick(1.0)
     if scheme == "verlet":
         return kick(0.5) @ drift(1.0) @ kick(0.5)
-    if scheme == "midpoint":
+    if scheme in ("midpoint", "avf"):
         A = np.block([[Z, Dp], [-Dq, Z]])
         return sl.solve(np.eye(2 * r) - 0.5 * h * A, np.eye(2 * r) + 0.5 * h * A)
-    raise ValueError(f"unknown Hamiltonian scheme {scheme!r}; valid: {HAMILTONIAN_SCHEMES}")
+    raise ValueError(f"unknown Hamiltonian scheme {scheme!r}; valid: {_LINEAR_SCHEMES}")
+
+
+@dataclass(frozen=True, eq=False)
+class HamiltonianSolution:
+    """A reduced canonical trajectory; full fields are rebuilt only on request.
+
+    Unpacks as ``q, p, hamiltonian = solution`` (what ``predict`` returned
+    before it returned this object).
+
+    Attributes
+    ----------
+    t : (k,) ndarray
+    q, p : (r, k) ndarray
+        Reduced positions and momenta.
+    hamiltonian : (k,) ndarray
+        ``H^(q, p)``: ``q^T D^_q q / 2 + p^T D^_p p / 2 (+ H_nl(Phi q, Phi p))``.
+    outputs : (m, k) ndarray or None
+        ``E^ [q; p]``.
+    basis : (n, r) ndarray or None
+        ``Phi`` (a reference, not a copy).
+    info : dict
+        Scheme, step, timings, Newton iterations (with a potential).
+    """
+
+    t: np.ndarray
+    q: np.ndarray
+    p: np.ndarray
+    hamiltonian: np.ndarray
+    outputs: np.ndarray | None = None
+    basis: np.ndarray | None = None
+    info: dict = field(default_factory=dict)
+
+    def __iter__(self):
+        return iter((self.q, self.p, self.hamiltonian))
+
+    @property
+    def energy(self) -> np.ndarray:
+        """(k,) ndarray: the reduced Hamiltonian (the name :class:`ReducedSolution` uses)."""
+        return self.hamiltonian
+
+    def _coordinates(self, which: str) -> np.ndarray:
+        if self.basis is None:
+            raise ValueError("this model has no basis: full fields cannot be reconstructed")
+        if which not in ("q", "p"):
+            raise ValueError(f"unknown field {which!r}; valid: ('q', 'p')")
+        return getattr(self, which)
+
+    def field(self, k: int, which: str = "q") -> np.ndarray:
+        """(n,) ndarray ``Phi q(t_k)`` (or ``Phi p(t_k)``)."""
+        return self.basis @ self._coordinates(which)[:, k]
+
+    def fields(self, block: int = 256, which: str = "q") -> Iterator[tuple[np.ndarray, np.ndarray]]:
+        """Yield ``(t_block, Phi X_block)``, ``X`` one of ``q, p``, ``block`` steps at a time.
+
+        Memory stays at (n, block) whatever the trajectory's length.
+        """
+        X = self._coordinates(which)
+        for start in range(0, X.shape[1], block):
+            stop = min(start + block, X.shape[1])
+            yield self.t[start:stop], self.basis @ X[:, start:stop]
 
 
 class HamiltonianROM:
-    """A canonical Hamiltonian ROM (linear, or with a known projected potential).
+    r"""A canonical Hamiltonian ROM (linear, or with a known projected potential).
+
+    .. math::
+
+        \dot{\hat q} = \hat D_p \hat p + \nabla_{\hat p} \hat H_{nl}, \qquad
+        \dot{\hat p} = -\hat D_q \hat q - \nabla_{\hat q} \hat H_{nl}, \qquad
+        y = \hat E [\hat q; \hat p], \qquad (q, p) \approx (\Phi \hat q, \Phi \hat p),
+
+    with ``H^_nl(q^, p^) = H_nl(Phi q^, Phi p^)``.
 
     Parameters
     ----------
-    operators : HamiltonianOperators
+    operators : HamiltonianOperators, optional
+        Given ``D^_q``, ``D^_p`` (else :meth:`fit` or :meth:`galerkin`).
     basis : (n, r) ndarray, optional
-        The cotangent-lift ``Phi``: ``q ~ Phi q^``, ``p ~ Phi p^``.
+        The cotangent-lift ``Phi`` (``Phi^T Phi = I``): ``q ~ Phi q^``, ``p ~ Phi p^``.
     potential : object, optional
         The known full-order ``H_nl`` (``value``, ``gradient``, ``hessian``);
         needs ``basis``. The ROM uses ``H_nl(Phi q^, Phi p^)``.
     newton : Newton
         Tolerances of the implicit steps with a potential.
+    learner : HamiltonianOpInf, optional
+        What :meth:`fit` uses (default ``HamiltonianOpInf()``).
+    output_matrix : (m, 2r) ndarray, optional
+        ``E^`` acting on ``[q^; p^]``.
+    scheme : str
+        Default scheme of :meth:`predict`: ``"midpoint"``, ``"avf"``,
+        ``"symplectic_euler_a"``, ``"symplectic_euler_b"``, ``"verlet"`` (the
+        last three without a potential only).
 
     Attributes
     ----------
+    operators_ : HamiltonianOperators
+    output_matrix_ : (m, 2r) ndarray or None
+    potential_ : ProjectedPotential or None
+    metadata_ : dict
+        How the operators were obtained (learner settings and error split, or
+        ``{"method": "galerkin"}``); saved with the model.
     last_trajectory_ : CanonicalTrajectory
         Newton iterations and stepping time of the last nonlinear ``predict``.
     """
 
-    def __init__(self, operators: HamiltonianOperators, basis: np.ndarray | None = None,
-                 potential=None, newton: Newton = Newton(rtol=1e-12)):
+    def __init__(self, operators: HamiltonianOperators | None = None,
+                 basis: np.ndarray | None = None, potential=None,
+                 newton: Newton = Newton(rtol=1e-12), *, learner: HamiltonianOpInf | None = None,
+                 output_matrix: np.ndarray | None = None, scheme: str = "midpoint"):
         if potential is not None and basis is None:
             raise ValueError("a known potential is evaluated through the basis: give basis")
+        valid = CANONICAL_SCHEMES if potential is not None else _LINEAR_SCHEMES
+        if scheme not in valid:
+            raise ValueError(f"unknown scheme {scheme!r} for this model; valid: {valid}")
+        self.basis = None if basis is None else np.asarray(basis, dtype=float)
+        if operators is not None and self.basis is not None and self.basis.shape[1] != operators.r:
+            raise ValueError(f"basis has {self.basis.shape[1]} columns, operators have r = {operators.r}")
         self.operators_ = operators
-        self.basis = basis
         self.newton = newton
-        self.potential_ = None if potential is None else ProjectedPotential(potential, basis)
+        self.learner = learner
+        self.scheme = scheme
+        self.potential = potential
+        self.potential_ = None if potential is None else ProjectedPotential(potential, self.basis)
+        self.output_matrix_ = None if output_matrix is None else np.atleast_2d(
+            np.asarray(output_matrix, dtype=float))
+        self.metadata_ = {"method": "given"} if operators is not None else {}
+
+    # -- construction --------------------------------------------------------
+    @classmethod
+    def galerkin(cls, system: CanonicalSystem, basis: np.ndarray, *,
+                 output_matrix=None, newton: Newton = Newton(rtol=1e-12),
+                 scheme: str = "midpoint") -> "HamiltonianROM":
+        """The intrusive ROM: ``D~_q = Phi^T D_q Phi``, ``D~_p = Phi^T D_p Phi``, the system's potential.
+
+        Parameters
+        ----------
+        system : CanonicalSystem
+            Full ``D_q``, ``D_p`` (dense or sparse) and potential.
+        basis : (n, r) ndarray
+            ``Phi`` with ``Phi^T Phi = I``.
+        output_matrix : (m, 2n) array, optional
+            Full output map of ``[q; p]``; reduced to ``E [Phi, 0; 0, Phi]``.
+        """
+        V = _cotangent_lift(basis)
+        n = V.shape[0]
+
+        def project(D):
+            A = V.T @ np.asarray(D @ V)
+            return 0.5 * (A + A.T)      # symmetric to round-off anyway: keep it exactly
+
+        ops = HamiltonianOperators(position=project(system.position),
+                                   momentum=project(system.momentum))
+        E = None
+        if output_matrix is not None:
+            E_full = output_matrix
+            if E_full.shape[1] != 2 * n:
+                raise ValueError(f"output_matrix has {E_full.shape[1]} columns, expected 2n = {2 * n}")
+            E = np.hstack([np.asarray(E_full[:, :n] @ V), np.asarray(E_full[:, n:] @ V)])
+        rom = cls(ops, V, system.potential, newton, output_matrix=E, scheme=scheme)
+        rom.metadata_ = {"method": "galerkin"}
+        return rom
+
+    def fit(self, Q: np.ndarray, P: np.ndarray, dt: float | None = None, *,
+            ddt_q: np.ndarray | None = None, ddt_p: np.ndarray | None = None,
+            derivatives: str | None = None, order: int = 4, gradient_data: str = "snapshots",
+            outputs: np.ndarray | None = None) -> "HamiltonianROM":
+        r"""Learn ``D^_q``, ``D^_p`` from full snapshots with the learner.
+
+        :meth:`HamiltonianOpInf.fit_snapshots` on ``Phi`` and this model's
+        potential; with ``outputs`` also
+        ``E^ = argmin_E ||Y - E [Q^; P^]||_F`` (least squares on the data columns).
+
+        Parameters
+        ----------
+        Q, P : (n, K) ndarray
+            Position and momentum snapshots on a uniform grid of step ``dt``.
+        dt : float, optional
+            Needed for finite-difference derivatives.
+        ddt_q, ddt_p : (n, K) ndarray, optional
+            Full time derivatives (training data, or the reference of the
+            derivative error with ``derivatives="finite_difference"``).
+        derivatives : {"stored", "finite_difference"}, optional
+        order : {2, 4, 6}
+        gradient_data : {"snapshots", "reconstructed"}
+        outputs : (m, K) ndarray, optional
+            Measured outputs ``Y``.
+
+        Returns
+        -------
+        self
+        """
+        if self.basis is None:
+            raise ValueError("fit projects full snapshots onto the cotangent lift: pass basis=Phi")
+        _cotangent_lift(self.basis)
+        if self.learner is None:
+            self.learner = HamiltonianOpInf()
+        learner = self.learner.fit_snapshots(
+            self.basis, Q, P, dt, ddt_q=ddt_q, ddt_p=ddt_p, potential=self.potential, order=order,
+            gradient_data=gradient_data, derivatives=derivatives)
+        self.operators_ = learner.operators_
+        if outputs is not None:
+            Y = np.atleast_2d(np.asarray(outputs, dtype=float))
+            X = np.vstack([self.basis.T @ Q, self.basis.T @ P])
+            if Y.shape[1] != X.shape[1]:
+                raise ValueError(f"outputs have {Y.shape[1]} columns, snapshots {X.shape[1]}")
+            self.output_matrix_ = np.linalg.lstsq(X.T, Y.T, rcond=None)[0].T
+        self.metadata_ = learner.describe()
+        return self
+
+    # -- evaluation ----------------------------------------------------------
+    def _ops(self) -> HamiltonianOperators:
+        if self.operators_ is None:
+            raise ValueError("this ROM is not fitted: call fit(Q, P, dt), galerkin(...) or pass operators")
+        return self.operators_
+
+    @property
+    def r(self) -> int:
+        return self._ops().r
 
     @property
     def system_(self) -> CanonicalSystem:
-        ops = self.operators_
+        ops = self._ops()
         return CanonicalSystem(ops.position, ops.momentum, self.potential_)
 
     def hamiltonian(self, q: np.ndarray, p: np.ndarray) -> np.ndarray:
         """Reduced ``H^`` of (r, k) columns: quadratic part plus ``H_nl(Phi q^, Phi p^)``."""
         return np.atleast_1d(self.system_.hamiltonian(q, p))
 
+    def outputs(self, q: np.ndarray, p: np.ndarray) -> np.ndarray | None:
+        """(m, k) ndarray ``E^ [q; p]`` (``None`` without an output map)."""
+        E = self.output_matrix_
+        return None if E is None else E @ np.vstack([q, p])
+
+    def reduce(self, x: np.ndarray) -> np.ndarray:
+        """(r,) or (r, k) ``Phi^T x`` of full (n,) or (n, k) positions or momenta."""
+        if self.basis is None:
+            raise ValueError("a full-order vector needs the basis to be reduced")
+        return self.basis.T @ np.asarray(x, dtype=float)
+
     def reconstruct(self, q: np.ndarray, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Full ``(Phi q^, Phi p^)``."""
+        """Full ``(Phi q^, Phi p^)`` now (a solution's :meth:`~HamiltonianSolution.fields` streams them)."""
+        if self.basis is None:
+            raise ValueError("this model has no basis: full fields cannot be reconstructed")
         return self.basis @ q, self.basis @ p
 
+    def _initial(self, x, name: str) -> np.ndarray:
+        r = self.r
+        x = np.asarray(x, dtype=float).ravel()
+        if x.size == r:
+            return x
+        if self.basis is not None and x.size == self.basis.shape[0]:
+            return self.reduce(x)
+        raise ValueError(f"{name} has {x.size} entries: expected r = {r} (reduced) "
+                         f"or n = {None if self.basis is None else self.basis.shape[0]} (full)")
+
     def predict(self, q0: np.ndarray, p0: np.ndarray, times: np.ndarray,
-                scheme: str = "midpoint"):
-        """``(Q, P, H)``: (r, k), (r, k) and the reduced Hamiltonian (k,) on uniform ``times``."""
+                scheme: str | None = None) -> HamiltonianSolution:
+        r"""Integrate the ROM on a uniform time grid.
+
+        Parameters
+        ----------
+        q0, p0 : (r,) or (n,) ndarray
+            Initial position and momentum, reduced or full (then ``Phi^T x``);
+            with ``r = n`` a vector is read as reduced.
+        times : (k,) ndarray
+            Uniform grid ``t_0, t_0 + h, ...``.
+        scheme : str, optional
+            Default: the model's ``scheme``. Without a potential one precomputed
+            (2r, 2r) step matrix (:func:`hamiltonian_step_matrix`); with one,
+            :func:`femrom.integrators.integrate_canonical` (``"midpoint"``, ``"avf"``).
+
+        Returns
+        -------
+        HamiltonianSolution
+            Unpacks as ``(q, p, hamiltonian)``.
+        """
+        scheme = self.scheme if scheme is None else scheme
+        ops = self._ops()
         times = np.asarray(times, dtype=float)
+        if times.ndim != 1 or times.size < 2:
+            raise ValueError("times must be a 1-d grid of at least two points")
         h = float(times[1] - times[0])
-        r = self.operators_.r
+        if not h > 0 or not np.allclose(np.diff(times), h, rtol=1e-9, atol=0.0):
+            raise ValueError("times must be uniformly spaced and increasing")
+        q0, p0 = self._initial(q0, "q0"), self._initial(p0, "p0")
+        r, n_steps = ops.r, times.size - 1
+        info = {"scheme": scheme, "dt": h, "n_steps": n_steps}
+        tic = time.perf_counter()
         if self.potential_ is not None:
             if scheme not in CANONICAL_SCHEMES:
                 raise ValueError(f"scheme {scheme!r} needs a separable Hamiltonian; with a potential "
                                  f"coupling q and p use one of {CANONICAL_SCHEMES}")
-            tr = integrate_canonical(self.system_, q0, p0, h, times.size - 1, scheme, self.newton)
+            tr = integrate_canonical(self.system_, q0, p0, h, n_steps, scheme, self.newton)
             self.last_trajectory_ = tr
-            return tr.q, tr.p, tr.hamiltonian
-        S = hamiltonian_step_matrix(self.operators_, h, scheme)
-        X = run_linear(S, np.concatenate([q0, p0]), times.size - 1, None)
-        Q, P = X[:r], X[r:]
-        return Q, P, self.operators_.hamiltonian(Q, P)
+            Q, P, H = tr.q, tr.p, tr.hamiltonian
+            info.update(stepping_seconds=tr.seconds, newton_iterations=int(tr.iterations.sum()))
+        else:
+            if scheme not in _LINEAR_SCHEMES:
+                raise ValueError(f"unknown Hamiltonian scheme {scheme!r}; valid: {_LINEAR_SCHEMES}")
+            S = hamiltonian_step_matrix(ops, h, scheme)
+            step_tic = time.perf_counter()
+            X = run_linear(S, np.concatenate([q0, p0]), n_steps, None)
+            info["stepping_seconds"] = time.perf_counter() - step_tic
+            Q, P = X[:r], X[r:]
+            H = ops.hamiltonian(Q, P)
+        info["seconds"] = time.perf_counter() - tic
+        info["seconds_per_step"] = info["stepping_seconds"] / max(n_steps, 1)
+        return HamiltonianSolution(t=times, q=Q, p=P, hamiltonian=H, outputs=self.outputs(Q, P),
+                                   basis=self.basis, info=info)
+
+    # -- storage -------------------------------------------------------------
+    def save(self, path, *, include_basis: bool = True) -> None:
+        """Write operators, output map, optional basis, scheme, Newton tolerances and metadata to HDF5.
+
+        A known potential is code, not data: the file records its class and,
+        for a dataclass with plain fields (e.g. ``QuarticPotential(gamma)``),
+        its parameters; :meth:`load` needs it passed again and checks it
+        against that record.
+        """
+        import h5py
+
+        ops = self._ops()
+        if self.potential is not None and not (include_basis and self.basis is not None):
+            raise ValueError("a model with a known potential evaluates it through the basis: "
+                             "save it with include_basis=True")
+        with h5py.File(path, "w") as f:
+            f.attrs["format"] = "femrom.HamiltonianROM"
+            f.attrs["version"] = 1
+            f.attrs["scheme"] = self.scheme
+            f.attrs["newton"] = json.dumps(dataclasses.asdict(self.newton))
+            f.attrs["potential"] = json.dumps(None if self.potential is None
+                                              else _describe_potential(self.potential))
+            f.attrs["metadata"] = json.dumps(_jsonable(self.metadata_))
+            g = f.create_group("operators")
+            g.create_dataset("position", data=ops.position)
+            g.create_dataset("momentum", data=ops.momentum)
+            if self.output_matrix_ is not None:
+                g.create_dataset("output_matrix", data=self.output_matrix_)
+            if include_basis and self.basis is not None:
+                f.create_dataset("basis", data=self.basis, compression="gzip")
+
+    @classmethod
+    def load(cls, path, *, potential=None, newton: Newton | None = None) -> "HamiltonianROM":
+        """Read a model written by :meth:`save`.
+
+        Parameters
+        ----------
+        path : str or Path
+        potential : object, optional
+            The known ``H_nl``: required when the saved model had one (it is
+            checked against the stored class and parameters), refused when it
+            had none.
+        newton : Newton, optional
+            Replaces the saved tolerances.
+        """
+        import h5py
+
+        with h5py.File(path, "r") as f:
+            if f.attrs.get("format") != "femrom.HamiltonianROM":
+                raise ValueError(f"{path} is not a femrom HamiltonianROM file")
+            g = f["operators"]
+            ops = HamiltonianOperators(position=g["position"][()], momentum=g["momentum"][()])
+            E = g["output_matrix"][()] if "output_matrix" in g else None
+            basis = f["basis"][()] if "basis" in f else None
+            scheme = str(f.attrs["scheme"])
+            saved_newton = Newton(**json.loads(f.attrs["newton"]))
+            stored = json.loads(f.attrs["potential"])
+            metadata = json.loads(f.attrs["metadata"])
+        if stored is not None and potential is None:
+            raise ValueError(f"{path} holds a model with a known potential ({stored['repr']}), "
+                             "which cannot be stored: pass potential=...")
+        if stored is None and potential is not None:
+            raise ValueError(f"{path} holds a model without a potential, but potential was given")
+        if stored is not None:
+            given = _describe_potential(potential)
+            if given["class"] != stored["class"] or (
+                    stored["parameters"] is not None and given["parameters"] != stored["parameters"]):
+                raise ValueError(f"potential {given['repr']} does not match the saved "
+                                 f"{stored['repr']}")
+        rom = cls(ops, basis, potential, saved_newton if newton is None else newton,
+                  output_matrix=E, scheme=scheme)
+        rom.metadata_ = metadata
+        return rom
+
+
+def _describe_potential(potential) -> dict:
+    """``{"class", "parameters", "repr"}`` of a potential: what of it a file can hold.
+
+    ``parameters`` are the fields of a dataclass when all are plain numbers,
+    strings or arrays (JSON), else ``None``.
+    """
+    cls = type(potential)
+    parameters = None
+    if dataclasses.is_dataclass(potential) and not isinstance(potential, type):
+        try:
+            parameters = json.loads(json.dumps(
+                {f.name: _plain(getattr(potential, f.name)) for f in dataclasses.fields(potential)}))
+        except TypeError:
+            parameters = None
+    return {"class": f"{cls.__module__}.{cls.__qualname__}", "parameters": parameters,
+            "repr": repr(potential)[:200]}
+
+
+def _plain(value):
+    if isinstance(value, np.ndarray) and value.dtype.kind in "biuf":
+        return value.tolist()
+    if isinstance(value, (np.floating, np.integer, np.bool_)):
+        return value.item()
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    if isinstance(value, (str, int, float, bool)) or value is None:
+        return value
+    raise TypeError(f"{type(value).__name__} is not plain data")
+
+
+def _cotangent_lift(basis) -> np.ndarray:
+    V = np.asarray(basis, dtype=float)
+    if V.ndim != 2:
+        raise ValueError(f"basis must be (n, r), got shape {V.shape}")
+    error = float(np.max(np.abs(V.T @ V - np.eye(V.shape[1]))))
+    if error > _ORTHONORMALITY:
+        raise ValueError(f"basis is not orthonormal (max |Phi^T Phi - I| = {error:.2g}): "
+                         "a cotangent lift needs Phi^T Phi = I")
+    return V
