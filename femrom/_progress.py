@@ -1,8 +1,19 @@
-"""Progress of long loops: a live line on a terminal, silence in logs and CI.
+"""Progress of long work: a live line on a terminal, silence in logs and CI.
 
-Used by every layer that runs long work (mesh generation, assembly, time
-stepping). Shows steps done, steps per second and the estimated time left on
-``stderr`` when it is a TTY and ``CI`` is not set; otherwise prints nothing.
+Two reports, both on ``stderr`` and only when it is a TTY and neither ``CI``
+nor ``FEMROM_NO_PROGRESS`` is set (otherwise they print nothing):
+
+- :class:`Progress`, for loops of counted steps: steps done, steps per second
+  and the estimated time left. Used by the time integrators (one unit per
+  step: :func:`femrom.integrators.iterate`) and the randomized SVD (one unit
+  per pass over the snapshots).
+- :class:`Stage`, for one long call that has no steps to count: a line
+  ``label ...`` when it starts and ``label: done in m:ss`` when it ends. Used
+  by mesh generation (:func:`femrom.mesh.generate_mesh`, only when gmsh
+  actually runs, not on a cache hit: the large solid beam mesh takes about a
+  minute) and by scene assembly (:func:`femrom.scene.build`: 6-10 s for the
+  stiffness and 15-41 s for the whole benchmark system at 5e5 dofs,
+  ``benchmarks/results/fom_ladder.json``).
 """
 
 from __future__ import annotations
@@ -57,7 +68,7 @@ class Progress:
         rate = self.done / elapsed
         left = (self.total - self.done) / rate if rate > 0 else float("inf")
         self.stream.write(
-            f"\r{self.label}: {self.done}/{self.total}  {rate:,.0f}/s  "
+            f"\r{self.label}: {self.done}/{self.total}  {_format_rate(rate)}/s  "
             f"{_format_seconds(left)} left   "
         )
         self.stream.flush()
@@ -76,6 +87,49 @@ class Progress:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+class Stage:
+    """One-line report of a single long call: ``label ...``, then ``label: done in m:ss``.
+
+    Use as a context manager; an exception leaving the block ends the line
+    with ``failed after m:ss`` instead (and is not swallowed).
+
+    Parameters
+    ----------
+    label : str
+        What is being done.
+    enabled : bool or None
+        Force on or off; ``None`` decides from the stream (TTY and not CI).
+    stream : text stream, optional
+        Default ``sys.stderr``.
+    """
+
+    def __init__(self, label: str, *, enabled: bool | None = None,
+                 stream: TextIO | None = None):
+        self.label = label
+        self.stream = stream if stream is not None else sys.stderr
+        self.enabled = _interactive(self.stream) if enabled is None else enabled
+        self._start = 0.0
+
+    def __enter__(self) -> "Stage":
+        self._start = time.perf_counter()
+        if self.enabled:
+            self.stream.write(f"{self.label} ...")
+            self.stream.flush()
+        return self
+
+    def __exit__(self, exc_type, *exc) -> None:
+        if self.enabled:
+            elapsed = _format_seconds(time.perf_counter() - self._start)
+            outcome = f"failed after {elapsed}" if exc_type is not None else f"done in {elapsed}"
+            self.stream.write(f"\r{self.label}: {outcome}\n")
+            self.stream.flush()
+
+
+def _format_rate(rate: float) -> str:
+    """Steps per second: three significant digits below 100 (``0.63``), whole numbers above."""
+    return f"{rate:,.0f}" if rate >= 100 else f"{rate:.3g}"
 
 
 def _format_seconds(seconds: float) -> str:

@@ -19,6 +19,7 @@ from femrom.integrators import (
     OutputRecorder,
     StepResult,
     Trajectory,
+    bound_max_frequency,
     estimate_max_frequency,
     integrate,
     iterate,
@@ -281,6 +282,64 @@ def test_central_difference_refuses_an_unstable_step():
         iterate(system, CentralDifference(), q0, v0, 1.01 * 2 / omega_max, 10)
     run = iterate(system, CentralDifference(), q0, v0, 0.99 * 2 / omega_max, 10)
     assert run.summary().details["stability_bound"] == pytest.approx(2 / omega_max, rel=1e-3)
+
+
+def clustered_chain(n: int = 400):
+    """Uniform springs, masses in [1, 1.01]: the top eigenvalues cluster (spacing ~1e-5),
+    so Lanczos at rtol 1e-3 stops visibly below lambda_max, while Gershgorin is loose (1.9e-3)."""
+    m = 1.0 + 0.01 * np.random.default_rng(1).random(n)
+    K = sp.diags([2.0 * np.ones(n), -np.ones(n - 1), -np.ones(n - 1)], [0, 1, -1], format="csr")
+    return SecondOrderSystem(mass=sp.diags(m, format="csr"), stiffness=K)
+
+
+def test_central_difference_refuses_a_step_just_above_the_true_bound():
+    system = clustered_chain()  # 400 dofs: above the dense cutoff, Lanczos runs
+    exact = np.sqrt(sla.eigh(system.stiffness.toarray(), system.mass.toarray(),
+                             eigvals_only=True)[-1])
+    true_bound = 2.0 / exact
+    omega = bound_max_frequency(system.stiffness, system.mass)
+    assert omega.method == "ritz residual"
+    assert omega.estimate <= exact <= omega.upper  # Ritz value below, residual bound above
+    # 1e-5 past the true bound (dense eigensolve: exact to ~1e-15). The Lanczos estimate
+    # alone is 7.7e-5 low here, so 2 / estimate would have let this step through:
+    dt = true_bound * (1.0 + 1e-5)
+    assert 2.0 / omega.estimate > dt
+    q0, v0 = initial_state(400)
+    with pytest.raises(ValueError, match=r"^dt = .* exceeds the central-difference stability "
+                                         r"bound 2/omega_max = \d\.\d+ \(omega_max <= "):
+        iterate(system, CentralDifference(), q0, v0, dt, 10)
+    # The margin is what the tolerance allows: ARPACK stops at ||r|| <= rtol theta (rtol 1e-3),
+    # so the checked bound is at most a factor 1/sqrt(1 + rtol) below the true one
+    # (measured 3.4e-4 below); a step 0.1 % under the true bound still runs.
+    run = iterate(system, CentralDifference(), q0, v0, 0.999 * true_bound, 10)
+    details = run.summary().details
+    assert true_bound / np.sqrt(1.0 + 1e-3) <= details["stability_bound"] <= true_bound
+    assert details["omega_max"] <= exact <= details["omega_max_upper"]
+    assert len(list(run)) == 11
+
+
+def test_max_frequency_upper_bounds_hold_on_every_path(monkeypatch):
+    M, K = chain_matrices(200)
+    # a consistent (non-diagonal) mass: residual in the M^-1 norm
+    M_consistent = (M + 0.1 * sp.diags([np.full(199, 0.1)] * 2, [1, -1])).tocsr()
+    exact = np.sqrt(sla.eigh(K.toarray(), M_consistent.toarray(), eigvals_only=True)[-1])
+    omega = bound_max_frequency(K, M_consistent)
+    assert omega.method == "ritz residual"
+    assert omega.estimate <= exact <= omega.upper <= exact * np.sqrt(1.0 + 1e-3)
+    # ARPACK gives up without a Ritz value: Gershgorin's bound of D^-1/2 K D^-1/2 stands alone
+    import scipy.sparse.linalg as spla
+    from femrom.integrators import _stability
+
+    def no_convergence(*args, **kwargs):
+        raise spla.ArpackNoConvergence("no convergence", np.empty(0), np.empty((200, 0)))
+
+    monkeypatch.setattr(_stability.spla, "eigsh", no_convergence)
+    exact = np.sqrt(sla.eigh(K.toarray(), M.toarray(), eigvals_only=True)[-1])
+    omega = bound_max_frequency(K, M)
+    scaled = np.diag(1.0 / np.sqrt(M.diagonal())) @ K.toarray() @ np.diag(1.0 / np.sqrt(M.diagonal()))
+    assert omega.method == "gershgorin"
+    assert omega.upper == pytest.approx(np.sqrt(np.abs(scaled).sum(axis=1).max()), rel=1e-14)
+    assert omega.upper >= exact
 
 
 def test_central_difference_needs_a_diagonal_mass():

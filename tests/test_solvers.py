@@ -76,6 +76,22 @@ def test_auto_reports_its_choice(monkeypatch):
     assert choose_strategy(A) == "amg-cg"
 
 
+def test_auto_decides_by_size_and_availability_not_dimension(monkeypatch):
+    # the documented rule (module docstring, "Size, not dimension"): a 1D chain and a 3D
+    # elasticity matrix of the same size get the same strategy, whatever is installed
+    K3, _ = clamped_elasticity(3)
+    n = K3.shape[0]
+    K1 = sp.diags([2.0 * np.ones(n), -np.ones(n - 1), -np.ones(n - 1)], [0, 1, -1], format="csr")
+    available = {}
+    monkeypatch.setattr(_solvers, "is_available", lambda s: available.get(s, True))
+    for small, direct, expected in [(n + 1, n + 1, "superlu"), (n, n, "pardiso"),
+                                    (n, n + 1, "cholmod"), (n, n, "amg-cg")]:
+        monkeypatch.setattr(_solvers, "AUTO_SMALL", small)
+        monkeypatch.setattr(_solvers, "AUTO_DIRECT_THRESHOLD", direct)
+        available.update(pardiso=expected == "pardiso", cholmod=expected == "cholmod")
+        assert choose_strategy(K1) == choose_strategy(K3) == expected
+
+
 def test_superlu_refuses_large_problems(monkeypatch):
     monkeypatch.setattr(_solvers, "SUPERLU_MAX_DOFS", 50)
     with pytest.raises(ValueError, match="superlu is limited to 50 dofs"):

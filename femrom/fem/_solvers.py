@@ -29,15 +29,36 @@ Strategies
     rigid-body modes for elasticity); GMRES when ``spd=False``. The caller
     passes a warm start ``x0`` (e.g. the previous step's solution).
 ``"auto"``
-    :func:`choose_strategy`: ``"diagonal"`` for a diagonal matrix;
-    ``"superlu"`` below :data:`AUTO_SMALL` dofs; otherwise ``"pardiso"`` if
-    importable, else ``"cholmod"`` (SPD only) if importable, else
-    ``"superlu"`` below :data:`AUTO_DIRECT_THRESHOLD` dofs, else ``"amg-cg"``.
+    :func:`choose_strategy`, by the matrix alone (diagonal or not, and its
+    size): ``"diagonal"`` for a diagonal matrix; ``"superlu"`` below
+    :data:`AUTO_SMALL` dofs; otherwise ``"pardiso"`` if importable, else
+    ``"cholmod"`` (SPD only) if importable, else ``"superlu"`` below
+    :data:`AUTO_DIRECT_THRESHOLD` dofs, else ``"amg-cg"``. ``"jacobi-cg"`` is
+    never chosen automatically: ask for it (the fishtail case does, for its
+    consistent mass).
 
-Measured here (3D P1 elasticity, clamped bar, 2 shared cores): at 3.5e3 dofs
-SuperLU factorises in 0.08 s and PARDISO in 0.06 s; at 1.45e4 dofs SuperLU
-takes 2.4 s and PARDISO 0.43 s, so PARDISO is preferred as soon as the
-problem is not tiny.
+Size, not dimension
+-------------------
+The rule looks at the size only, not at whether the problem is 1D, 2D or 3D
+(a matrix does not say). It uses SuperLU only for small problems, whatever
+their dimension, so it keeps to "SuperLU only for small or 1D/2D problems";
+it does not extend SuperLU to large 1D/2D problems, where a dimension hint
+from the scene would be needed and PARDISO, when installed, is a direct
+solver as well. The measurements behind it are 3D elasticity
+(``docs/benchmarks.md``, sections 3 and 4b): at 2e4 dofs SuperLU and PARDISO
+take the same time per step (0.015-0.022 s) and SuperLU sets up 2-3.5x slower;
+at 1e5 dofs one SuperLU factorisation takes 17.8 s and 1.7 GB (P1) or 31.4 s
+and 2.3 GB (P2), 12-15x PARDISO's fresh factorisation. SuperLU on large 1D or
+2D problems was not measured. Where a dimension hint would matter (no PARDISO
+and no CHOLMOD, a 1D/2D problem above :data:`AUTO_DIRECT_THRESHOLD` dofs),
+pass ``"superlu"`` explicitly (up to :data:`SUPERLU_MAX_DOFS`).
+
+Measured here (3D P1 elasticity, clamped bar, 2 shared cores, a spot check
+not kept in ``benchmarks/results``): at 3.5e3 dofs SuperLU factorises in
+0.08 s and PARDISO in 0.06 s; at 1.45e4 dofs SuperLU takes 2.4 s and PARDISO
+0.43 s. The ladder (``benchmarks/results/fom_ladder.json``) gives 0.55-0.84 s
+against 0.16-0.24 s at 2e4 dofs: PARDISO is preferred as soon as the problem
+is not tiny.
 """
 
 from __future__ import annotations
@@ -60,7 +81,10 @@ STRATEGIES = ("auto", "diagonal", "superlu", "pardiso", "cholmod", "amg-cg", "ja
 #: and locating and initialising MKL (about a second, once) is not worth it.
 AUTO_SMALL = 5_000
 #: Without PARDISO or CHOLMOD, ``"auto"`` still uses SuperLU below this size
-#: and switches to AMG-preconditioned CG above it.
+#: and switches to AMG-preconditioned CG above it. Not backed by the ladder:
+#: at 20,262 dofs (just above) SuperLU stepped 16x faster than AMG-CG (0.021 s
+#: against 0.334 s, docs/benchmarks.md section 3); sizes between 2e4 and 6e4
+#: were not measured.
 AUTO_DIRECT_THRESHOLD = 20_000
 #: SuperLU refuses larger matrices. The project notes report 269 s and 15 GB at
 #: 1.37e5 dofs of 3D elasticity; measured here with scipy 1.17 (COLAMD): 17.8 s,
@@ -378,7 +402,11 @@ def _is_diagonal(A) -> bool:
 
 
 def choose_strategy(A, *, spd: bool = True) -> str:
-    """The concrete strategy ``"auto"`` picks for ``A`` (see the module docstring)."""
+    """The concrete strategy ``"auto"`` picks for ``A``: by size and availability only.
+
+    Whether ``A`` is diagonal, its number of rows, and which packages import;
+    never the spatial dimension (module docstring, "Size, not dimension").
+    """
     if _is_diagonal(A):
         return "diagonal"
     n = A.shape[0]

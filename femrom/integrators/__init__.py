@@ -43,7 +43,7 @@ from femrom.fem import (
     make_solver,
 )
 from femrom.integrators._simulate import SimulationResult, scheme_for, simulate
-from femrom.integrators._stability import estimate_max_frequency
+from femrom.integrators._stability import MaxFrequency, bound_max_frequency, estimate_max_frequency
 
 __all__ = [
     "CANONICAL_SCHEMES",
@@ -62,6 +62,7 @@ __all__ = [
     "IntegrationSummary",
     "LinearSolver",
     "LinearSolverError",
+    "MaxFrequency",
     "Newmark",
     "NewmarkAverageAcceleration",
     "Newton",
@@ -69,6 +70,7 @@ __all__ = [
     "SimulationResult",
     "StepResult",
     "Trajectory",
+    "bound_max_frequency",
     "choose_strategy",
     "estimate_max_frequency",
     "integrate",

@@ -15,6 +15,7 @@ from pathlib import Path
 
 import gmsh
 
+from femrom._progress import Stage
 from femrom.mesh._errors import MeshError
 from femrom.mesh._geometry import declared_parameters, find_geometry, source_files
 
@@ -33,7 +34,7 @@ def default_cache_dir() -> Path:
 
 def generate_mesh(geometry: str | os.PathLike, parameters: Mapping[str, float] | None = None,
                   *, cache_dir: str | os.PathLike | None = None, force: bool = False,
-                  verbose: bool = False) -> Path:
+                  verbose: bool = False, progress: bool | None = None) -> Path:
     """Mesh a parametric Gmsh geometry, or reuse the cached mesh of the same inputs.
 
     The ``.geo`` file is parsed with each given parameter pre-set, so that its
@@ -55,6 +56,10 @@ def generate_mesh(geometry: str | os.PathLike, parameters: Mapping[str, float] |
         Regenerate even when the cached file exists.
     verbose : bool
         Let gmsh print its log on the terminal.
+    progress : bool or None
+        A one-line stage report on stderr while gmsh runs (``meshing <name>
+        (<parameters>) ...``, then ``done in m:ss``); nothing on a cache hit.
+        ``None``: only on an interactive terminal outside CI.
 
     Returns
     -------
@@ -74,7 +79,10 @@ def generate_mesh(geometry: str | os.PathLike, parameters: Mapping[str, float] |
     if target.is_file() and not force:
         return target
     directory.mkdir(parents=True, exist_ok=True)
-    with _GMSH_LOCK:
+    label = f"meshing {geo.stem}"
+    if values:
+        label += " (" + ", ".join(f"{name}={value:g}" for name, value in values.items()) + ")"
+    with _GMSH_LOCK, Stage(label, enabled=progress):
         _run_gmsh(geo, values, target, verbose)
     return target
 

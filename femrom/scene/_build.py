@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import time
 from dataclasses import dataclass, field
 
@@ -9,6 +10,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from femrom import fem
+from femrom._progress import Stage
 from femrom.fem import Condensation, LocalPotential
 from femrom.mesh import build_mesh
 from femrom.scene._config import Scene
@@ -32,6 +34,67 @@ class FullOrderModel:
     @property
     def times(self) -> np.ndarray:
         return self.scene.time.dt * np.arange(self.scene.time.n_steps + 1)
+
+
+def _assemble(scene: Scene, mesh, names, stiffness_effect: str, timings: dict):
+    """The system of the listed effects on ``mesh``; fills ``timings`` per stage."""
+    with _timed(timings, "space"):
+        space = make_space(scene, mesh)
+        condensation = _condensation(scene, space)
+
+    material = scene.material
+    with _timed(timings, "stiffness"):
+        stiffness = condensation.matrix(space.stiffness(stiffness_effect, material))
+
+    mass_kind = scene.effect("inertia").option("mass")
+    if mass_kind not in ("consistent", "lumped"):
+        raise SceneError("[effects.inertia] mass must be 'consistent' or 'lumped'")
+    with _timed(timings, "mass"):
+        mass = condensation.matrix(space.mass(material, lumped=mass_kind == "lumped"))
+
+    damping = None
+    if "damping" in names:
+        with _timed(timings, "damping"):
+            damping = _damping(scene.effect("damping"), mass, stiffness)
+
+    input_matrix = inputs = None
+    if "actuation" in names:
+        with _timed(timings, "inputs"):
+            columns = [condensation.vector(sum(space.load_vector(load) for load in i.loads))
+                       for i in scene.inputs]
+            input_matrix = np.column_stack(columns)
+            inputs = _SignalVector(tuple(i.signal for i in scene.inputs))
+
+    nonlinear = None
+    if "nonlinear_potential" in names:
+        nonlinear = _nonlinear_potential(scene.effect("nonlinear_potential"), space, condensation)
+
+    output_matrix = None
+    output_names = ()
+    if scene.outputs.probes:
+        with _timed(timings, "outputs"):
+            rows = [condensation.columns(space.output_row(p)) for p in scene.outputs.probes]
+            output_matrix = sp.vstack(rows).tocsr()
+            output_names = tuple(p.name for p in scene.outputs.probes)
+
+    system = SecondOrderSystem(
+        mass=mass, stiffness=stiffness, damping=damping,
+        input_matrix=input_matrix, inputs=inputs,
+        output_matrix=output_matrix, nonlinear=nonlinear,
+        condensation=condensation, output_names=output_names,
+        metadata={"scene": scene.name, "effects": names, "n_total": space.n_total,
+                  "n_free": condensation.n_free, "element": scene.structure.element},
+    )
+    with _timed(timings, "initial_conditions"):
+        q0, v0 = _initial_state(scene, space, system)
+    return system, space, q0, v0
+
+
+@contextlib.contextmanager
+def _timed(timings: dict, name: str):
+    tic = time.perf_counter()
+    yield
+    timings[name] = time.perf_counter() - tic
 
 
 def make_space(scene: Scene, mesh):
@@ -65,68 +128,12 @@ def build(scene: Scene, *, mesh=None) -> FullOrderModel:
     if len(stiffness_effects) != 1:
         raise SceneError(f"list exactly one stiffness effect of {', '.join(STIFFNESS_EFFECTS)}; got {stiffness_effects}")
 
-    tic = time.perf_counter()
-    if mesh is None:
-        mesh = build_mesh(scene.structure.geometry, dict(scene.structure.parameters))
-    timings["mesh"] = time.perf_counter() - tic
-
-    tic = time.perf_counter()
-    space = make_space(scene, mesh)
-    condensation = _condensation(scene, space)
-    timings["space"] = time.perf_counter() - tic
-
-    material = scene.material
-    tic = time.perf_counter()
-    stiffness_full = space.stiffness(stiffness_effects[0], material)
-    stiffness = condensation.matrix(stiffness_full)
-    timings["stiffness"] = time.perf_counter() - tic
-
-    tic = time.perf_counter()
-    lumped = scene.effect("inertia").option("mass") == "lumped"
-    if scene.effect("inertia").option("mass") not in ("consistent", "lumped"):
-        raise SceneError("[effects.inertia] mass must be 'consistent' or 'lumped'")
-    mass = condensation.matrix(space.mass(material, lumped=lumped))
-    timings["mass"] = time.perf_counter() - tic
-
-    damping = None
-    if "damping" in names:
-        tic = time.perf_counter()
-        damping = _damping(scene.effect("damping"), mass, stiffness)
-        timings["damping"] = time.perf_counter() - tic
-
-    input_matrix = inputs = None
-    if "actuation" in names:
-        tic = time.perf_counter()
-        columns = [condensation.vector(sum(space.load_vector(load) for load in i.loads)) for i in scene.inputs]
-        input_matrix = np.column_stack(columns)
-        signals = tuple(i.signal for i in scene.inputs)
-        inputs = _SignalVector(signals)
-        timings["inputs"] = time.perf_counter() - tic
-
-    nonlinear = None
-    if "nonlinear_potential" in names:
-        nonlinear = _nonlinear_potential(scene.effect("nonlinear_potential"), space, condensation)
-
-    output_matrix = None
-    output_names = ()
-    if scene.outputs.probes:
-        tic = time.perf_counter()
-        rows = [condensation.columns(space.output_row(p)) for p in scene.outputs.probes]
-        output_matrix = sp.vstack(rows).tocsr()
-        output_names = tuple(p.name for p in scene.outputs.probes)
-        timings["outputs"] = time.perf_counter() - tic
-
-    system = SecondOrderSystem(
-        mass=mass, stiffness=stiffness, damping=damping,
-        input_matrix=input_matrix, inputs=inputs,
-        output_matrix=output_matrix, nonlinear=nonlinear,
-        condensation=condensation, output_names=output_names,
-        metadata={"scene": scene.name, "effects": names, "n_total": space.n_total,
-                  "n_free": condensation.n_free, "element": scene.structure.element},
-    )
-    tic = time.perf_counter()
-    q0, v0 = _initial_state(scene, space, system)
-    timings["initial_conditions"] = time.perf_counter() - tic
+    with _timed(timings, "mesh"):
+        if mesh is None:
+            mesh = build_mesh(scene.structure.geometry, dict(scene.structure.parameters))
+    # assembly takes seconds to tens of seconds at 1e5-1e6 dofs: one line on a terminal
+    with Stage(f"{scene.name}: assembling {', '.join(names)}"):
+        system, space, q0, v0 = _assemble(scene, mesh, names, stiffness_effects[0], timings)
     return FullOrderModel(scene, system, space, q0, v0, timings)
 
 
