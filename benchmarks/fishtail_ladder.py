@@ -22,8 +22,8 @@ subprocess of its own (so that its peak memory is its own):
 
 Run from the repository root::
 
-    python benchmarks/fishtail_ladder.py --levels small                  # ~2 min
-    python benchmarks/fishtail_ladder.py --levels small medium large     # ~1 h on a quiet machine
+    python benchmarks/fishtail_ladder.py --levels small                  # ~20 s
+    python benchmarks/fishtail_ladder.py --levels small medium large     # ~13 min (large: 11 min, 12.4 GB)
 
 Results: ``benchmarks/results/fishtail_ladder.json`` (levels merged into the
 existing file) and a table on stdout; the discussion is in docs/cases/fishtail.md.
@@ -138,7 +138,7 @@ def main(argv=None) -> int:
     parser.add_argument("--steps", type=int, default=150, help="Newmark steps of 1 ms per run")
     parser.add_argument("--ranks", type=int, nargs="+", default=[4, 8, 12])
     parser.add_argument("--store-dir", default=tempfile.gettempdir(),
-                        help="where the snapshot stores go (the large level needs ~17 GB)")
+                        help="where the snapshot stores go (the large level: 5.2 GB at 150 steps)")
     parser.add_argument("--svd-power", type=int, default=2, help="power iterations of the randomized SVD")
     parser.add_argument("--memory-limit-gb", type=float, default=20.0)
     parser.add_argument("--out", type=Path, default=RESULTS)

@@ -31,8 +31,8 @@ two chambers driven antagonistically by one pressure input (``fishtail.toml``;
    with ``keep_snapshots``, ``snapshots.h5``.
 
 Every level runs the same way, up to the papers' size (``--level large``,
-7.6e5 dofs: about 12 GB of memory for the factor, 2.7 GB of snapshots per
-field and run on disk; ``benchmarks/fishtail_ladder.py`` runs the ladder).
+7.6e5 dofs: about 12.4 GB of memory, mostly the factor, and 0.9 GB of snapshots
+per field, run and 150 steps on disk; ``benchmarks/fishtail_ladder.py`` runs the ladder).
 
 Run ``python -m femrom run fishtail [--out DIR] [--quick] [--level small]``;
 tests import :func:`run`.

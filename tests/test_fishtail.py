@@ -8,6 +8,8 @@ configuration (see each assertion) and are stated with their margin.
 from __future__ import annotations
 
 import json
+import os
+import subprocess
 import sys
 from pathlib import Path
 
@@ -147,6 +149,11 @@ def test_pipeline_writes_its_report(pipeline):
     saved = json.loads((out / "metrics.json").read_text())
     assert saved["n_dofs"] == metrics["n_dofs"] > 1000
     assert saved["train"] == "sigmoid" and saved["test"] == "step"
+    from femrom.post import render_available
+
+    if render_available()[0]:        # where it cannot draw, the case says why and skips the PNG
+        assert (out / "render.png").stat().st_size > 0
+        assert metrics["renders"]["render"] == "render.png"
     pvd = (out / "paraview" / "fishtail.pvd").read_text()
     assert pvd.count("<DataSet") == len(list((out / "paraview").glob("fishtail_*.vtu"))) > 5
     assert "| r | learner |" in (out / "report.md").read_text()
@@ -224,11 +231,12 @@ def test_rom_output_error_on_the_unseen_step_input(pipeline):
     # Measured on this configuration at r = 4: Galerkin 1.77e-3, L-OpInf 1.75e-3 (field
     # errors 2.7e-3 and 2.6e-3; training output error 3.6e-5). Bound: about twice the
     # measured value (timing-independent; a different gmsh may move the tiny mesh), and
-    # L-OpInf within 25 % (+1e-3) of the intrusive ROM in the same basis. (With the step
+    # L-OpInf within 25 % of the intrusive ROM in the same basis. (With the step
     # on a grid point, a rounding shift of the input by one step gave 5.7e-2 for every
     # ROM: the check that caught it is the Galerkin ROM's error in its own training basis.)
     assert lop["test_output_error"] < 4e-3
-    assert lop["test_output_error"] < 1.25 * gal["test_output_error"] + 1e-3
+    # measured 0.99 of Galerkin's; 25 % leaves room for a gmsh or BLAS that moves the mesh
+    assert lop["test_output_error"] < 1.25 * gal["test_output_error"]
     # it is learned, and it learned the training data far better than it generalises
     assert lop["train_output_error"] < 0.2 * lop["test_output_error"]
     # fewer modes, larger error on the unseen input: r = 2 measured 1.6e-2
@@ -262,6 +270,8 @@ def test_render_is_a_non_blank_image_of_the_requested_size(tmp_path, tiny_model)
 
     ok, reason = render_available()
     if not ok:
+        if os.environ.get("FEMROM_REQUIRE_RENDER"):      # set by .ci/run: a missing EGL fails
+            pytest.fail(f"FEMROM_REQUIRE_RENDER is set but PyVista cannot render: {reason}")
         pytest.skip(f"PyVista cannot render off-screen here: {reason}")
     import matplotlib.image
 
@@ -281,3 +291,70 @@ def test_render_is_a_non_blank_image_of_the_requested_size(tmp_path, tiny_model)
     assert 0.05 < 1 - background.mean() < 0.95
     colours = np.unique((image[..., :3].reshape(-1, 3) * 255).round(), axis=0)
     assert len(colours) > 50
+
+
+# -- the main job: README's first command, small level -------------------------------------
+@pytest.fixture(scope="module")
+def main_job(tmp_path_factory):
+    """``python3 -m femrom run fishtail`` as the README runs it (small level, 2e4 dofs,
+    300 steps, ladders and renders on; 70 s on a quiet machine), in a subprocess."""
+    out = tmp_path_factory.mktemp("main_job")
+    done = subprocess.run([sys.executable, "-m", "femrom", "run", "fishtail", "--out", str(out)],
+                          capture_output=True, text=True, cwd=ROOT, timeout=1800)
+    assert done.returncode == 0, done.stderr[-2000:]
+    return out, done.stdout, json.loads((out / "metrics.json").read_text())
+
+
+def test_main_job_runs_the_small_fishtail_end_to_end(main_job):
+    out, stdout, metrics = main_job
+    assert f"report: {out / 'report.md'}" in stdout       # it says where the report is
+    assert metrics["level"] == "small" and 1.5e4 < metrics["n_dofs"] < 2.5e4  # "about 2e4"
+    for name in ("report.md", "response.png", "rom_error.png", "energy.png", "accuracy_cost_r.png",
+                 "accuracy_cost_dt.png", "accuracy_cost_mesh.png", "scene.toml",
+                 "paraview/fishtail.pvd"):
+        assert (out / name).stat().st_size > 0, name
+    if "render" in metrics["renders"]:
+        assert (out / "render.png").stat().st_size > 0
+    elif os.environ.get("FEMROM_REQUIRE_RENDER"):
+        pytest.fail(f"no render in the main job: {metrics['renders']}")
+    assert not (out / "snapshots.h5").exists()            # streamed, scored, deleted
+    # Newmark is second order: the dt ladder against dt = 1 ms (measured 1.98)
+    assert 1.8 < metrics["time_step_ladder"][0]["observed_order"] < 2.2
+
+
+def test_main_job_lopinf_predicts_the_unseen_step_and_stays_stable(main_job):
+    """The seed's claim on femrom's own fishtail: trained on the sigmoid, L-OpInf predicts
+    the step. Measured (2026-11-23): output error 2.7e-3, 1.5e-3, 1.4e-3, 5.3e-4 at r = 4, 6,
+    8, 12; field error 7.0e-4 at r = 12; Galerkin 2.8e-5 at r = 12."""
+    _, _, metrics = main_job
+    rows = {(x["r"], x["learner"]): x for x in metrics["roms"]}
+    ranks = sorted({r for r, _ in rows})
+    lop = {r: rows[r, "lopinf"] for r in ranks}
+    # about 3x the measured value: a different gmsh or BLAS moves the mesh and the
+    # round-off, not the order of magnitude
+    assert lop[12]["test_output_error"] < 1.5e-3 and lop[12]["test_field_error"] < 2e-3
+    assert lop[12]["test_output_error"] < 0.5 * lop[4]["test_output_error"]   # more modes help
+    for r in ranks:
+        for learner in ("lopinf", "lopinf_fd"):
+            row = rows[r, learner]
+            assert row["stiffness_symmetric"] and row["stiffness_min_eig"] > 0, (r, learner)
+            assert row["damping_min_eig"] > -1e-10, (r, learner)
+            # 10 windows under the held step: a stable damped model settles below the
+            # FOM's overshoot peak or near it (measured 0.10-1.014)
+            assert float(row["test_energy_ratio"]) < 1.5, (r, learner)   # JSON writes inf as "inf"
+    # what plain OpInf does on the same data, asserted as observed (docs/cases/fishtail.md):
+    # unstable at some r (r = 8 from the stored derivatives: energy 2e123; from finite
+    # differences at r >= 6). If this stops, the page's comparison must be rewritten.
+    blowups = [r for r in ranks for learner in ("opinf", "opinf_fd")
+               if not float(rows[r, learner]["test_energy_ratio"]) < 1e3]   # JSON: "inf"
+    assert blowups, "plain OpInf stayed stable at every r: update docs/cases/fishtail.md"
+
+
+def test_main_job_reverse_direction(main_job):
+    """Trained on the step, tested on the sigmoid (measured: Galerkin 1.3e-6, L-OpInf
+    1.1e-4 at r = 12; L-OpInf 4.3e-2 at r = 4, which the page reports as a miss)."""
+    _, _, metrics = main_job
+    rows = {(x["r"], x["learner"]): x for x in metrics["roms_reverse"]}
+    assert rows[12, "galerkin"]["test_output_error"] < 1e-5
+    assert rows[12, "lopinf"]["test_output_error"] < 1e-3      # ~10x the measured 1.1e-4
+    assert all(np.isfinite(float(rows[r, "lopinf"]["test_energy_ratio"])) for r, _ in rows)
