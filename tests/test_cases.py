@@ -49,12 +49,38 @@ def _rows(metrics, study, method):
     return {row["r"]: row for row in metrics[study]["rows"] if row["method"] == method}
 
 
+def _report_tables(text: str) -> list[list[dict]]:
+    """Every markdown table of a report, as rows of {column: cell}."""
+    tables, header = [], None
+    for line in text.splitlines() + [""]:
+        if not line.startswith("|"):
+            header = None
+            continue
+        cells = [c.strip() for c in line.strip().strip("|").split("|")]
+        if header is None:
+            header = cells
+            tables.append([])
+        elif not set(line) <= set("|-"):
+            tables[-1].append(dict(zip(header, cells)))
+    return tables
+
+
 def test_beam_case_writes_its_rom_report(beam_metrics):
-    _, out = beam_metrics
+    metrics, out = beam_metrics
     for name in ("rom_state_error.png", "rom_energy_error.png", "rom_tip_end.png", "accuracy_cost_rom.png",
                  "coarse_rom_state_error.png", "coarse_accuracy_cost_rom.png"):
         assert (out / name).stat().st_size > 0, name
-    assert "L-OpInf" in (out / "report.md").read_text() or "lopinf" in (out / "report.md").read_text()
+    # the report's two ROM tables hold one row per (method, r) of each study, in order, with the
+    # test errors of metrics.json (printed to 4 digits: rel 1e-3)
+    tables = [t for t in _report_tables((out / "report.md").read_text()) if t and "test_error" in t[0]]
+    assert len(tables) == 2
+    for table, study in zip(tables, ("rom", "rom_coarse_data")):
+        rows = metrics[study]["rows"]
+        assert [(t["method"], int(t["r"])) for t in table] == [(row["method"], row["r"]) for row in rows]
+        assert {row["method"] for row in rows} == {"galerkin", "lopinf", "plain_opinf"}
+        for t, row in zip(table, rows):
+            if np.isfinite(row["test_error"]):
+                assert float(t["test_error"]) == pytest.approx(row["test_error"], rel=1e-3), (study, t)
 
 
 def test_beam_lopinf_energy_error_stays_bounded_over_20_training_windows(beam_metrics):
@@ -72,7 +98,12 @@ def test_beam_lopinf_energy_error_stays_bounded_over_20_training_windows(beam_me
     for r, row in _rows(metrics, "rom", "lopinf").items():
         # the Galerkin ROM conserves its energy exactly: its FOM-energy error is the energy of the
         # initial state the basis misses (4.6e-3 at r = 2). L-OpInf adds what its small learned
-        # damping dissipates over 20 windows: observed at most 3.3e-4 more; 1e-3 allows load-free noise
+        # damping dissipates over 20 windows: observed 3.3e-4, 1.1e-4, 2.6e-4 more (r = 2, 4, 6).
+        # The run is deterministic, so 1e-3 (3x the largest excess) is not room for noise: it is
+        # the size of error a wrong model makes. A K^ whose scale is off by 0.1 % alone moves the
+        # FOM energy of the ROM state by up to 1e-3 E0 (released from rest, the ROM keeps its own
+        # energy, which differs from the FOM's by that fraction of the potential energy); the
+        # coarse data's dissipation is 7.6e-2
         assert row["energy_error_max"] <= gal[r]["energy_error_max"] + 1e-3, (r, row["energy_error_max"])
     for r, row in _rows(metrics, "rom_coarse_data", "lopinf").items():
         # coarse data (dt = 4e-4): wrong accelerations of the high modes are fitted as damping, the
@@ -87,13 +118,20 @@ def test_beam_rom_state_error_against_the_projection_error(beam_metrics):
         # (observed ratio 1.00-1.006)
         assert row["test_error"] <= 1.05 * row["projection_error"], (r, row)
     for r, row in _rows(metrics, "rom", "lopinf").items():
-        if row["projection_error"] >= 3e-4:
-            # where the basis dominates (r = 2, 4): within 10x the projection error (observed 1.03, 8.2)
-            assert row["test_error"] <= 10 * row["projection_error"], (r, row)
-        # beyond, a floor: the learned K^ reproduces the *discrete* Newmark frequencies of the data
-        # (relative shift (omega dt)^2 / 12), and the ROM's Newmark adds the same shift again; for
-        # mode 2 at dt = 1e-4 that is 2.9e-3 over 2 s (observed 2.86e-3 to 2.88e-3 for r = 4, 6)
-        assert row["test_error"] <= 4e-3, (r, row)
+        # L-OpInf at every r against the projection error combined with d(r), the a priori phase
+        # error of a model that learned the data's *discrete* Newmark frequencies exactly and is
+        # stepped by Newmark once more (cases/beam.py: dispersion_error; no fitted constant).
+        # The ratio to the projection error alone runs from 1.03 (r = 2) to 33 (r = 6); the ratio
+        # to sqrt(projection^2 + d^2) is 0.999-1.000 here (0.998-1.002 for r = 2..12 in the
+        # default run). 5 %: a uniform relative error of 3e-5 in the learned frequencies already
+        # moves the error by 11 % (mode 2 carries 2.5 % of ||q|| and turns through 660 rad over
+        # 2 s), so the test fails for any K^ that is not the data's own; the lower side fails if
+        # the floor stops being the derivative data's time discretisation (then update the page)
+        ratio = row["test_error"] / row["predicted_learned_error"]
+        assert 0.95 < ratio < 1.05, (r, ratio, row["test_error"], row["projection_error"], row["dispersion_error"])
+    # the floor is real: at r = 6 the dispersion, not the basis, sets the error
+    assert _rows(metrics, "rom", "lopinf")[6]["dispersion_error"] > 10 * _rows(metrics, "rom", "lopinf")[6][
+        "projection_error"]
 
 
 def test_beam_plain_opinf_is_harmless_on_fine_data_and_blows_up_on_coarse_data(beam_metrics):
@@ -112,6 +150,10 @@ def test_beam_plain_opinf_is_harmless_on_fine_data_and_blows_up_on_coarse_data(b
     # coarse data (dt = 4e-4): at r = 8 plain OpInf's negative damping (observed -970) blows up
     # within the first training window (observed at 0.09 s), L-OpInf stays finite
     assert coarse_plain[8]["blowup_time"] is not None and coarse_plain[8]["blowup_time"] < 0.2
+    # ... and still useful: observed test error 7.2e-2. Mode 1 carries 99.97 % of ||q||, so the
+    # error is mostly its phase drift, ~ omega_1 |delta| t_rms with t_rms ~ 1.2 s over the test
+    # window; 0.2 (2.8x the observed) bounds the learned first frequency to ~0.3 % of
+    # omega_1 = 52.5 rad/s, where a model that is merely finite could be off by O(1)
     assert coarse_lop[8]["blowup_time"] is None and coarse_lop[8]["test_error"] < 0.2
 
 
