@@ -274,8 +274,9 @@ def fit_roms(system, data_all, basis, r: int, *, order: int = 4, regularization:
             roms[name] = SecondOrderROM.galerkin(system, V, product=M, mass_orthonormal=True)
         else:
             learner = LagrangianOpInf if name.startswith("lopinf") else SecondOrderOpInf
-            roms[name] = SecondOrderROM(basis=V, product=M, learner=learner(
-                damping=True, regularization=regularization)).fit(
+            # the terms of the scene's effects: C^ (Rayleigh damping) and B^ (actuation)
+            roms[name] = SecondOrderROM(basis=V, product=M, learner=learner.for_system(
+                system, regularization=regularization)).fit(
                 data["fd" if name.endswith("_fd") else "stored"])
         seconds[name] = time.perf_counter() - tic
     return {"roms": roms, "fit_seconds": seconds, "data": data}

@@ -258,8 +258,9 @@ def run(out_dir, *, quick: bool = False, paper: bool = False, study: SineGordonS
             if method == "galerkin":
                 rom = SecondOrderROM.galerkin(system, V, product=M, mass_orthonormal=True)
             elif method in ("lopinf", "plain_opinf"):
-                learner = (LagrangianOpInf if method == "lopinf" else SecondOrderOpInf)(
-                    damping=False, nonlinear=projected)
+                # the scene's effects: no damping, the known sin(q) force projected
+                learner = (LagrangianOpInf if method == "lopinf" else SecondOrderOpInf).for_system(
+                    system, V)
                 rom = SecondOrderROM(learner=learner, basis=V, product=M).fit(data)
                 if method == "lopinf":
                     learned = rom

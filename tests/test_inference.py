@@ -605,3 +605,27 @@ def test_interior_point_converges_when_the_gram_matrix_is_numerically_singular(s
     for name in ("CLARABEL", "SCS"):
         X_ref, _ = solve_conic(problem, name)
         assert info["objective"] <= problem.objective(X_ref) * (1 + 1e-8), name
+
+
+def test_learner_terms_follow_the_scene_effects(beam):
+    """``for_system`` fits exactly the terms of the system's effects: no ``C^`` for an
+    undamped system, a projected known force when it has a nonlinear effect."""
+    from femrom.fem import LocalPotential
+
+    M, K, w, Phi = beam
+    undamped = SecondOrderSystem(mass=M, stiffness=K)
+    damped = SecondOrderSystem(mass=M, stiffness=K, damping=rayleigh_damping(M, K, 0.1, 1e-4))
+    assert LagrangianOpInf.for_system(undamped).damping is False
+    learner = SecondOrderOpInf.for_system(damped, regularization=1e-6)
+    assert learner.damping is True and learner.nonlinear is None
+    n = M.shape[0]
+    potential = LocalPotential(np.ones(n), lambda q: 1 - np.cos(q), np.sin, np.cos)
+    nonlinear = SecondOrderSystem(mass=M, stiffness=K, nonlinear=potential)
+    V = Phi[:, :3]
+    learner = LagrangianOpInf.for_system(nonlinear, V)
+    q = np.linspace(0.0, 0.3, 3)
+    np.testing.assert_allclose(learner.nonlinear.force(q), V.T @ np.sin(V @ q), rtol=1e-14)
+    with pytest.raises(ValueError, match="needs the basis"):
+        LagrangianOpInf.for_system(nonlinear)
+    with pytest.raises(TypeError, match="from the system's effects"):
+        LagrangianOpInf.for_system(damped, damping=False)

@@ -111,6 +111,39 @@ class _SecondOrderLearner:
         self.stiffness_margin = float(stiffness_margin)
         self.solver_options = dict(solver_options or {})
 
+    @classmethod
+    def for_system(cls, system, basis: np.ndarray | None = None, **options):
+        """A learner with exactly the terms of ``system``'s effects.
+
+        ``C^`` only when the system has damping; the projected known nonlinear
+        force ``V^T f_nl(V q)`` only when it has a nonlinear effect (then
+        ``basis`` is needed); ``B^`` follows the data's inputs as always. Only
+        which effects exist is read, never the operators' values (the learner
+        stays nonintrusive).
+
+        Parameters
+        ----------
+        system : SecondOrderSystem
+            Or a built scene (anything with a ``system`` attribute).
+        basis : (n, r) ndarray, optional
+        **options
+            The other constructor arguments (``regularization``, ``solver``, ...).
+        """
+        from femrom.inference._operators import ProjectedNonlinearForce
+
+        system = getattr(system, "system", system)
+        for name in ("damping", "nonlinear"):
+            if name in options:
+                raise TypeError(f"for_system sets {name!r} from the system's effects; "
+                                f"use {cls.__name__}(...) to choose it by hand")
+        nonlinear = None
+        if system.nonlinear is not None:
+            if basis is None:
+                raise ValueError("the system has a nonlinear effect: for_system needs the basis "
+                                 "to project its known force")
+            nonlinear = ProjectedNonlinearForce(system.nonlinear, basis)
+        return cls(damping=system.damping is not None, nonlinear=nonlinear, **options)
+
     # -- the regression --------------------------------------------------
     def _target(self, data: SecondOrderData) -> np.ndarray:
         Y = data.accelerations if self.mass is None else self.mass @ data.accelerations
