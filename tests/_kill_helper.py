@@ -5,6 +5,10 @@ store, prints ``ready`` once the writer exists, then integrates to the end
 (unless it is killed). Imported by ``tests/test_snapshots.py``, it builds the
 very same systems for the uninterrupted reference run and for ``resume``.
 
+``python tests/_kill_helper.py layout STORE MOMENT`` instead SIGKILLs itself
+at one moment of making a store or adding a trajectory to it, before the
+file is in SWMR mode (:func:`kill_while_changing_layout`).
+
 Kinds
 -----
 ``scene``
@@ -20,6 +24,8 @@ Kinds
 
 from __future__ import annotations
 
+import os
+import signal
 import sys
 import tomllib
 
@@ -71,6 +77,8 @@ STATEFUL_DOFS = 12
 STATEFUL_DT = 0.02
 STATEFUL_STEPS = 450
 STATEFUL_CHUNK = 3
+#: The store the ``layout`` kills act on: one stateful trajectory of this many steps.
+LAYOUT_STEPS = 20
 
 
 def scene_model():
@@ -157,5 +165,54 @@ def run(kind: str, path, *, announce: bool = False) -> None:
     store.close()
 
 
+def layout_store(path, *, trajectories: int = 1):
+    """A stateful store holding ``trajectories`` complete runs of :data:`LAYOUT_STEPS` steps."""
+    system = stateful_system()
+    store = SnapshotStore.create(path, system, fields=("q", "v", "a"), scheme=Newmark(),
+                                 dt=STATEFUL_DT, n_steps=LAYOUT_STEPS, overwrite=True)
+    for _ in range(trajectories):
+        integrate(system, Newmark(), *stateful_initial_state(), STATEFUL_DT, LAYOUT_STEPS,
+                  consumers=[store.writer(chunk_steps=STATEFUL_CHUNK)], progress=False)
+    return store
+
+
+def _sigkill(*args, **kwargs):
+    os.kill(os.getpid(), signal.SIGKILL)
+
+
+def kill_while_changing_layout(path, moment: str) -> None:
+    """SIGKILL this process at ``moment`` while a store is made or a trajectory added to one.
+
+    ``"create"``: while :meth:`SnapshotStore.create` writes a new store, just
+    before it is renamed into place. ``"write:N"``: just before the N-th write
+    (1-based) of the undo-journaled change that adds a second trajectory to a
+    store holding one (:func:`layout_store`). ``"reopen"``: after that change
+    is committed, before the file is reopened in SWMR mode.
+    """
+    from femrom.snapshots import _format, _journal
+
+    if moment == "create":
+        os.replace = _sigkill
+        layout_store(path)
+    elif moment.startswith("write:"):
+        store = layout_store(path)
+        kill_at, write = int(moment.split(":")[1]), _journal.UndoJournalFile.write
+
+        def write_or_die(self, data):
+            if self.writes + 1 == kill_at:
+                _sigkill()
+            return write(self, data)
+
+        _journal.UndoJournalFile.write = write_or_die
+        store.writer(chunk_steps=STATEFUL_CHUNK)
+    elif moment == "reopen":
+        store = layout_store(path)
+        _format.open_swmr_writer = _sigkill
+        store.writer(chunk_steps=STATEFUL_CHUNK)
+    raise SystemExit(f"no kill at {moment!r}; valid: create, write:N (N <= the writes), reopen")
+
+
 if __name__ == "__main__":
+    if sys.argv[1] == "layout":
+        kill_while_changing_layout(sys.argv[2], sys.argv[3])
     run(sys.argv[1], sys.argv[2], announce=True)

@@ -358,13 +358,23 @@ def test_sketch_as_integrator_consumer():
 # -- dask ---------------------------------------------------------------------------
 
 def test_dask_agrees_with_in_memory(geometric, tmp_path):
-    r = 10
+    r, p, q = 10, 10, 2
     exact_u, exact_s, _ = np.linalg.svd(geometric, full_matrices=False)
     memory = randomized_svd(geometric, r)
     dask_result = randomized_svd_dask(geometric, r, chunks=(500, 125), scheduler="synchronous")
     # Same algorithm family (q = 2, p = 10): both converge to round-off on this spectrum.
     assert np.max(np.abs(dask_result.s - memory.s) / memory.s) < 1e-9
-    assert np.linalg.norm(dask_result.U @ (dask_result.U.T @ exact_u[:, :r]) - exact_u[:, :r]) < 1e-4
+    # svd_compressed spans (A A^T)^q A Omega: the exact u_j (j <= r) lies outside that
+    # range by sin theta_j <= C gamma_j^(2q+1), gamma_j = sigma_{k+1} / sigma_j (Saibaba,
+    # SIMAX 40(1), 2019, Thm. 1, split at the sketch size k = r + p), C = ||Omega_2 Omega_1^+||
+    # a Gaussian factor. Measured here: errors_j / gamma_j^(2q+1) = 3-7, subspace distances
+    # 3.1e-6 - 1.9e-5 over seeds 0-5 (seed 0: 1.9e-5). The Frobenius sum over the r
+    # vectors with C = 20: 20 * 4.95e-6 = 9.9e-5, the former "< 1e-4".
+    gamma = GEOMETRIC[r + p] / GEOMETRIC[:r]
+    predicted = np.sqrt(np.sum(gamma ** (2 * (2 * q + 1))))
+    assert predicted == pytest.approx(4.95e-6, rel=0.01)
+    distance = np.linalg.norm(dask_result.U @ (dask_result.U.T @ exact_u[:, :r]) - exact_u[:, :r])
+    assert distance < 20 * predicted
     assert dask_result.total_energy == pytest.approx(memory.total_energy, rel=1e-12)
     path = tmp_path / "snapshots.h5"
     with h5py.File(path, "w") as file:
@@ -375,19 +385,185 @@ def test_dask_agrees_with_in_memory(geometric, tmp_path):
     weighted = randomized_svd_dask(geometric, r, product=weights, scheduler="synchronous")
     assert np.abs(weighted.U.T @ (weights[:, None] * weighted.U) - np.eye(r)).max() < 1e-12
     assert np.allclose(weighted.s, randomized_svd(geometric, r, product=weights).s, rtol=1e-9)
-    with pytest.raises(NotImplementedError, match="sparse"):
-        randomized_svd_dask(geometric, r, product=sp.identity(N, format="csr"))
     with pytest.raises(KeyError, match="no dataset"):
         randomized_svd_dask(path, r, dataset="v")
+    with pytest.raises(ValueError, match="scheduler_address"):
+        randomized_svd_dask(geometric, r, scheduler="tcp://127.0.0.1:8786")
 
 
-def test_dask_on_a_local_cluster(geometric, tmp_path):
+def test_dask_with_a_consistent_mass_equals_the_out_of_core_svd():
+    # A sparse W runs femrom's pass-efficient range finder with one dask computation per
+    # pass and the same Omega as randomized_svd: the same arithmetic up to the order of
+    # the block sums, so round-off (measured 3e-15).
+    rng = np.random.default_rng(5)
+    n, k_cols, r = 800, 200, 12
+    a = synthetic(0.7 ** np.arange(k_cols), n=n)
+    h = rng.uniform(0.1, 3.0, n + 1)
+    consistent = sp.diags([h[1:-1] / 6, (h[:-1] + h[1:]) / 3, h[1:-1] / 6], [-1, 0, 1]).tocsr()
+    reference = randomized_svd(a, r, product=consistent)
+    result = randomized_svd_dask(a, r, product=consistent, chunks=(400, 60), scheduler="synchronous")
+    assert result.passes == 4 and result.method == "dask-pass-efficient"
+    assert np.max(np.abs(result.s - reference.s) / reference.s) < 1e-12
+    # W-orthonormality to 1e-12: CholQR2 after Householder, as in randomized_svd.
+    assert np.abs(result.U.T @ (consistent @ result.U) - np.eye(r)).max() < 1e-12
+    w_distance = result.U @ (result.U.T @ (consistent @ reference.U)) - reference.U
+    assert np.linalg.norm(w_distance) < 1e-10  # sigma_12 / sigma_13 = 1/0.7: well separated
+    assert result.total_energy == pytest.approx(reference.total_energy, rel=1e-12)
+
+
+# -- dask on a snapshot store -----------------------------------------------------------
+
+STORE_DOFS, STORE_MODES, STORE_CHUNK = 120, 6, 16
+
+
+@pytest.fixture(scope="module")
+def chain_store(tmp_path_factory):
+    """A store of two Newmark runs of a spring chain, written by the real writer.
+
+    Both runs start in the span of the chain's first six modes (different amplitudes,
+    one with a velocity), and a linear scheme keeps them there: the concatenated
+    snapshot matrix has rank 6 up to round-off. 151 and 188 snapshots in chunks of 16
+    (partial last chunks); trajectory 000 then gets 9 rows of NaN past its declared
+    length, as a killed writer leaves: nothing may read them.
+    """
+    from femrom.integrators import Newmark, integrate
+    from femrom.scene import SecondOrderSystem
+    from femrom.snapshots import SnapshotStore
+
+    n = STORE_DOFS
+    stiffness = 1e3 * sp.diags([2.0 * np.ones(n), -np.ones(n - 1), -np.ones(n - 1)], [0, 1, -1],
+                               format="csr")
+    system = SecondOrderSystem(mass=sp.identity(n, format="csr"), stiffness=stiffness)
+    j = np.arange(1, n + 1)
+    modes = np.sqrt(2 / (n + 1)) * np.sin(np.pi * np.outer(j, np.arange(1, STORE_MODES + 1)) / (n + 1))
+    path = tmp_path_factory.mktemp("store") / "chain.h5"
+    store = SnapshotStore.create(path, system, fields=("q", "v"), scheme=Newmark(), dt=2e-3,
+                                 n_steps=150)
+    for q0, v0, steps in ((modes @ 0.5 ** np.arange(6), np.zeros(n), 150),
+                          (modes @ (-0.3) ** np.arange(6), modes @ np.ones(6), 187)):
+        integrate(system, Newmark(), q0, v0, 2e-3, steps,
+                  consumers=[store.writer(chunk_steps=STORE_CHUNK)])
+    matrix = np.hstack([store.read(name, "q") for name in store.trajectories])
+    store.close()
+    with h5py.File(path, "r+") as file:
+        q = file["trajectories/000/q"]
+        q.resize(q.shape[0] + 9, axis=0)
+        q[-9:] = np.nan
+    return path, matrix
+
+
+def test_dask_array_of_a_store_is_the_concatenated_snapshot_matrix(chain_store):
+    from femrom.linalg import as_dask_array
+    from femrom.snapshots import SnapshotStore
+
+    path, matrix = chain_store
+    assert matrix.shape == (STORE_DOFS, 151 + 188)
+    array = as_dask_array(path, field="displacement", block_columns=40)  # 40 -> 3 chunks = 48
+    # columns [X_000 | X_001], committed rows only (the NaN rows past the length are not read)
+    assert array.shape == matrix.shape and array.chunks[0] == (STORE_DOFS,)
+    assert array.chunks[1] == (48, 48, 48, 7, 48, 48, 48, 44)  # never across trajectories
+    assert np.array_equal(array.compute(scheduler="synchronous"), matrix)
+    with SnapshotStore.open(path) as store:
+        velocity = as_dask_array(store, field="v", trajectories=[1]).compute(scheduler="synchronous")
+        assert np.array_equal(velocity, store.read(1, "v"))
+
+
+def test_dask_svd_of_a_store_agrees_with_the_in_memory_svd(chain_store):
+    path, matrix = chain_store
+    r = 4
+    exact_u, exact_s, exact_vt = np.linalg.svd(matrix, full_matrices=False)
+    # The data have rank 6 (fixture): sigma_7 / sigma_1 = 3e-16 measured, so the sketch of
+    # k = r + p = 14 >= 6 columns spans range(A) and every method is exact up to round-off.
+    assert exact_s[STORE_MODES] < 1e-14 * exact_s[0]
+    result = randomized_svd_dask(path, r, field="displacement", block_columns=40,
+                                 scheduler="synchronous")
+    memory = randomized_svd(matrix, r)
+    # Round-off of the sketch's QR and products, ~eps sigma_1, relative to sigma_r
+    # (sigma_4 / sigma_1 = 6.5e-3): ~3e-14; 1e-12 leaves 30x (measured 9e-16).
+    for reference in (exact_s[:r], memory.s):
+        assert np.max(np.abs(result.s - reference) / reference) < 1e-12
+    # Subspace distance to the exact top-r left singular vectors: Wedin, ~eps sigma_1 /
+    # (sigma_4 - sigma_5) = 5e-14; 1e-10 (measured 9e-15). A transposed read would fail
+    # on the shapes already.
+    distance = result.U @ (result.U.T @ exact_u[:, :r]) - exact_u[:, :r]
+    assert np.linalg.norm(distance) < 1e-10
+    # The right factor: the columns in the store's order, trajectory 000 then 001 (a
+    # swapped or shifted concatenation changes the rank-r reconstruction by O(1)).
+    best = (exact_u[:, :r] * exact_s[:r]) @ exact_vt[:r]
+    assert np.linalg.norm((result.U * result.s) @ result.Vt - best) < 1e-12 * np.linalg.norm(matrix)
+    assert result.n_columns == 339
+    assert result.total_energy == pytest.approx(np.sum(matrix**2), rel=1e-12)
+    # The consistent-mass path on the same store (a W with a coupling off-diagonal).
+    mass = sp.diags([np.full(STORE_DOFS - 1, 0.1), np.linspace(1.0, 2.0, STORE_DOFS),
+                     np.full(STORE_DOFS - 1, 0.1)], [-1, 0, 1]).tocsr()
+    weighted = randomized_svd_dask(path, r, field="q", product=mass, scheduler="synchronous")
+    assert np.allclose(weighted.s, randomized_svd(matrix, r, product=mass).s, rtol=1e-12, atol=0)
+    assert np.abs(weighted.U.T @ (mass @ weighted.U) - np.eye(r)).max() < 1e-12
+
+
+def test_dask_on_a_store_refuses_wrong_fields_and_foreign_files(chain_store, tmp_path):
+    from femrom.snapshots import SnapshotStoreError
+
+    path, _ = chain_store
+    with pytest.raises(SnapshotStoreError, match=r"no field 'acceleration'; stored: q, v "
+                                                 r"\(displacement, velocity\)$"):
+        randomized_svd_dask(path, 3, field="acceleration", scheduler="synchronous")
+    with pytest.raises(SnapshotStoreError, match="no field 'pressure'"):
+        randomized_svd_dask(path, 3, field="pressure", scheduler="synchronous")
+    with pytest.raises(SnapshotStoreError, match="no trajectory '002'"):
+        randomized_svd_dask(path, 3, field="q", trajectories=[2], scheduler="synchronous")
+    # a store's (K, n) dataset read as a plain (n, K) one would be the transpose: refused
+    with pytest.raises(ValueError, match="is a femrom snapshot store.*give field="):
+        randomized_svd_dask(path, 3, dataset="trajectories/000/q", scheduler="synchronous")
+    foreign = tmp_path / "foreign.h5"
+    with h5py.File(foreign, "w") as file:
+        file.create_dataset("q", data=np.ones((STORE_DOFS, 20)))
+    with pytest.raises(SnapshotStoreError, match="not a femrom snapshot store") as info:
+        randomized_svd_dask(foreign, 3, field="displacement", scheduler="synchronous")
+    assert str(foreign) in str(info.value) and "\n" not in str(info.value)
+    text = tmp_path / "notes.h5"
+    text.write_text("not HDF5")
+    with pytest.raises(SnapshotStoreError, match="not an HDF5 file"):
+        randomized_svd_dask(text, 3, field="q", scheduler="synchronous")
+
+
+def _failing_read(*args):
+    raise OSError("disk gone")
+
+
+def test_dask_default_local_cluster_is_closed_and_an_address_is_used(chain_store, monkeypatch):
     distributed = pytest.importorskip("distributed")
-    path = tmp_path / "snapshots.h5"
-    with h5py.File(path, "w") as file:
-        file.create_dataset("q", data=geometric[:, :200])
-    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
-                                  dashboard_address=None) as cluster:
-        by_address = randomized_svd_dask(path, 5, dataset="q", scheduler=cluster.scheduler_address)
-    reference = randomized_svd(geometric[:, :200], 5)
-    assert np.max(np.abs(by_address.s - reference.s) / reference.s) < 1e-9
+    from femrom.linalg import _dask
+
+    path, matrix = chain_store
+    reference = randomized_svd(matrix, 3)
+    started = []
+
+    class RecordedCluster(distributed.LocalCluster):
+        def __init__(self, **options):
+            super().__init__(**options)
+            started.append(self)
+
+    own = distributed.LocalCluster  # the test's own cluster is not femrom's
+    monkeypatch.setattr(distributed, "LocalCluster", RecordedCluster)
+    by_default = randomized_svd_dask(path, 3, field="q")  # scheduler=None: a LocalCluster
+    assert len(started) == 1 and started[0].status.name == "closed"
+    assert not started[0].processes  # the light default: one in-process worker
+    # Only the method's algorithm differs from the in-memory one here: round-off (see above).
+    assert np.max(np.abs(by_default.s - reference.s) / reference.s) < 1e-12
+    with monkeypatch.context() as patch:  # a failing task: the error comes out, the cluster closes
+        patch.setattr(_dask, "_read_store_rows", _failing_read)
+        with pytest.raises(OSError, match="disk gone"):
+            randomized_svd_dask(path, 3, field="q")
+    assert len(started) == 2 and started[1].status.name == "closed"
+    randomized_svd_dask(matrix, 3)  # an in-memory array: threads, no cluster
+    assert len(started) == 2
+
+    with own(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None) as cluster:
+        by_address = randomized_svd_dask(path, 3, field="q",
+                                         scheduler_address=cluster.scheduler_address)
+        assert cluster.status.name == "running"  # somebody else's cluster is left running
+        with distributed.Client(cluster):  # an active client is used, no cluster started
+            randomized_svd_dask(path, 3, field="q")
+    assert len(started) == 2
+    assert np.max(np.abs(by_address.s - reference.s) / reference.s) < 1e-12

@@ -1,10 +1,12 @@
 """Snapshot store: round trip, metadata, block reads, resume, SIGKILL at random moments,
 and one clear error for every kind of bad file."""
 
+import dataclasses
 import datetime
 import importlib.util
 import os
 import re
+import shutil
 import signal
 import subprocess
 import sys
@@ -34,7 +36,7 @@ from femrom.snapshots import (
     SnapshotStoreError,
     resume,
 )
-from femrom.snapshots import _format, _store, _writer
+from femrom.snapshots import _format, _journal, _store, _writer
 from femrom.snapshots._superblock import lookup3, read_superblock
 
 REPO = Path(__file__).resolve().parents[1]
@@ -297,8 +299,10 @@ def _kill_once(kind, path, delay):
         process.stdout.close()
 
 
+# Five kills each by default (4 s per kind here: a child starts in ~0.5 s, the scene's
+# 1000 steps run in 0.25 s); thirty on the stateful chain with -m slow.
 @pytest.mark.parametrize("kind, kills", [
-    ("stateful", 5), ("scene", 2),
+    ("stateful", 5), ("scene", 5),
     pytest.param("stateful", 30, marks=pytest.mark.slow, id="stateful-30-slow"),
 ])
 def test_sigkill_at_random_moments_keeps_chunks_and_resumes_bit_identically(tmp_path, kind, kills):
@@ -359,6 +363,230 @@ def test_sigkill_at_random_moments_keeps_chunks_and_resumes_bit_identically(tmp_
     reference.close()
     print(f"{kind}: kills landed at committed chunks {landed} of {total // chunk}")
     assert len(landed) == kills
+
+
+# -- kills while the layout changes (before SWMR mode) ------------------------------
+def _copy_as_killed(path, destination, *, journal_cut=0, torn=None):
+    """Copy the files a SIGKILL at this moment would leave (the store and its journal).
+
+    The journal names the file it protects by device and inode: the copy's are
+    written in. ``journal_cut``: bytes cut off the journal (killed while appending a
+    record). ``torn``: ``(offset, data)`` written into the copy (an overwrite cut short).
+    """
+    shutil.copyfile(path, destination)
+    journal = _journal.journal_path(path)
+    if journal.exists():
+        data = bytearray(journal.read_bytes())
+        header = _journal._HEADER
+        if len(data) >= header.size:
+            fields = list(header.unpack_from(data))
+            fields[4:6] = destination.stat().st_dev, destination.stat().st_ino
+            data[:header.size] = header.pack(*fields)
+        _journal.journal_path(destination).write_bytes(bytes(data[:len(data) - journal_cut]))
+    if torn is not None:
+        with open(destination, "r+b") as fh:
+            fh.seek(torn[0])
+            fh.write(torn[1])
+
+
+def _watch_layout_change(patch, path, folder):
+    """Copy the files as a kill would leave them at every moment of a journaled change.
+
+    Moments: before each write; for a write over old bytes also after its record is
+    journaled, with that record cut short, and with the overwrite half done; before a
+    truncation; after the HDF5 file is closed but before the journal is deleted.
+    Returns the copies in order and counts: ``writes`` and ``journaled`` (writes over
+    old bytes) per change.
+    """
+    copies, counts = [], SimpleNamespace(writes=[], journaled=0)
+    journal_class = _journal.UndoJournalFile
+    write, save, truncate, commit = (journal_class.write, journal_class._save,
+                                     journal_class.truncate, journal_class.commit)
+
+    def copy(**how):
+        copies.append(folder / f"killed_{len(copies)}.h5")
+        _copy_as_killed(path, copies[-1], **how)
+
+    def watched_write(self, data):
+        copy()
+        self.pending = bytes(data)
+        return write(self, data)
+
+    def watched_save(self, start, stop):
+        save(self, start, stop)
+        if stop > start and getattr(self, "pending", None) is not None:
+            counts.journaled += 1
+            copy()
+            copy(journal_cut=5)
+            copy(torn=(start, self.pending[:len(self.pending) // 2]))
+            self.pending = None
+
+    def watched_truncate(self, size=None):
+        copy()
+        return truncate(self, size)
+
+    def watched_commit(self):
+        copy()
+        counts.writes.append(self.writes)
+        return commit(self)
+
+    patch.setattr(journal_class, "write", watched_write)
+    patch.setattr(journal_class, "_save", watched_save)
+    patch.setattr(journal_class, "truncate", watched_truncate)
+    patch.setattr(journal_class, "commit", watched_commit)
+    return copies, counts
+
+
+@pytest.mark.parametrize("change", ["add", "resume"])
+def test_a_kill_anywhere_in_a_layout_change_leaves_the_store_as_before(tmp_path, change):
+    # Adding a trajectory (or trimming one for resume) happens outside SWMR mode, where
+    # HDF5 rewrites existing metadata in place and in no set order. Every moment of it
+    # is copied as a kill would leave it; each copy must open as the store was before,
+    # byte for byte (the undo journal rolled back), and the change must then succeed.
+    system = helper.stateful_system()
+    folder = tmp_path / "killed"
+    folder.mkdir()
+    if change == "add":
+        reference = helper.layout_store(tmp_path / "reference.h5", trajectories=2)
+        path = tmp_path / "store.h5"
+        helper.layout_store(path).close()
+        before = {"000": 21}
+    else:
+        _run_stopped_at(tmp_path / "reference.h5", system, -1)
+        reference = SnapshotStore.open(tmp_path / "reference.h5")
+        path = tmp_path / "stopped.h5"
+        # stopped after 4 of the 7 row writes of the 4th chunk: q, v, a, u hold 12 rows,
+        # 9 are declared; resume trims them back to 9 under the journal
+        _run_stopped_at(path, system, 11 + 3 * 18 + 4)
+        with h5py.File(path, "r") as f:
+            assert f["trajectories/000/q"].shape[0] == 12
+        before = {"000": 9}
+
+    original = path.read_bytes()
+    with pytest.MonkeyPatch.context() as patch:
+        copies, counts = _watch_layout_change(patch, path, folder)
+        if change == "add":
+            SnapshotStore.open(path, system=system).writer(chunk_steps=3).close()
+        else:
+            with patch.context() as stop:  # the change only: resume up to the SWMR reopen
+                stop.setattr(_format, "open_swmr_writer", lambda p: (_ for _ in ()).throw(_Stop))
+                with pytest.raises(_Stop):
+                    resume(path, system, Newmark())
+    # one change, which rewrote old bytes (what a kill could tear), watched at every write
+    assert len(counts.writes) == 1 and counts.journaled >= 5
+    torn_states = 0
+    for index, copy in enumerate(copies):
+        unrolled = copy.with_name("unrolled_" + copy.name)
+        shutil.copyfile(copy, unrolled)  # the same files without their journal
+        try:
+            with SnapshotStore.open(unrolled) as bare:
+                intact = all(bare.length(name) == length and _rows_equal(bare, reference, name)
+                             for name, length in before.items())
+        except SnapshotStoreError:
+            intact = False
+        torn_states += not intact
+        store = SnapshotStore.open(copy, system=system)  # rolls back
+        assert not _journal.journal_path(copy).exists()
+        assert store.trajectories == tuple(before)
+        for name, length in before.items():
+            assert store.length(name) == length and _rows_equal(store, reference, name)
+        assert copy.read_bytes() == original
+        if index not in (0, len(copies) // 2, len(copies) - 1):  # the same bytes: finish a few
+            store.close()
+            continue
+        if change == "add":
+            integrate(system, Newmark(), *helper.stateful_initial_state(), helper.STATEFUL_DT,
+                      helper.LAYOUT_STEPS, consumers=[store.writer(chunk_steps=3)])
+            assert store.length(1) == 21 and _rows_equal(store, reference, 1)
+            store.close()
+        else:
+            store.close()
+            resume(copy, system, Newmark())
+            with SnapshotStore.open(copy) as finished:
+                assert finished.length(0) == 18 and _rows_equal(finished, reference, 0)
+    # without its journal, many copies taken mid-change are unreadable or wrong: the
+    # journal is what keeps these states safe (so this test fails without it)
+    assert torn_states >= 1
+    reference.close()
+    print(f"{change}: {counts.writes[0]} writes ({counts.journaled} over old bytes), "
+          f"{len(copies)} kill moments, "
+          f"{torn_states} unreadable or wrong without the journal")
+
+
+class _SlashKeys(helper.CreepSpring):
+    def checkpoint(self, state):
+        return {"sliders/0": np.array(state[0]), "commits": np.array(state[1])}
+
+
+def test_a_writer_failing_while_it_sets_up_leaves_the_store_unchanged(tmp_path):
+    # The checkpoint keys are checked after the datasets are created: the undo journal
+    # takes the half-made trajectory away again (before, it stayed and broke the store).
+    path = tmp_path / "store.h5"
+    helper.layout_store(path).close()
+    original = path.read_bytes()
+    bad = dataclasses.replace(helper.stateful_system(), nonlinear=_SlashKeys(helper.STATEFUL_DOFS))
+    store = SnapshotStore.open(path, system=bad)
+    with pytest.raises(ValueError, match="checkpoint key 'sliders/0'.*cannot name a dataset"):
+        store.writer()
+    store.close()
+    assert path.read_bytes() == original and not _journal.journal_path(path).exists()
+    with SnapshotStore.open(path) as reopened:
+        assert reopened.trajectories == ("000",) and reopened.length(0) == 21
+    # a reader holding the file open (HDF5's shared lock) is not written under
+    with h5py.File(path, "r"):
+        with pytest.raises(SnapshotStoreError, match="is open elsewhere .file locked"):
+            SnapshotStore.open(path, system=helper.stateful_system()).writer()
+    assert path.read_bytes() == original
+
+
+def _kill_in_layout_change(path, moment):
+    env = {**os.environ, "PYTHONPATH": str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", "")}
+    done = subprocess.run([sys.executable, str(HELPER), "layout", str(path), moment], env=env,
+                          capture_output=True, text=True)
+    assert done.returncode == -signal.SIGKILL, done.stderr
+
+
+def test_sigkill_while_a_store_is_made_or_a_trajectory_added(tmp_path):
+    # Real SIGKILLs at moments before SWMR mode (the helper kills itself there).
+    system = helper.stateful_system()
+    reference = helper.layout_store(tmp_path / "reference.h5", trajectories=2)
+
+    # killed while creating the store: no store at all, only the temporary file
+    path = tmp_path / "created.h5"
+    _kill_in_layout_change(path, "create")
+    assert not path.exists()
+    assert [p.name for p in tmp_path.glob(".created.h5.*.creating")]
+    with pytest.raises(SnapshotStoreError, match="not found"):
+        SnapshotStore.open(path)
+
+    # killed in the journaled change that adds trajectory 001: rolled back on opening.
+    # Of its 55 writes here, 1-9 go past the old end, 10-17 rewrite old metadata in place.
+    for kill_at in (1, 14, 40):
+        path = tmp_path / f"added_{kill_at}.h5"
+        _kill_in_layout_change(path, f"write:{kill_at}")
+        assert _journal.journal_path(path).exists()
+        with pytest.MonkeyPatch.context() as patch:  # a live journal's process is respected
+            patch.setattr(_store, "_process_alive", lambda pid: True)
+            with pytest.raises(SnapshotStoreError, match="is adding or resuming a trajectory"):
+                SnapshotStore.open(path)
+        store = SnapshotStore.open(path, system=system)
+        assert not _journal.journal_path(path).exists()
+        assert store.trajectories == ("000",) and _rows_equal(store, reference, 0)
+        assert read_superblock(path).flags == 0
+        integrate(system, Newmark(), *helper.stateful_initial_state(), helper.STATEFUL_DT,
+                  helper.LAYOUT_STEPS, consumers=[store.writer(chunk_steps=3)])
+        assert store.trajectories == ("000", "001") and _rows_equal(store, reference, 1)
+        store.close()
+
+    # killed after the change, before the SWMR reopen: the new trajectory is there, empty
+    path = tmp_path / "reopen.h5"
+    _kill_in_layout_change(path, "reopen")
+    with SnapshotStore.open(path) as store:
+        assert store.trajectories == ("000", "001") and _rows_equal(store, reference, 0)
+        assert store.length(1) == 0 and store.checkpoint(1) is None
+    with pytest.raises(SnapshotStoreError, match="has no checkpoint yet; run it again"):
+        resume(path, system, Newmark())  # a bare system has no initial state to restart from
+    reference.close()
 
 
 # -- bad files -------------------------------------------------------------------

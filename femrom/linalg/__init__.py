@@ -6,7 +6,8 @@
   ends with B = Q^T W A;
 - :class:`StreamingSketch`: single-pass sketch fed column by column, also as an
   integrator consumer;
-- :func:`randomized_svd_dask`: the same on a ``dask.array`` (HDF5 file, cluster);
+- :func:`randomized_svd_dask`: the same on a ``dask.array`` (a snapshot store and a
+  field, an HDF5 file, an array), on a LocalCluster by default or a real cluster;
 - :class:`InnerProduct`: SPD (mass) inner products; every basis returned is
   orthonormal in the product it was given, U^T W U = I.
 """

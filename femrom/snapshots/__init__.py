@@ -10,6 +10,18 @@
   checkpoint, in HDF5's SWMR mode so a killed run leaves a readable file.
 - :func:`resume` -- continue a stopped run from its last committed chunk,
   bit-identically.
+- :func:`read_rows` -- committed rows of one dataset by path, for readers
+  elsewhere (Dask workers) that a store planned with
+  :meth:`~SnapshotStore.column_blocks`.
+
+A kill at any moment is covered: a new store is written under a temporary
+name and renamed into place; adding a trajectory (or trimming one for
+``resume``) happens under an undo journal (``<store>.journal``) that the next
+reader or writer rolls back if the process died; after that the file is in
+HDF5's SWMR mode, where every committed chunk stays readable.
+
+Fields are named by key or by name: ``q`` / ``displacement``, ``v`` /
+``velocity``, ``a`` / ``acceleration``, ``u`` / ``inputs``, ``y`` / ``outputs``.
 
 Every problem with a file (missing, not HDF5, truncated, foreign, wrong-shaped,
 a declared length beyond the data, a read past it) is a one-line
@@ -19,7 +31,7 @@ a declared length beyond the data, a read past it) is a one-line
 from femrom.snapshots._errors import SnapshotStoreError
 from femrom.snapshots._format import DEFAULT_UNITS, FORMAT_NAME, FORMAT_VERSION
 from femrom.snapshots._resume import model_solver, resume
-from femrom.snapshots._store import SnapshotStore
+from femrom.snapshots._store import SnapshotStore, read_rows
 from femrom.snapshots._writer import SnapshotWriter, default_chunk_steps
 
 __all__ = [
@@ -31,5 +43,6 @@ __all__ = [
     "SnapshotWriter",
     "default_chunk_steps",
     "model_solver",
+    "read_rows",
     "resume",
 ]

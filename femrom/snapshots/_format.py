@@ -24,11 +24,15 @@ A chunk of ``c`` consecutive rows holds ``c`` whole snapshot columns, so a
 block of columns of the (n, K) snapshot matrix is ``ceil(k / c)`` contiguous
 reads. Only rows ``[0, L)`` are data: ``L`` is written after the rows and the
 checkpoint are flushed, and readers never look past it.
+
+Next to the file, while a trajectory is being added or trimmed:
+``<store>.journal``, the undo journal of that change (:mod:`._journal`).
 """
 
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 
 import h5py
@@ -41,6 +45,11 @@ FORMAT_NAME = "femrom.snapshots"
 FORMAT_VERSION = 1
 STATE_FIELDS = ("q", "v", "a")
 SIGNAL_FIELDS = ("u", "y")
+#: What each per-step dataset holds; a field can be named either way
+#: (``store.read(0, "displacement")`` reads ``q``).
+FIELD_NAMES = {"q": "displacement", "v": "velocity", "a": "acceleration", "u": "inputs",
+               "y": "outputs"}
+FIELD_KEYS = {name: key for key, name in FIELD_NAMES.items()}
 #: SI, as every scene file (``MaterialConfig`` documents SI input).
 DEFAULT_UNITS = {"system": "SI", "length": "m", "time": "s", "mass": "kg", "force": "N",
                  "pressure": "Pa", "angle": "rad"}
@@ -66,6 +75,24 @@ def open_file(path: Path, mode: str, **kwargs) -> h5py.File:
         return h5py.File(path, mode, **kwargs)
     except (OSError, ValueError) as exc:
         raise SnapshotStoreError(f"{path}: {hdf5_message(exc)}") from None
+
+
+def open_swmr_writer(path: Path) -> h5py.File:
+    """Open read-write directly in SWMR write mode.
+
+    The superblock goes from "closed" to "open for SWMR write" in one write.
+    (``h5py.File(path, "r+")`` followed by ``swmr_mode = True`` passes through
+    "open for write" alone, a state that SWMR readers refuse: "file is not
+    already open for SWMR writing".)
+    """
+    fapl = h5py.h5p.create(h5py.h5p.FILE_ACCESS)
+    fapl.set_libver_bounds(h5py.h5f.LIBVER_LATEST, h5py.h5f.LIBVER_LATEST)
+    try:
+        fid = h5py.h5f.open(os.fsencode(path), h5py.h5f.ACC_RDWR | h5py.h5f.ACC_SWMR_WRITE,
+                            fapl=fapl)
+    except (OSError, ValueError) as exc:
+        raise SnapshotStoreError(f"{path}: {hdf5_message(exc)}") from None
+    return h5py.File(fid)
 
 
 def open_for_reading(path: Path) -> tuple[h5py.File, bool]:
@@ -140,8 +167,12 @@ def check_store(f: h5py.File, path: Path) -> None:
         raise SnapshotStoreError(f"{path}: dataset /dofmap/free has shape {f['dofmap/free'].shape}, "
                                  f"expected ({n},)")
     fields = stored_fields(f)
-    for name, group in f["trajectories"].items():
+    for name in f["trajectories"]:
         where = f"/trajectories/{name}"
+        group = f["trajectories"].get(name)
+        if not isinstance(group, h5py.Group):  # a link to an object that is not (fully) there
+            raise SnapshotStoreError(f"{path}: damaged snapshot store ({where} is not a readable "
+                                     "group)")
         for key in (*fields, "t", "step", "committed"):
             if key not in group:
                 raise SnapshotStoreError(f"{path}: trajectory {name!r} has no dataset {key!r}")

@@ -21,7 +21,7 @@ import numpy as np
 import femrom
 from femrom.fem import Condensation
 from femrom.integrators import StepResult, scheme_for
-from femrom.snapshots import _format
+from femrom.snapshots import _format, _journal
 from femrom.snapshots._errors import SnapshotStoreError
 from femrom.snapshots._superblock import SuperblockError, clear_write_flags, read_superblock
 
@@ -45,9 +45,8 @@ def trajectory_name(trajectory) -> str:
 
 def _state_fields(model, system, fields) -> tuple[str, ...]:
     if fields is None:
-        keys = {"displacement": "q", "velocity": "v", "acceleration": "a"}
         asked = model.scene.outputs.fields if model is not None else ()
-        fields = ("q", *(keys[f] for f in asked if keys[f] != "q"))
+        fields = ("q", *(_format.FIELD_KEYS[f] for f in asked if _format.FIELD_KEYS[f] != "q"))
     fields = tuple(dict.fromkeys(fields))
     unknown = [f for f in fields if f not in _format.STATE_FIELDS]
     if unknown:
@@ -110,13 +109,22 @@ class SnapshotStore:
         units : dict, optional
             Units of the quantities; SI (:data:`DEFAULT_UNITS`) by default.
         overwrite : bool
-            Replace an existing file.
+            Replace an existing file (not one a live process is writing).
+
+        Notes
+        -----
+        The file is written under a temporary name in the same folder
+        (``.<name>.<pid>.creating``) and renamed into place, so a process
+        killed meanwhile leaves no store (or the old one, when overwriting)
+        and at most that temporary file, never a partial store.
         """
         path = Path(path)
         model, system = split_model(model_or_system)
         fields = _state_fields(model, system, fields)
         if path.exists() and not overwrite:
             raise SnapshotStoreError(f"{path}: file exists (pass overwrite=True to replace it)")
+        if path.exists():
+            _refuse_live_writer(path)
         scene = None if model is None else model.scene
         if scene is not None:
             scheme = scheme_for(scene.time) if scheme is None else scheme
@@ -144,13 +152,20 @@ class SnapshotStore:
             attrs["dt"] = float(dt)
         if n_steps is not None:
             attrs["n_steps"] = int(n_steps)
-        with _format.open_file(path, "w", libver="latest") as f:
-            f.attrs.update(attrs)
-            dofmap = f.create_group("dofmap")
-            dofmap.attrs["n_total"] = cond.n_total
-            dofmap.create_dataset("free", data=np.asarray(cond.free, dtype=np.int64))
-            dofmap.create_dataset("fixed", data=np.asarray(cond.fixed, dtype=np.int64))
-            f.create_group("trajectories")
+        temporary = path.with_name(f".{path.name}.{os.getpid()}.creating")
+        try:
+            with _format.open_file(temporary, "w", libver="latest") as f:
+                f.attrs.update(attrs)
+                dofmap = f.create_group("dofmap")
+                dofmap.attrs["n_total"] = cond.n_total
+                dofmap.create_dataset("free", data=np.asarray(cond.free, dtype=np.int64))
+                dofmap.create_dataset("fixed", data=np.asarray(cond.fixed, dtype=np.int64))
+                f.create_group("trajectories")
+            os.replace(temporary, path)
+        except BaseException:
+            temporary.unlink(missing_ok=True)
+            raise
+        _journal.journal_path(path).unlink(missing_ok=True)  # the replaced file's, if any
         return cls(path, system=system)
 
     @classmethod
@@ -166,7 +181,7 @@ class SnapshotStore:
 
     def _handle(self) -> h5py.File:
         if self._file is None:
-            f, swmr = _format.open_for_reading(self.path)
+            f, swmr = _open_for_reading(self.path)
             try:
                 with self._guard("checking the layout"):
                     _format.check_store(f, self.path)
@@ -216,8 +231,16 @@ class SnapshotStore:
         return SnapshotWriter(self, trajectory, chunk_steps=chunk_steps, every=every,
                               n_steps=n_steps, dt=dt, scheme=scheme, fsync=fsync)
 
-    def _open_for_writing(self, writer) -> h5py.File:
-        """Reopen the file read-write for ``writer`` (clearing a killed writer's flags first)."""
+    def _open_for_writing(self, writer, change_layout, *, fsync: bool = False) -> h5py.File:
+        """Make ``writer`` this store's writer and return the file, open in SWMR write mode.
+
+        First ``change_layout(f)`` creates or trims the writer's trajectory on
+        the file ``f`` open read-write under an undo journal
+        (:mod:`._journal`): if the process is killed or ``change_layout``
+        raises, the file goes back to how it was. Then the file is reopened
+        directly in SWMR write mode, so from then on a kill leaves a readable
+        file. A killed writer's flags and unfinished changes are cleared first.
+        """
         if self._writer is not None:
             raise SnapshotStoreError(f"{self.path}: trajectory {self._writer.trajectory!r} is "
                                      "still being written; close its writer first")
@@ -225,15 +248,13 @@ class SnapshotStore:
             self._file.close()
             self._file = None
         self._recover()
-        f = _format.open_file(self.path, "r+", libver="latest")
-        try:
+        with _journal.journaled_file(self.path, fsync=fsync) as f:
             with self._guard("checking the layout"):
                 _format.check_store(f, self.path)
             f.attrs["writer_pid"] = os.getpid()
             f.attrs["writer_host"] = socket.gethostname()
-        except BaseException:
-            f.close()
-            raise
+            change_layout(f)
+        f = _format.open_swmr_writer(self.path)
         self._file, self._swmr_reader, self._writer = f, False, writer
         return f
 
@@ -244,18 +265,18 @@ class SnapshotStore:
             self._file = None
 
     def _recover(self) -> None:
-        """Clear the "open for write" flags a killed writer left, after checking it is gone."""
+        """Undo a killed writer's unfinished layout change and clear its "open for write"
+        flags, after checking it is gone."""
+        _journal.roll_back(self.path, _process_alive, other_host_is_gone=True)
         try:
             block = read_superblock(self.path)
         except SuperblockError:
             return  # not a version-3 superblock: opening it reports what is wrong
         if not block.open_for_write:
             return
-        f, _ = _format.open_for_reading(self.path)
-        with f:
-            pid, host = f.attrs.get("writer_pid"), _format.text(f.attrs.get("writer_host", ""))
-        if pid is not None and host == socket.gethostname() and _process_alive(int(pid)):
-            raise SnapshotStoreError(f"{self.path}: is open for writing by process {int(pid)}")
+        pid = _live_writer(self.path)
+        if pid is not None:
+            raise SnapshotStoreError(f"{self.path}: is open for writing by process {pid}")
         clear_write_flags(self.path)
 
     # -- reading -------------------------------------------------------------
@@ -314,13 +335,26 @@ class SnapshotStore:
 
     def n_snapshots(self, field: str = "q") -> int:
         """Columns K of the snapshot matrix of ``field``: committed steps of all trajectories."""
-        self._check_field(field)
+        self.field_key(field)
         return sum(self.length(name) for name in self.trajectories)
 
-    def _check_field(self, field: str) -> None:
-        if field not in self.fields:
+    def field_key(self, field: str) -> str:
+        """The dataset of a stored field, named by key or by name: ``"q"`` or
+        ``"displacement"``, ``"v"`` or ``"velocity"``, ``"a"`` or ``"acceleration"``,
+        ``"u"`` or ``"inputs"``, ``"y"`` or ``"outputs"``.
+
+        Raises
+        ------
+        SnapshotStoreError
+            The field is not stored; the message lists the stored ones.
+        """
+        key = _format.FIELD_KEYS.get(field, field)
+        fields = self.fields
+        if key not in fields:
+            names = ", ".join(_format.FIELD_NAMES[k] for k in fields)
             raise SnapshotStoreError(f"{self.path}: no field {field!r}; stored: "
-                                     f"{', '.join(self.fields)}")
+                                     f"{', '.join(fields)} ({names})")
+        return key
 
     def _rows(self, group, key, start, stop, length) -> np.ndarray:
         if not 0 <= start <= stop <= length:
@@ -343,11 +377,11 @@ class SnapshotStore:
         SnapshotStoreError
             ``stop`` beyond the declared length, or an unknown field/trajectory.
         """
-        self._check_field(field)
+        key = self.field_key(field)
         group = self._group(trajectory)
         length = self.length(trajectory)
         stop = length if stop is None else int(stop)
-        return self._rows(group, field, int(start), stop, length).T
+        return self._rows(group, key, int(start), stop, length).T
 
     def times(self, trajectory) -> np.ndarray:
         """(L,) ndarray: times of the committed snapshots."""
@@ -377,7 +411,7 @@ class SnapshotStore:
         trajectories : sequence, optional
             Names or indices; all by default.
         """
-        self._check_field(field)
+        key = self.field_key(field)
         block_steps = int(block_steps)
         if block_steps < 1:
             raise ValueError(f"block_steps must be >= 1, got {block_steps}")
@@ -387,7 +421,37 @@ class SnapshotStore:
             group = self._group(name)
             length = self.length(name)
             for start in range(0, length, block_steps):
-                yield self._rows(group, field, start, min(start + block_steps, length), length).T
+                yield self._rows(group, key, start, min(start + block_steps, length), length).T
+
+    def column_blocks(self, field: str, block_steps: int,
+                      trajectories=None) -> list[tuple[str, int, int]]:
+        """The column blocks of :meth:`iter_blocks`, aligned with the HDF5 chunks, as a plan.
+
+        Each block ``(trajectory, start, stop)`` lies in one trajectory and
+        starts on a chunk boundary; it holds ``b`` committed snapshots, ``b``
+        the multiple of the trajectory's chunk rows ``c`` nearest
+        ``block_steps`` (halves up, at least ``c``), except the last block of a
+        trajectory. Reading a block (:func:`read_rows`) reads whole chunks.
+
+        Returns
+        -------
+        list of (str, int, int)
+            In the column order of the snapshot matrix ``[X_000, X_001, ...]``.
+        """
+        key = self.field_key(field)
+        block_steps = int(block_steps)
+        if block_steps < 1:
+            raise ValueError(f"block_steps must be >= 1, got {block_steps}")
+        names = self.trajectories if trajectories is None else \
+            tuple(trajectory_name(t) for t in trajectories)
+        plan = []
+        for name in names:
+            group = self._group(name)
+            length = self.length(name)
+            chunk = group[key].chunks[0]
+            step = chunk * max(1, int(block_steps / chunk + 0.5))
+            plan.extend((name, start, min(start + step, length)) for start in range(0, length, step))
+        return plan
 
     def attrs(self, trajectory) -> dict:
         """A trajectory's run parameters: scheme, dt, n_steps, every, chunk_steps, created."""
@@ -431,6 +495,83 @@ class SnapshotStore:
         elif arrays:
             state = arrays
         return StepResult(step=step, t=t, q=q, v=v, a=a, state=state)
+
+
+def read_rows(path, trajectory: str, field: str, start: int, stop: int) -> np.ndarray:
+    """Rows ``start:stop`` of one dataset of a store, opening the file for just this read.
+
+    For readers away from the :class:`SnapshotStore` that planned the read
+    (tasks on Dask workers, see :meth:`SnapshotStore.column_blocks`): the
+    layout was checked there; this checks that the rows are still committed.
+
+    Parameters
+    ----------
+    path : str or Path
+    trajectory : str
+        Its name (``"000"``, ...).
+    field : str
+        Key or name (``"q"`` or ``"displacement"``, ...).
+    start, stop : int
+
+    Returns
+    -------
+    (stop - start, w) ndarray
+        Snapshots as rows, as stored (the transpose of snapshot columns).
+
+    Raises
+    ------
+    SnapshotStoreError
+        Rows past the declared length, a missing dataset, an unreadable file.
+    """
+    path = Path(path)
+    field = _format.FIELD_KEYS.get(field, field)
+    f, _ = _open_for_reading(path)
+    with f:
+        where = f"/trajectories/{trajectory}/{field}"
+        try:
+            group = f["trajectories"][trajectory]
+            length = _format.declared_length(group)
+            if not 0 <= start <= stop <= length:
+                raise SnapshotStoreError(f"{path}: trajectory {trajectory!r} has {length} committed "
+                                         f"snapshots; cannot read [{start}, {stop})")
+            return group[field][start:stop]
+        except SnapshotStoreError:
+            raise
+        except (OSError, KeyError, ValueError, RuntimeError) as exc:
+            raise SnapshotStoreError(f"{path}: damaged or unreadable (reading {where}): "
+                                     f"{_format.hdf5_message(exc)}") from None
+
+
+def _open_for_reading(path: Path) -> tuple[h5py.File, bool]:
+    """:func:`_format.open_for_reading`, after undoing a killed writer's unfinished layout change."""
+    _journal.roll_back(path, _process_alive)
+    return _format.open_for_reading(path)
+
+
+def _live_writer(path: Path) -> int | None:
+    """The pid of the live process on this host that a store open for writing names, else ``None``.
+
+    Raises :class:`SnapshotStoreError` if the file cannot be opened.
+    """
+    f, _ = _format.open_for_reading(path)
+    with f:
+        pid, host = f.attrs.get("writer_pid"), _format.text(f.attrs.get("writer_host", ""))
+    if pid is not None and host == socket.gethostname() and _process_alive(int(pid)):
+        return int(pid)
+    return None
+
+
+def _refuse_live_writer(path: Path) -> None:
+    """Raise if a live process is writing the file at ``path`` or changing its layout."""
+    _journal.roll_back(path, _process_alive, other_host_is_gone=True)
+    try:
+        if not read_superblock(path).open_for_write:
+            return
+        pid = _live_writer(path)
+    except (SuperblockError, SnapshotStoreError, OSError):
+        return  # not a file a femrom writer has open
+    if pid is not None:
+        raise SnapshotStoreError(f"{path}: is open for writing by process {pid}")
 
 
 def _readonly(x: np.ndarray) -> np.ndarray:

@@ -15,6 +15,13 @@ rows and the old, intact checkpoint slot; killed in 4-5, the new record is
 either not on disk or points at data that already is. The file is written in
 HDF5's single-writer/multiple-reader (SWMR) mode, whose ordered metadata
 flushes keep the file itself readable after a kill at any moment.
+
+Before that, the writer's trajectory is created (or, for ``resume``, cut back
+to its declared length), which HDF5 cannot do in SWMR mode. That change is
+made under an undo journal (:mod:`._journal`): a kill during it leaves the
+store as it was (the next reader or writer rolls it back) or with the new,
+empty trajectory, never in between. The file is then reopened directly in
+SWMR write mode.
 """
 
 from __future__ import annotations
@@ -67,7 +74,8 @@ class SnapshotWriter:
     scheme : scheme or str, optional
         Scheme (name) recorded for ``resume``; the store's default.
     fsync : bool
-        Also ``fsync`` at each commit (survives power loss, not just a killed process).
+        Also ``fsync`` at each commit, and the undo journal while the
+        trajectory is set up (survives power loss, not just a killed process).
     append : bool
         Continue the existing ``trajectory`` after its declared length instead
         (what :func:`~femrom.snapshots.resume` does); the other options are then
@@ -75,9 +83,11 @@ class SnapshotWriter:
 
     Notes
     -----
-    Making the writer creates the trajectory's datasets before switching the
-    file to SWMR mode (HDF5 cannot create objects in it); that takes
-    milliseconds, and a kill inside it is the one moment not covered.
+    Making the writer creates the trajectory's datasets before the file is
+    opened in SWMR mode (HDF5 cannot create objects in it), under an undo
+    journal: a kill meanwhile leaves the store without the new trajectory
+    (rolled back when it is next opened) or with it, empty (declared length
+    0, no checkpoint). Old trajectories are never at risk.
     """
 
     def __init__(self, store, trajectory=None, *, chunk_steps: int | None = None, every: int = 1,
@@ -88,25 +98,29 @@ class SnapshotWriter:
             raise SnapshotStoreError(f"{store.path}: open the store with system=... to write to it")
         self.store, self.system, self.fsync = store, system, bool(fsync)
         self._closed = True
-        f = store._open_for_writing(self)
-        self._closed = False
-        try:
+
+        def change_layout(f) -> None:  # under the undo journal (store._open_for_writing)
             trajectories = f["trajectories"]
             if append:
                 self.trajectory = trajectory_name(trajectory)
                 if self.trajectory not in trajectories:
                     raise SnapshotStoreError(f"{store.path}: no trajectory {self.trajectory!r} "
                                              "to append to")
-                group = self._reopen(trajectories[self.trajectory])
+                self._reopen(trajectories[self.trajectory])
             else:
                 self.trajectory = _new_name(trajectories, trajectory, store.path)
                 defaults = f.attrs
-                group = self._create(
+                self._create(
                     trajectories, self.trajectory, chunk_steps, every,
                     n_steps=defaults.get("n_steps") if n_steps is None else n_steps,
                     dt=defaults.get("dt") if dt is None else dt,
                     scheme=defaults.get("scheme") if scheme is None else
                     getattr(scheme, "name", str(scheme)))
+
+        f = store._open_for_writing(self, change_layout, fsync=self.fsync)
+        self._closed = False
+        try:
+            group = f["trajectories"][self.trajectory]
             self._group = group
             self.chunk_steps = int(group.attrs["chunk_steps"])
             self.every = int(group.attrs["every"])
@@ -124,14 +138,12 @@ class SnapshotWriter:
             self._state = dict(group["checkpoint/state"].items())
             self._buffered = 0
             self._last = None
-            f.flush()
-            f.swmr_mode = True  # from here on, a kill leaves a readable file
         except BaseException:
             self._closed = True
             store._writer_closed()
             raise
 
-    # -- setting up (before SWMR mode: objects can only be created now) ------
+    # -- setting up (under the undo journal, before SWMR mode: objects can only be created now)
     def _create(self, trajectories, name, chunk_steps, every, *, n_steps, dt, scheme):
         system, n = self.system, self.system.n_dofs
         every = int(every)
