@@ -52,7 +52,7 @@ from femrom.fem import SolverCache, make_solver
 from femrom.inference import LagrangianOpInf, SecondOrderOpInf, reduce_snapshots
 from femrom.inference._data import project_columns
 from femrom.integrators import simulate
-from femrom.linalg import default_block_columns
+from femrom.linalg import store_source
 from femrom.post import (
     accuracy_cost_table,
     mesh_arrays,
@@ -197,9 +197,7 @@ def run_fom(model, signal: Signal, *, dt=None, store: SnapshotStore | None = Non
 
 def store_blocks(store: SnapshotStore, field: str, trajectory: str):
     """A block source of one trajectory's field: about 128 MB column blocks of whole chunks."""
-    chunk = int(store.attrs(trajectory).get("chunk_steps", 1))
-    steps = max(chunk, default_block_columns(store.n_dofs) // chunk * chunk)
-    return lambda: store.iter_blocks(field, steps, [trajectory])
+    return store_source(store, field, [trajectory])
 
 
 # -- reduced models --------------------------------------------------------------------

@@ -501,6 +501,37 @@ def test_dask_svd_of_a_store_agrees_with_the_in_memory_svd(chain_store):
     assert np.abs(weighted.U.T @ (mass @ weighted.U) - np.eye(r)).max() < 1e-12
 
 
+def test_a_store_is_a_block_source_for_the_out_of_core_svd_and_pod(chain_store):
+    """``randomized_svd(store)`` and ``POD().fit(store)`` read the displacements of every
+    trajectory in order, in blocks of whole chunks that never span two trajectories."""
+    from femrom.basis import POD
+    from femrom.linalg import store_source
+    from femrom.snapshots import SnapshotStore
+
+    path, matrix = chain_store
+    r = 4
+    exact_s = np.linalg.svd(matrix, compute_uv=False)
+    with SnapshotStore.open(path) as store:
+        source = store_source(store, "displacement", block_columns=40)
+        blocks = list(source.blocks())
+        assert np.array_equal(np.hstack(blocks), matrix)          # every column, in order, once
+        lengths = [store.length(t) for t in store.trajectories]
+        widths = [b.shape[1] for b in blocks]
+        ends = np.cumsum(widths)
+        assert set(np.cumsum(lengths)) <= set(ends)               # no block spans two runs
+        for t in store.trajectories:                              # blocks start on chunks
+            chunk = store.attrs(t)["chunk_steps"]
+            assert all(start % chunk == 0 for _, start, _ in store.column_blocks("q", 40, [t]))
+        result = randomized_svd(store, r)
+        # rank-6 data (fixture), sketch of 14 columns: exact to round-off relative to
+        # sigma_4 = 6.5e-3 sigma_1 (see the Dask test above)
+        assert np.max(np.abs(result.s - exact_s[:r]) / exact_s[:r]) < 1e-12
+        pod = POD(rank=r).fit(store)                                # method "auto": randomized
+        assert np.allclose(pod.singular_values_[:r], exact_s[:r], rtol=1e-12, atol=0)
+        with pytest.raises(Exception, match="no field 'acceleration'"):
+            store_source(store, "acceleration")
+
+
 def test_dask_on_a_store_refuses_wrong_fields_and_foreign_files(chain_store, tmp_path):
     from femrom.snapshots import SnapshotStoreError
 

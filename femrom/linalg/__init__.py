@@ -12,7 +12,7 @@
   orthonormal in the product it was given, U^T W U = I.
 """
 
-from femrom.linalg._blocks import BlockSource, as_block_source, default_block_columns
+from femrom.linalg._blocks import BlockSource, as_block_source, default_block_columns, store_source
 from femrom.linalg._dask import as_dask_array, randomized_svd_dask
 from femrom.linalg._lowrank import LowRankSVD
 from femrom.linalg._product import InnerProduct, householder_qr
@@ -22,5 +22,5 @@ from femrom.linalg._streaming import SketchConsumer, StreamingSketch
 __all__ = [
     "BlockSource", "InnerProduct", "LowRankSVD", "SketchConsumer", "StreamingSketch",
     "as_block_source", "as_dask_array", "default_block_columns", "householder_qr", "randomized_svd",
-    "randomized_svd_dask",
+    "randomized_svd_dask", "store_source",
 ]

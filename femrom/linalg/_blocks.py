@@ -6,8 +6,10 @@ float64 column blocks of A in a fixed order. What can be turned into one
 
 - a 2-D array-like with ``shape`` and slicing (``ndarray``, ``np.memmap``,
   an ``h5py.Dataset`` stored as (n, K)): read as ``A[:, j:j + b]``;
-- an object with ``iter_blocks()`` returning a fresh iterator of blocks
-  (e.g. a snapshot store);
+- a :class:`femrom.snapshots.SnapshotStore`: its displacements, all
+  trajectories in order (:func:`store_source` chooses the field, the
+  trajectories and chunk-aligned blocks);
+- an object with ``iter_blocks()`` returning a fresh iterator of blocks;
 - a zero-argument callable returning a fresh iterator of blocks;
 - a list or tuple of blocks;
 - a one-shot iterator or generator: readable once, so only single-pass
@@ -188,6 +190,11 @@ def as_block_source(data: Any, *, block_columns: int | None = None,
     """
     if isinstance(data, BlockSource):
         return data
+    from femrom.snapshots import SnapshotStore
+
+    if isinstance(data, SnapshotStore):
+        return store_source(data, block_columns=block_columns,
+                            prefetch=1 if prefetch is None else prefetch)
     ahead = (0 if isinstance(data, np.ndarray) else 1) if prefetch is None else int(prefetch)
     if hasattr(data, "shape") and hasattr(data, "__getitem__") and not callable(data):
         shape = tuple(data.shape)
@@ -212,3 +219,37 @@ def as_block_source(data: Any, *, block_columns: int | None = None,
     raise TypeError(f"cannot read snapshot blocks from {type(data).__name__}: give an (n, K) "
                     "array, an object with iter_blocks(), a callable returning an iterator of "
                     "(n, b) blocks, or a list of blocks")
+
+
+def store_source(store, field: str = "q", trajectories=None, *, block_columns: int | None = None,
+                 prefetch: int = 1) -> BlockSource:
+    """A snapshot store's field as a block source: ``[X_000, X_001, ...]`` (n, K).
+
+    Blocks hold a whole number of the store's HDF5 chunks (about
+    ``block_columns`` columns, by default about 128 MB) and never span two
+    trajectories, so every pass reads each chunk once.
+
+    Parameters
+    ----------
+    store : SnapshotStore
+    field : str
+        ``"q"`` / ``"displacement"``, ``"v"`` / ``"velocity"``, ``"a"`` / ``"acceleration"``.
+    trajectories : sequence of str or int, optional
+        Which runs, in this column order; all by default.
+    block_columns : int, optional
+    prefetch : int
+        Blocks read ahead in a background thread.
+    """
+    key = store.field_key(field)          # one clear error for a field the store lacks
+    wanted = block_columns if block_columns is not None else default_block_columns(store.n_dofs)
+    plan = store.column_blocks(key, wanted, trajectories)
+    if not plan:
+        raise ValueError(f"{store.path}: no committed snapshots of {field!r} to read")
+
+    def blocks():
+        for trajectory, start, stop in plan:
+            yield store.read(trajectory, key, start, stop)
+
+    return BlockSource(blocks, reiterable=True, n_rows=store.n_dofs, prefetch=int(prefetch),
+                       description=f"{store.path.name}: {key} of {len({p[0] for p in plan})} "
+                                   f"trajectories, {len(plan)} blocks")
