@@ -411,17 +411,21 @@ class SnapshotStore:
         trajectories : sequence, optional
             Names or indices; all by default.
         """
-        key = self.field_key(field)
-        block_steps = int(block_steps)
-        if block_steps < 1:
-            raise ValueError(f"block_steps must be >= 1, got {block_steps}")
-        names = self.trajectories if trajectories is None else \
-            tuple(trajectory_name(t) for t in trajectories)
+        key, block_steps, names = self._block_plan_args(field, block_steps, trajectories)
         for name in names:
             group = self._group(name)
             length = self.length(name)
             for start in range(0, length, block_steps):
                 yield self._rows(group, key, start, min(start + block_steps, length), length).T
+
+    def _block_plan_args(self, field: str, block_steps: int, trajectories):
+        """``(dataset key, block_steps, trajectory names)``, checked."""
+        block_steps = int(block_steps)
+        if block_steps < 1:
+            raise ValueError(f"block_steps must be >= 1, got {block_steps}")
+        names = self.trajectories if trajectories is None else \
+            tuple(trajectory_name(t) for t in trajectories)
+        return self.field_key(field), block_steps, names
 
     def column_blocks(self, field: str, block_steps: int,
                       trajectories=None) -> list[tuple[str, int, int]]:
@@ -438,12 +442,7 @@ class SnapshotStore:
         list of (str, int, int)
             In the column order of the snapshot matrix ``[X_000, X_001, ...]``.
         """
-        key = self.field_key(field)
-        block_steps = int(block_steps)
-        if block_steps < 1:
-            raise ValueError(f"block_steps must be >= 1, got {block_steps}")
-        names = self.trajectories if trajectories is None else \
-            tuple(trajectory_name(t) for t in trajectories)
+        key, block_steps, names = self._block_plan_args(field, block_steps, trajectories)
         plan = []
         for name in names:
             group = self._group(name)
