@@ -32,8 +32,8 @@ Strategies
     :func:`choose_strategy`, by the matrix alone (diagonal or not, and its
     size): ``"diagonal"`` for a diagonal matrix; ``"superlu"`` below
     :data:`AUTO_SMALL` dofs; otherwise ``"pardiso"`` if importable, else
-    ``"cholmod"`` (SPD only) if importable, else ``"superlu"`` below
-    :data:`AUTO_DIRECT_THRESHOLD` dofs, else ``"amg-cg"``. ``"jacobi-cg"`` is
+    ``"cholmod"`` (SPD only) if importable, else ``"superlu"`` up to
+    :data:`AUTO_DIRECT_THRESHOLD` (= :data:`SUPERLU_MAX_DOFS`) dofs, else ``"amg-cg"``. ``"jacobi-cg"`` is
     never chosen automatically: ask for it (the fishtail case does, for its
     consistent mass).
 
@@ -50,8 +50,8 @@ take the same time per step (0.015-0.022 s) and SuperLU sets up 2-3.5x slower;
 at 1e5 dofs one SuperLU factorisation takes 17.8 s and 1.7 GB (P1) or 31.4 s
 and 2.3 GB (P2), 12-15x PARDISO's fresh factorisation. SuperLU on large 1D or
 2D problems was not measured. Where a dimension hint would matter (no PARDISO
-and no CHOLMOD, a 1D/2D problem above :data:`AUTO_DIRECT_THRESHOLD` dofs),
-pass ``"superlu"`` explicitly (up to :data:`SUPERLU_MAX_DOFS`).
+and no CHOLMOD, a 1D/2D problem above :data:`SUPERLU_MAX_DOFS` dofs), the
+rule takes AMG-CG.
 
 Measured here (3D P1 elasticity, clamped bar, 2 shared cores, a spot check
 not kept in ``benchmarks/results``): at 3.5e3 dofs SuperLU factorises in
@@ -80,17 +80,18 @@ STRATEGIES = ("auto", "diagonal", "superlu", "pardiso", "cholmod", "amg-cg", "ja
 #: ``"auto"`` uses SuperLU below this size: factor and solve take milliseconds
 #: and locating and initialising MKL (about a second, once) is not worth it.
 AUTO_SMALL = 5_000
-#: Without PARDISO or CHOLMOD, ``"auto"`` still uses SuperLU below this size
-#: and switches to AMG-preconditioned CG above it. Not backed by the ladder:
-#: at 20,262 dofs (just above) SuperLU stepped 16x faster than AMG-CG (0.021 s
-#: against 0.334 s, docs/benchmarks.md section 3); sizes between 2e4 and 6e4
-#: were not measured.
-AUTO_DIRECT_THRESHOLD = 20_000
 #: SuperLU refuses larger matrices. The project notes report 269 s and 15 GB at
 #: 1.37e5 dofs of 3D elasticity; measured here with scipy 1.17 (COLAMD): 17.8 s,
 #: 1.7 GB (P1) and 31.4 s, 2.3 GB (P2) at 1.0e5 dofs, 12-15x PARDISO's factor time
 #: and growing faster with n (docs/benchmarks.md, section 4b). A conservative guard.
 SUPERLU_MAX_DOFS = 60_000
+#: Without PARDISO or CHOLMOD, ``"auto"`` uses SuperLU up to its own limit and
+#: AMG-preconditioned CG above. Measured on the clamped P1 solid beam (Newmark
+#: ``M + dt^2/4 K``, one BLAS thread; docs/benchmarks.md, "Which strategy is the default"): SuperLU /
+#: AMG-CG setup 1.06 / 0.77 s and step 0.021 / 0.334 s at 20,262 dofs, 2.1 / 0.4 s
+#: and 0.031 / 0.49 s at 37,356, 5.1 / 1.1 s and 0.063 / 0.79 s at 56,790 (0.84
+#: against 0.39 GB): SuperLU is 12-16x cheaper a step and ahead after 4-6 steps.
+AUTO_DIRECT_THRESHOLD = SUPERLU_MAX_DOFS
 
 
 class LinearSolverError(RuntimeError):
@@ -416,7 +417,7 @@ def choose_strategy(A, *, spd: bool = True) -> str:
         return "pardiso"
     if spd and is_available("cholmod"):
         return "cholmod"
-    return "superlu" if n < AUTO_DIRECT_THRESHOLD else "amg-cg"
+    return "superlu" if n <= AUTO_DIRECT_THRESHOLD else "amg-cg"
 
 
 def make_solver(A, strategy: str = "auto", *, near_nullspace=None, rtol: float = 1e-10,
