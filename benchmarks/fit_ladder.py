@@ -49,6 +49,9 @@ from femrom.integrators import Newmark, Trajectory, integrate
 from femrom.scene import SecondOrderSystem
 
 SIZES = (10, 30, 60, 100, 150)
+SOLVERS = ("fast", "clarabel", "scs")
+#: The conic solvers' own wall-clock limits (seconds), set to ``--limit``.
+TIME_LIMIT_OPTION = {"clarabel": "time_limit", "scs": "time_limit_secs"}
 LIMIT_SECONDS = 120.0
 #: Assumed growth of a solver's time with r when predicting whether to skip it
 #: (Clarabel and the interior-point path of fast: dense systems with ~r^2
@@ -96,7 +99,8 @@ def random_data(r: int, seed: int = 0) -> SecondOrderData:
 
 
 def run(sizes=SIZES, out_dir: Path | None = None, problem_kind: str = "string",
-        limit: float = LIMIT_SECONDS) -> list[dict]:
+        limit: float = LIMIT_SECONDS, solvers=None) -> list[dict]:
+    solvers = SOLVERS if solvers is None else tuple(solvers)
     if problem_kind == "string":
         M, Q, U, dt = string_data()
     rows = []
@@ -110,7 +114,7 @@ def run(sizes=SIZES, out_dir: Path | None = None, problem_kind: str = "string",
             data = random_data(r)
         problem = LagrangianOpInf(regularization=1e-8).regression(data)
         results = {}
-        for name in ("fast", "clarabel", "scs"):
+        for name in solvers:
             predicted = None
             if times[name]:
                 r0 = max(times[name])
@@ -118,7 +122,16 @@ def run(sizes=SIZES, out_dir: Path | None = None, problem_kind: str = "string",
             if predicted is not None and predicted > limit:
                 results[name] = {"skipped": f"predicted {predicted:.0f} s > {limit:.0f} s"}
                 continue
-            _, info = solve_fast(problem) if name == "fast" else solve_conic(problem, name.upper())
+            if name == "fast":
+                _, info = solve_fast(problem)
+            else:   # a run that would overshoot the prediction stops at the limit, said so
+                tic = time.perf_counter()
+                try:
+                    _, info = solve_conic(problem, name.upper(), **{TIME_LIMIT_OPTION[name]: limit})
+                except Exception as exc:       # noqa: BLE001 - reported in the table
+                    results[name] = {"skipped": f"no solution within {limit:.0f} s ({exc})",
+                                     "stopped_after": time.perf_counter() - tic}
+                    continue
             results[name] = info
             times[name][r] = info["seconds"]
             if name == "fast":
@@ -132,9 +145,11 @@ def run(sizes=SIZES, out_dir: Path | None = None, problem_kind: str = "string",
                    if k != "least_squares" and "objective" in v]
         best = min(reached) if reached else None
         for name, info in results.items():
-            row = {"r": r, "solver": name, "n_samples": data.n_samples, "problem": problem_kind}
+            row = {"r": r, "solver": name, "n_samples": data.n_samples, "problem": problem_kind,
+                   "date": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
             if "skipped" in info:
-                row.update(seconds=None, objective=None, gap=None, status=info["skipped"])
+                row.update(seconds=None, objective=None, gap=None, status=info["skipped"],
+                           stopped_after=info.get("stopped_after"))
             else:
                 row.update(seconds=float(info["seconds"]), objective=float(info["objective"]),
                            gap=None if best is None else float((info["objective"] - best) / best),
@@ -153,15 +168,25 @@ def run(sizes=SIZES, out_dir: Path | None = None, problem_kind: str = "string",
 
 
 def _write(out_dir, problem_kind, rows):
+    """Write the rows, merged into the existing file: a (r, solver) this run measured
+    replaces the old row, the others stay (each row keeps its own ``date``)."""
     if out_dir is not None:
         out_dir = Path(out_dir)
         out_dir.mkdir(parents=True, exist_ok=True)
+        name = "fit_ladder.json" if problem_kind == "string" else f"fit_ladder_{problem_kind}.json"
+        ran = {(row["r"], row["solver"]) for row in rows}
+        kept = []
+        if (out_dir / name).is_file():
+            old = json.loads((out_dir / name).read_text())
+            kept = [dict(row, date=row.get("date", old.get("date"))) for row in old.get("rows", [])
+                    if (row["r"], row["solver"]) not in ran]
+        order = SOLVERS + ("least_squares",)
+        rows = sorted(kept + rows, key=lambda row: (row["r"], order.index(row["solver"])))
         payload = {"benchmark": "fit_ladder", "machine": platform.platform(),
                    "date": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "load_average": os.getloadavg(),
                    "load_average_at_start": _LOAD_AT_START,
                    "processor": platform.processor(), "problem": problem_kind,
                    "description": __doc__.split("\n\n")[1], "rows": rows}
-        name = "fit_ladder.json" if problem_kind == "string" else f"fit_ladder_{problem_kind}.json"
         (out_dir / name).write_text(json.dumps(payload, indent=2))
 
 
@@ -186,8 +211,10 @@ def main(argv=None) -> int:
     parser.add_argument("--problem", choices=("string", "random"), default="string")
     parser.add_argument("--limit", "--max-seconds", dest="limit", type=float, default=LIMIT_SECONDS,
                         help="skip a solver whose predicted time exceeds this (seconds)")
+    parser.add_argument("--solvers", nargs="+", choices=SOLVERS, default=list(SOLVERS),
+                        help="a subset to (re)measure; the file keeps the other rows")
     args = parser.parse_args(argv)
-    run(args.sizes, args.out, args.problem, args.limit)
+    run(args.sizes, args.out, args.problem, args.limit, args.solvers)
     return 0
 
 

@@ -66,6 +66,9 @@ up to ``FastOptions.ipm_max_unknowns``.
 
 from __future__ import annotations
 
+import contextlib
+import os
+
 import numpy as np
 import scipy.linalg as sla
 import scipy.sparse as sp
@@ -241,6 +244,25 @@ def _assemble(problem: GramProblem, blocks) -> np.ndarray:
 
 
 # -- Newton systems --------------------------------------------------------------
+#: Newton matrices with at least this many unknowns are factorised with every BLAS
+#: thread (the solver otherwise runs on one, see :mod:`._fast`): at m = 10 100
+#: (r = 100) a Cholesky took 6.6 s on one thread and 3.6 s on two with another
+#: process busy; at m = 3 660 two threads were slower under that load (1.5 s
+#: against 0.34 s), where the work per thread is too small to hide the contention.
+THREADED_UNKNOWNS = 8000
+
+
+def _all_threads(enabled: bool):
+    """Lift the solver's one-BLAS-thread limit for one large factorisation."""
+    if not enabled:
+        return contextlib.nullcontext()
+    try:
+        from threadpoolctl import threadpool_limits
+    except ImportError:  # pragma: no cover - optional
+        return contextlib.nullcontext()
+    return threadpool_limits(limits=os.cpu_count() or 1, user_api="blas")
+
+
 class DenseNewton:
     r"""``2 P + sum_j D_j`` assembled densely and factored by Cholesky (``m^3 / 3`` flops).
 
@@ -281,7 +303,8 @@ class DenseNewton:
                 N[np.diag_indices(self.m)] = diagonal + delta * np.maximum(
                     diagonal, np.finfo(float).tiny)
             try:
-                self.fac = sla.cho_factor(N, lower=True, overwrite_a=True, check_finite=False)
+                with _all_threads(self.m >= THREADED_UNKNOWNS):
+                    self.fac = sla.cho_factor(N, lower=True, overwrite_a=True, check_finite=False)
                 return
             except np.linalg.LinAlgError:
                 continue
