@@ -47,7 +47,7 @@ import scipy.linalg as sl
 from femrom.inference._hamiltonian import HamiltonianOperators, HamiltonianOpInf, ProjectedPotential
 from femrom.integrators._hamiltonian import CANONICAL_SCHEMES, CanonicalSystem, integrate_canonical
 from femrom.integrators._newton import Newton
-from femrom.rom._model import _jsonable
+from femrom.rom._model import LazyFields, _jsonable
 from femrom.rom._steppers import run_linear
 
 #: Symplectic schemes for Hamiltonian ROMs.
@@ -82,7 +82,7 @@ def hamiltonian_step_matrix(ops: HamiltonianOperators, dt: float, scheme: str) -
 
 
 @dataclass(frozen=True, eq=False)
-class HamiltonianSolution:
+class HamiltonianSolution(LazyFields):
     """A reduced canonical trajectory; full fields are rebuilt only on request.
 
     Unpacks as ``q, p, hamiltonian = solution`` (what ``predict`` returned
@@ -119,26 +119,7 @@ class HamiltonianSolution:
         """(k,) ndarray: the reduced Hamiltonian (the name :class:`ReducedSolution` uses)."""
         return self.hamiltonian
 
-    def _coordinates(self, which: str) -> np.ndarray:
-        if self.basis is None:
-            raise ValueError("this model has no basis: full fields cannot be reconstructed")
-        if which not in ("q", "p"):
-            raise ValueError(f"unknown field {which!r}; valid: ('q', 'p')")
-        return getattr(self, which)
-
-    def field(self, k: int, which: str = "q") -> np.ndarray:
-        """(n,) ndarray ``Phi q(t_k)`` (or ``Phi p(t_k)``)."""
-        return self.basis @ self._coordinates(which)[:, k]
-
-    def fields(self, block: int = 256, which: str = "q") -> Iterator[tuple[np.ndarray, np.ndarray]]:
-        """Yield ``(t_block, Phi X_block)``, ``X`` one of ``q, p``, ``block`` steps at a time.
-
-        Memory stays at (n, block) whatever the trajectory's length.
-        """
-        X = self._coordinates(which)
-        for start in range(0, X.shape[1], block):
-            stop = min(start + block, X.shape[1])
-            yield self.t[start:stop], self.basis @ X[:, start:stop]
+    FIELDS = ("q", "p")
 
 
 class HamiltonianROM:

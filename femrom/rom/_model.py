@@ -23,8 +23,39 @@ from femrom.inference import ReducedOperators, galerkin, reduced_coordinates
 from femrom.rom._steppers import SCHEMES, linear_step_map, run_linear, run_nonlinear, verlet_bound
 
 
+class LazyFields:
+    """Full fields ``V x(t_k)`` of a reduced solution, rebuilt only on request.
+
+    For dataclasses with ``t`` (k,), ``basis`` (n, r) or ``None`` and the (r, k)
+    coordinate arrays named in ``FIELDS``.
+    """
+
+    FIELDS: tuple[str, ...] = ("q",)
+
+    def _coordinates(self, which: str) -> np.ndarray:
+        if self.basis is None:
+            raise ValueError("this model has no basis: full fields cannot be reconstructed")
+        if which not in self.FIELDS:
+            raise ValueError(f"unknown field {which!r}; valid: {self.FIELDS}")
+        return getattr(self, which)
+
+    def field(self, k: int, which: str = "q") -> np.ndarray:
+        """(n,) ndarray ``V x(t_k)``, ``x`` one of :attr:`FIELDS`."""
+        return self.basis @ self._coordinates(which)[:, k]
+
+    def fields(self, block: int = 256, which: str = "q") -> Iterator[tuple[np.ndarray, np.ndarray]]:
+        """Yield ``(t_block, V X_block)``, ``X`` one of :attr:`FIELDS`, ``block`` steps at a time.
+
+        Memory stays at (n, block) whatever the trajectory's length.
+        """
+        X = self._coordinates(which)
+        for start in range(0, X.shape[1], block):
+            stop = min(start + block, X.shape[1])
+            yield self.t[start:stop], self.basis @ X[:, start:stop]
+
+
 @dataclass(frozen=True, eq=False)
-class ReducedSolution:
+class ReducedSolution(LazyFields):
     """A reduced trajectory; full fields are rebuilt only on request.
 
     Attributes
@@ -51,23 +82,7 @@ class ReducedSolution:
     basis: np.ndarray | None = None
     info: dict = field(default_factory=dict)
 
-    def field(self, k: int) -> np.ndarray:
-        """(n,) ndarray ``V q(t_k)``."""
-        if self.basis is None:
-            raise ValueError("this model has no basis: full fields cannot be reconstructed")
-        return self.basis @ self.q[:, k]
-
-    def fields(self, block: int = 256, which: str = "q") -> Iterator[tuple[np.ndarray, np.ndarray]]:
-        """Yield ``(t_block, V X_block)`` with ``X`` one of ``q, v, a``, ``block`` steps at a time.
-
-        Memory stays at (n, block) whatever the trajectory's length.
-        """
-        if self.basis is None:
-            raise ValueError("this model has no basis: full fields cannot be reconstructed")
-        X = getattr(self, which)
-        for start in range(0, X.shape[1], block):
-            stop = min(start + block, X.shape[1])
-            yield self.t[start:stop], self.basis @ X[:, start:stop]
+    FIELDS = ("q", "v", "a")
 
 
 class SecondOrderROM:
