@@ -45,6 +45,7 @@ Run ``python -m femrom run nls [--out DIR] [--quick]``; tests import :func:`run`
 import argparse
 import dataclasses
 import time
+import types
 import tomllib
 from pathlib import Path
 
@@ -54,7 +55,8 @@ import scipy.sparse as sp
 from femrom.basis import CotangentLiftPSD
 from femrom.inference import HamiltonianOperators, HamiltonianOpInf, finite_difference
 from femrom.inference import ProjectedPotential, project_potential_gradient
-from femrom.integrators import CanonicalSystem, Newton, QuarticPotential, integrate_canonical
+from femrom.integrators import (CanonicalSystem, ConvergenceError, Newton, QuarticPotential,
+                                integrate_canonical, solve_newton)
 from femrom.post import accuracy_cost_table, plot_accuracy_cost, write_metrics
 from femrom.post._report import machine_description
 from femrom.rom import HamiltonianROM
@@ -188,31 +190,27 @@ def midpoint_plain(A, potential, basis, y0, dt, n_steps, newton: Newton = Newton
         hqq, hqp, hpp = pot.hessian(y[:r], y[r:])
         return A + np.block([[hqp.T, hpp], [-hqq, -hqp]])
 
+    def residual(y_new, y):
+        fm = f(0.5 * (y + y_new))
+        return y_new - y - dt * fm, np.linalg.norm(y) + dt * np.linalg.norm(fm)
+
+    def dense_solver(J, spd=False):
+        return types.SimpleNamespace(solve=lambda b: np.linalg.solve(J, b))
+
     Y = np.full((2 * r, n_steps + 1), np.nan)
     Y[:, 0] = y0
     y = np.asarray(y0, dtype=float).copy()
     limit = 1e3 * max(np.linalg.norm(y0), 1.0)
-    eps = np.finfo(float).eps
     tic = time.perf_counter()
     with np.errstate(over="ignore", invalid="ignore"):
         for k in range(n_steps):
-            y1 = y + dt * f(y)
-            converged = False
-            for _ in range(newton.max_iterations + 1):
-                fm = f(0.5 * (y + y1))
-                R = y1 - y - dt * fm
-                norm = np.linalg.norm(R)
-                if not np.isfinite(norm):
-                    break
-                if norm <= newton.atol + newton.rtol * (np.linalg.norm(y) + dt * np.linalg.norm(fm)):
-                    converged = True
-                    break
-                dy = np.linalg.solve(identity - 0.5 * dt * jacobian(0.5 * (y + y1)), R)
-                y1 = y1 - dy
-                if np.linalg.norm(dy) <= 4.0 * eps * np.linalg.norm(y1):
-                    converged = True
-                    break
-            if not converged or not (np.linalg.norm(y1) < limit):
+            try:
+                y1, _ = solve_newton(lambda x: residual(x, y),
+                                     lambda x: identity - 0.5 * dt * jacobian(0.5 * (y + x)),
+                                     y + dt * f(y), dense_solver, newton)
+            except ConvergenceError:
+                break
+            if not np.linalg.norm(y1) < limit:
                 break
             y = y1
             Y[:, k + 1] = y

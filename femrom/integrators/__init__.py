@@ -34,7 +34,7 @@ from femrom.integrators._hamiltonian import (
     integrate_canonical,
 )
 from femrom.integrators._newmark import GeneralizedAlpha, Newmark, NewmarkAverageAcceleration
-from femrom.integrators._newton import ConvergenceError, Newton
+from femrom.integrators._newton import ConvergenceError, Newton, solve_newton
 from femrom.fem import (
     STRATEGIES,
     LinearSolver,
@@ -53,7 +53,7 @@ __all__ = [
     "integrate_canonical",
     "STRATEGIES",
     "CentralDifference",
-    "ConvergenceError",
+    "ConvergenceError", "solve_newton",
     "EnergyRecorder",
     "GeneralizedAlpha",
     "ImplicitMidpoint",
