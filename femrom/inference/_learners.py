@@ -155,6 +155,12 @@ class _SecondOrderLearner:
     def regression(self, data) -> GramProblem:
         """The :class:`GramProblem` this learner solves for ``data`` (one or a list)."""
         data = concatenate(data) if isinstance(data, (list, tuple)) else data
+        return self._regression(data, self._target(data), self._datablocks(data))
+
+    def _datablocks(self, data) -> list[np.ndarray]:
+        return [term.datablock(data) for term in self._terms(data)]
+
+    def _regression(self, data, Y: np.ndarray, blocks_data: list) -> GramProblem:
         if self.mass is None and not self.mass_orthonormal:
             warnings.warn(
                 "fitting with reduced mass M^ = I on a basis that is not mass-orthonormal: the "
@@ -162,8 +168,6 @@ class _SecondOrderLearner:
                 "structure argument breaks; pass mass=V^T M V or use a mass-orthonormal basis",
                 UserWarning, stacklevel=3)
         terms = self._terms(data)
-        Y = self._target(data)
-        blocks_data = [term.datablock(data) for term in terms]
         reg = {"stiffness": self.regularization.stiffness, "damping": self.regularization.damping,
                "input": self.regularization.input}
         shift = 0.0
@@ -184,12 +188,12 @@ class _SecondOrderLearner:
         return [Stiffness] + ([Damping] if self.damping else []) + \
             ([Input] if data.inputs is not None else [])
 
-    def _residual(self, data, X: np.ndarray) -> float:
+    @staticmethod
+    def _residual(Y: np.ndarray, blocks_data: list, X: np.ndarray) -> float:
         """``||Y + X D||_F / ||Y||_F`` from the data columns: the Gram expansion
         ``<X G, X> + 2 <X, H^T> + c`` cancels down to ``eps ||Y||^2``, so it cannot
         resolve a relative residual below ``sqrt(eps) ~ 1.5e-8``."""
-        Y = self._target(data)
-        R = Y + X @ np.vstack([term.datablock(data) for term in self._terms(data)])
+        R = Y + X @ np.vstack(blocks_data)
         return float(np.linalg.norm(R) / max(np.linalg.norm(Y), np.finfo(float).tiny))
 
     def _solve(self, problem: GramProblem):
@@ -212,7 +216,10 @@ class _SecondOrderLearner:
         self
         """
         data = concatenate(data) if isinstance(data, (list, tuple)) else data
-        problem = self.regression(data)
+        # the target (a projected nonlinear force costs one full-order evaluation per
+        # snapshot) and the data blocks, built once for the regression and the residual
+        Y, blocks_data = self._target(data), self._datablocks(data)
+        problem = self._regression(data, Y, blocks_data)
         X, info = self._solve(problem)
         parts = {b.name: X[:, s] for b, s in zip(problem.blocks, problem.slices())}
         self.stiffness_ = parts["stiffness"]
@@ -223,7 +230,7 @@ class _SecondOrderLearner:
         self.objective_ = float(info["objective"])
         self.solver_info_ = info
         self.stiffness_shift_ = next(b.shift for b in problem.blocks if b.name == "stiffness")
-        residual = self._residual(data, X)
+        residual = self._residual(Y, blocks_data, X)
         diag = data.diagnostics
         self.error_split_ = ErrorSplit(
             projection=diag.get("projection_error"),
