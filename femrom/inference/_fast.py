@@ -76,14 +76,13 @@ on one thread and 0.1 s with two busy threads).
 
 from __future__ import annotations
 
-import contextlib
 import time
 import weakref
 from dataclasses import dataclass, replace
 
 import numpy as np
 
-from femrom.inference._ipm import gap_bound, relative_gap, smallest_eigenvalue, solve_ipm
+from femrom.inference._ipm import blas_threads, gap_bound, relative_gap, smallest_eigenvalue, solve_ipm
 from femrom.inference._problem import GramProblem
 
 
@@ -166,14 +165,6 @@ class FastOptions:
             raise ValueError(f"unknown method {self.method!r}; valid: {METHODS}")
 
 
-def _single_thread():
-    try:
-        from threadpoolctl import threadpool_limits
-    except ImportError:  # pragma: no cover - optional
-        return contextlib.nullcontext()
-    return threadpool_limits(limits=1, user_api="blas")
-
-
 def solve_fast(problem: GramProblem, options: FastOptions = FastOptions()):
     """Solve ``problem`` (see module docstring); returns ``(X, info)``.
 
@@ -192,7 +183,7 @@ def solve_fast(problem: GramProblem, options: FastOptions = FastOptions()):
         ``active`` (per "psd" block: eigenvalues held at the bound).
     """
     tic = time.perf_counter()
-    with _single_thread():
+    with blas_threads(1):
         scaled, unscale, obj_scale = problem.scaled()
         reduced, recover = _eliminate_free(scaled)
         info = {"solver": "fast", "iterations": 0, "cg_iterations": 0, "gap_estimate": 0.0,

@@ -252,15 +252,15 @@ def _assemble(problem: GramProblem, blocks) -> np.ndarray:
 THREADED_UNKNOWNS = 8000
 
 
-def _all_threads(enabled: bool):
-    """Lift the solver's one-BLAS-thread limit for one large factorisation."""
-    if not enabled:
+def blas_threads(limit: int | None):
+    """``threadpoolctl`` limit of the BLAS threads for a block (``None``: unchanged)."""
+    if limit is None:
         return contextlib.nullcontext()
     try:
         from threadpoolctl import threadpool_limits
     except ImportError:  # pragma: no cover - optional
         return contextlib.nullcontext()
-    return threadpool_limits(limits=os.cpu_count() or 1, user_api="blas")
+    return threadpool_limits(limits=limit, user_api="blas")
 
 
 class DenseNewton:
@@ -303,7 +303,8 @@ class DenseNewton:
                 N[np.diag_indices(self.m)] = diagonal + delta * np.maximum(
                     diagonal, np.finfo(float).tiny)
             try:
-                with _all_threads(self.m >= THREADED_UNKNOWNS):
+                # lift the solver's one-thread limit for a large factorisation
+                with blas_threads((os.cpu_count() or 1) if self.m >= THREADED_UNKNOWNS else None):
                     self.fac = sla.cho_factor(N, lower=True, overwrite_a=True, check_finite=False)
                 return
             except np.linalg.LinAlgError:

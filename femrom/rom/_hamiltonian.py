@@ -39,7 +39,6 @@ import dataclasses
 import json
 import time
 from dataclasses import dataclass, field
-from typing import Iterator
 
 import numpy as np
 import scipy.linalg as sl
