@@ -13,8 +13,8 @@ import pytest
 
 from femrom.basis import CotangentLiftPSD
 from femrom.cli import load_case
-from femrom.inference import HamiltonianOperators, HamiltonianOpInf, ProjectedPotential
-from femrom.integrators import CanonicalSystem, QuarticPotential, integrate_canonical
+from femrom.inference import HamiltonianOpInf, ProjectedPotential
+from femrom.integrators import integrate_canonical
 from femrom.rom import HamiltonianROM
 
 nls = load_case("nls")
