@@ -51,7 +51,7 @@ LEARNERS = ("galerkin", "lopinf", "opinf")
 def run_level(level: str, *, steps: int, ranks, store_dir: Path, out_dir: Path, svd_power: int) -> dict:
     """One level through the case's pipeline; the numbers the ladder table needs."""
     import fishtail
-    from femrom.post._report import machine_description
+    from femrom.post import machine_description
 
     load_before = os.getloadavg()
     tic = time.perf_counter()
@@ -146,12 +146,12 @@ def main(argv=None) -> int:
     parser.add_argument("--worker-out", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.worker:
-        from femrom.post._report import _jsonable
+        from femrom.post import jsonable
 
         with tempfile.TemporaryDirectory(prefix=f"fishtail_{args.worker}_", dir=args.store_dir) as work:
             res = run_level(args.worker, steps=args.steps, ranks=args.ranks, store_dir=Path(args.store_dir),
                             out_dir=Path(work), svd_power=args.svd_power)
-        Path(args.worker_out).write_text(json.dumps(_jsonable(res), indent=2))
+        Path(args.worker_out).write_text(json.dumps(jsonable(res), indent=2))
         return 0
     merged = json.loads(args.out.read_text()) if args.out.exists() else {"levels": {}}
     results = []

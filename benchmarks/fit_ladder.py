@@ -112,7 +112,7 @@ def run(sizes=SIZES, out_dir: Path | None = None, problem_kind: str = "string",
             data = reduce_snapshots(V, Q, dt, product=M, inputs=U, order=4)
         else:
             data = random_data(r)
-        problem = LagrangianOpInf(regularization=1e-8).regression(data)
+        problem = LagrangianOpInf(["damping"], regularization=1e-8).regression(data)
         results = {}
         for name in solvers:
             predicted = None
@@ -136,7 +136,7 @@ def run(sizes=SIZES, out_dir: Path | None = None, problem_kind: str = "string",
             times[name][r] = info["seconds"]
             if name == "fast":
                 growth["fast"] = GROWTH.get(f"fast/{info.get('method')}", GROWTH["fast"])
-        plain = SecondOrderOpInf(regularization=1e-8)
+        plain = SecondOrderOpInf(["damping"], regularization=1e-8)
         tic = time.perf_counter()
         plain.fit(data)
         results["least_squares"] = {"seconds": time.perf_counter() - tic,

@@ -8,7 +8,7 @@ meshed by Gmsh at mesh sizes chosen so that P1 and P2 each reach about 2e4,
    ``asm(linear_elasticity(*lame_parameters(E, nu)), basis)`` on the same mesh
    and basis (skfem's default quadrature), their ratio and their difference;
 2. consistent-mass assembly (``vector_mass``);
-3. every linear-solver strategy of ``femrom.fem.make_solver`` driving
+3. every linear-solver strategy of ``femrom.solvers.make_solver`` driving
    ``femrom.integrators.integrate`` with ``Newmark()`` (average acceleration)
    through the ``solver=`` factory, for a tip traction on ``right`` applied
    suddenly at ``t = 0``: setup, factorisation, time per step with reuse,
@@ -283,7 +283,7 @@ def _warm_up(strategy: str) -> float:
     """
     import scipy.sparse as sp
 
-    from femrom.fem import make_solver
+    from femrom.solvers import make_solver
 
     tic = time.perf_counter()
     A = sp.diags(np.arange(1.0, 31.0)) + sp.eye(30, k=1) * 0.1 + sp.eye(30, k=-1) * 0.1
@@ -335,7 +335,7 @@ def task_newmark(size: str, element: str, strategy: str, fresh: bool, n_steps: i
     its own solvers; the previous ones are freed first, so the peak memory is
     that of one run); the reported numbers are medians over the runs.
     """
-    from femrom.fem import make_solver
+    from femrom.solvers import make_solver
 
     warm_up_seconds = _warm_up(strategy)
     system, modes, assembly_seconds = _cantilever(size, element)
@@ -375,17 +375,16 @@ def task_naive_superlu(size: str, element: str, n_steps: int) -> dict:
     """The naive baseline: scipy's SuperLU factorising ``A_eff`` afresh at every step.
 
     What ``scipy.sparse.linalg.spsolve`` does per call; femrom's ``superlu``
-    strategy refuses this size (:data:`femrom.fem._solvers.SUPERLU_MAX_DOFS`),
-    so the limit is lifted in this child only. No reused SuperLU run here: the
+    strategy refuses this size (:data:`femrom.solvers.SUPERLU_MAX_DOFS`),
+    so the limit is lifted for these solves only. No reused SuperLU run here: the
     reuse side of the ratio is PARDISO's, measured in the same ladder run.
     """
-    from femrom.fem import _solvers, make_solver
+    from femrom.solvers import make_solver
 
-    _solvers.SUPERLU_MAX_DOFS = 10**9
     system, _, assembly_seconds = _cantilever(size, element)
 
     def make(A, spd=True):  # the initial acceleration's mass solve is not what is measured
-        return make_solver(A, "pardiso" if A is system.mass else "superlu", spd=spd)
+        return make_solver(A, "pardiso" if A is system.mass else "superlu", spd=spd, max_dofs=10**9)
 
     gc.collect()
     run = _newmark_run(system, make, True, n_steps)
@@ -474,7 +473,7 @@ def _run_child(spec: str, memory_limit_gb: float, timeout: float,
 
 
 def _available_strategies() -> list[str]:
-    from femrom.fem._solvers import is_available  # not re-exported; read-only use
+    from femrom.solvers import is_available
 
     return [s for s in STRATEGY_ORDER if is_available(s)]
 
@@ -745,7 +744,7 @@ def main(argv=None) -> int:
 
     import psutil
 
-    from femrom.post._report import machine_description
+    from femrom.post import machine_description
 
     sizes = _parse_list(args.sizes, MESH_SIZES, "sizes")
     elements = _parse_list(args.elements, ("p1", "p2"), "elements")
@@ -788,7 +787,7 @@ def main(argv=None) -> int:
         "sizes": sizes, "elements": elements, "memory_limit_gb": limit,
         "results": results, "tables": tables,
     }
-    from femrom.post._report import write_metrics
+    from femrom.post import write_metrics
 
     path = write_metrics(args.out, record)
     print(f"wrote {path}")

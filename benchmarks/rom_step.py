@@ -51,7 +51,7 @@ import fom_ladder  # noqa: E402  (the FOM problem and its constants)
 
 from femrom.integrators import Newmark, Trajectory, integrate  # noqa: E402
 from femrom.rom import SecondOrderROM  # noqa: E402
-from femrom.rom._steppers import linear_step_map, run_linear  # noqa: E402
+from femrom.rom import LinearParts, reduced_scheme, run_linear  # noqa: E402
 from femrom.scene import SecondOrderSystem  # noqa: E402
 
 SIZES = (5, 10, 20, 40)
@@ -113,8 +113,8 @@ def _time_rom(rom: SecondOrderROM, n_steps: int, repeats: int, generic_steps: in
         gc.collect()
         sol = rom.predict(np.zeros(r), times, inputs=inputs, scheme="newmark")
         out["predict"].append(sol.info["seconds_per_step"])
-        A, F = linear_step_map(ops.mass_matrix, ops.damping, ops.stiffness, ops.input_matrix,
-                               fom_ladder.DT, "newmark")
+        A, F = reduced_scheme("newmark").step_map(LinearParts(ops.mass_matrix, ops.damping, ops.stiffness),
+                                                  fom_ladder.DT, ops.input_matrix)
         forcing = F @ inputs[:, 1:]
         tic = time.perf_counter()
         run_linear(A, np.zeros(A.shape[0]), n_steps, forcing)

@@ -34,8 +34,8 @@ from pathlib import Path
 import numpy as np
 
 from femrom.integrators import simulate
-from femrom.post import accuracy_cost_table, plot_accuracy_cost, plot_response, write_metrics
-from femrom.post._report import machine_description
+from femrom.post import (accuracy_cost_table, machine_description, plot_accuracy_cost, plot_response,
+                         write_metrics)
 from femrom.scene import Scene, build
 
 SCENE = Path(__file__).with_suffix(".toml")
@@ -269,7 +269,7 @@ def rom_study(scene: Scene, study: RomStudy) -> dict:
                 rom = SecondOrderROM.galerkin(system, V, product=M, mass_orthonormal=True)
             else:
                 learner = (LagrangianOpInf if method == "lopinf" else SecondOrderOpInf)(
-                    damping=study.damping)
+                    ["damping"] if study.damping else ())
                 rom = SecondOrderROM(learner=learner, basis=V, product=M).fit(data)
             fit_seconds = time.perf_counter() - tic
             with np.errstate(over="ignore", invalid="ignore"):
@@ -328,7 +328,7 @@ def rom_study(scene: Scene, study: RomStudy) -> dict:
 
 def write_rom_report(out_dir: Path, study_result: dict, prefix: str = "") -> dict:
     """Plots (file names start with ``prefix``) and the table of the ROM study; returns the metrics part."""
-    from femrom.post._report import plot_accuracy_cost_groups, plot_time_series
+    from femrom.post import plot_accuracy_cost_groups, plot_time_series
 
     res = study_result
     t, T = res["times"], res["train_window"]

@@ -6,7 +6,7 @@ two chambers driven antagonistically by one pressure input (``fishtail.toml``;
 
 1. builds the P2 FOM at a mesh level (``LEVELS``) and runs it twice, under the
    sigmoid pressure of the scene file and under a pressure step, factorising
-   the effective matrix once for both runs (:class:`femrom.fem.SolverCache`;
+   the effective matrix once for both runs (:class:`femrom.solvers.SolverCache`;
    the mass solve of the initial acceleration by Jacobi-CG, no second factor);
    ``q``, ``q'``, ``q''`` stream into an HDF5 snapshot store and are never
    held in memory;
@@ -48,25 +48,26 @@ from pathlib import Path
 import numpy as np
 
 from femrom.basis import POD
-from femrom.fem import SolverCache, make_solver
-from femrom.inference import LagrangianOpInf, SecondOrderOpInf, reduce_snapshots
-from femrom.inference._data import project_columns
+from femrom.inference import LagrangianOpInf, SecondOrderOpInf, project_columns, reduce_snapshots
 from femrom.integrators import simulate
 from femrom.linalg import store_source
 from femrom.post import (
     accuracy_cost_table,
+    machine_description,
     mesh_arrays,
     plot_accuracy_cost,
+    pyplot,
     render_available,
     render_grid,
+    save_figure,
     vertex_displacements,
     write_metrics,
     write_vtu_series,
 )
-from femrom.post._report import _pyplot, _save, machine_description
 from femrom.rom import SecondOrderROM
 from femrom.scene import InputConfig, Scene, Signal, build
 from femrom.snapshots import SnapshotStore
+from femrom.solvers import SolverCache, make_solver
 
 SCENE = Path(__file__).with_suffix(".toml")
 
@@ -379,7 +380,6 @@ def mesh_ladder(scene: Scene, levels) -> list[dict]:
     errors against the finest level of the ladder, with build + solve time."""
     from scipy.sparse.linalg import eigsh
 
-    from femrom.fem import make_solver
 
     rows = []
     for level in levels:
@@ -403,7 +403,7 @@ def mesh_ladder(scene: Scene, levels) -> list[dict]:
 
 # -- plots -------------------------------------------------------------------------------
 def plot_outputs(path, runs: dict, best: dict, r: int, names, title: str):
-    plt = _pyplot()
+    plt = pyplot()
     fig, axes = plt.subplots(len(runs), 2, figsize=(11, 3.3 * len(runs)), squeeze=False)
     for i, (key, run) in enumerate(runs.items()):
         for j, comp in enumerate((1, 0)):
@@ -431,11 +431,11 @@ def plot_outputs(path, runs: dict, best: dict, r: int, names, title: str):
     for ax in axes[-1]:
         ax.set_xlabel("t [s]")
     fig.suptitle(title, fontsize=10)
-    _save(fig, path, dpi=110)
+    save_figure(fig, path, dpi=110)
 
 
 def plot_errors(path, rows: list[dict], title: str):
-    plt = _pyplot()
+    plt = pyplot()
     fig, axes = plt.subplots(1, 2, figsize=(10, 3.6))
     for name, marker in (("galerkin", "s"), ("lopinf", "o"), ("opinf", "^"), ("lopinf_fd", "x"),
                          ("opinf_fd", "v")):
@@ -453,11 +453,11 @@ def plot_errors(path, rows: list[dict], title: str):
         ax.grid(alpha=0.3, which="both")
         ax.legend(fontsize=8)
     fig.suptitle(title, fontsize=10)
-    _save(fig, path, dpi=110)
+    save_figure(fig, path, dpi=110)
 
 
 def plot_energy(path, best: dict, r: int, fom_run: dict, title: str):
-    plt = _pyplot()
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(8, 3.6))
     ax.semilogy(fom_run["times"], np.maximum(fom_run["energy"], 1e-30), "k-", lw=2, label="FOM (test input)")
     for name, style in (("galerkin", "--"), ("lopinf", "-"), ("opinf", ":"), ("lopinf_fd", "-."),
@@ -476,7 +476,7 @@ def plot_energy(path, best: dict, r: int, fom_run: dict, title: str):
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=8)
     ax.set_title(title, fontsize=10)
-    _save(fig, path, dpi=110)
+    save_figure(fig, path, dpi=110)
 
 
 # -- renders -------------------------------------------------------------------------------

@@ -55,10 +55,9 @@ import scipy.sparse as sp
 from femrom.basis import CotangentLiftPSD
 from femrom.inference import HamiltonianOperators, HamiltonianOpInf, finite_difference
 from femrom.inference import ProjectedPotential, project_potential_gradient
-from femrom.integrators import (CanonicalSystem, ConvergenceError, Newton, QuarticPotential,
-                                integrate_canonical, solve_newton)
-from femrom.post import accuracy_cost_table, plot_accuracy_cost, write_metrics
-from femrom.post._report import machine_description
+from femrom.fem import QuarticPotential
+from femrom.integrators import CanonicalSystem, ConvergenceError, Newton, integrate_canonical, solve_newton
+from femrom.post import accuracy_cost_table, machine_description, plot_accuracy_cost, write_metrics
 from femrom.rom import HamiltonianROM
 
 SCENE = Path(__file__).with_suffix(".toml")

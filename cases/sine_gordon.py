@@ -35,8 +35,8 @@ from pathlib import Path
 
 import numpy as np
 
-from femrom.post import accuracy_cost_table, write_metrics
-from femrom.post._report import machine_description, plot_accuracy_cost_groups, plot_time_series
+from femrom.post import (accuracy_cost_table, machine_description, plot_accuracy_cost_groups,
+                         plot_time_series, write_metrics)
 from femrom.scene import Scene, build
 
 SCENE = Path(__file__).with_suffix(".toml")
@@ -269,7 +269,7 @@ def run(out_dir, *, quick: bool = False, paper: bool = False, study: SineGordonS
                 nodes, xi, info = ecsw_weights(nl, V, V @ data.states[:, ::study.hyper_stride],
                                                tolerance=study.hyper_tolerance)
                 hyper = HyperReducedPotential.from_potential(nl, V, nodes, xi)
-                rom = SecondOrderROM(dataclasses.replace(learned.operators_, nonlinear=hyper), V,
+                rom = SecondOrderROM(learned.operators_.without("projected_force").with_terms(hyper), V,
                                      product=M)
                 extra = {"samples": int(nodes.size), "ecsw_residual": info["residual"],
                          "ecsw_seconds": info["seconds"],

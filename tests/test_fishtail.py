@@ -16,7 +16,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from femrom.fem import Condensation, SolidSpace, make_solver
+from femrom.fem import Condensation, SolidSpace
+from femrom.solvers import make_solver
 from femrom.fem import _vector_ops
 from femrom.mesh import build_mesh
 from femrom.scene import InputConfig, MaterialConfig, SceneError, build

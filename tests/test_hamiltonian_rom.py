@@ -11,8 +11,9 @@ Two canonical systems, both small enough for seconds:
 import numpy as np
 import pytest
 
-from femrom.inference import HamiltonianOperators, HamiltonianOpInf
-from femrom.integrators import CanonicalSystem, Newton, QuarticPotential, integrate_canonical
+from femrom.inference import CanonicalData, HamiltonianOperators, HamiltonianOpInf
+from femrom.fem import QuarticPotential
+from femrom.integrators import CanonicalSystem, Newton, integrate_canonical
 from femrom.rom import HamiltonianROM, HamiltonianSolution, hamiltonian_step_matrix
 
 
@@ -61,7 +62,7 @@ def nls():
 # -- fit and predict ------------------------------------------------------------
 def test_fit_and_predict_reproduce_the_hopinf_model(linear):
     K, t, Q, P, dQ, dP, Phi = linear
-    rom = HamiltonianROM(basis=Phi, learner=HamiltonianOpInf()).fit(Q, P, ddt_q=dQ, ddt_p=dP)
+    rom = HamiltonianROM(basis=Phi, learner=HamiltonianOpInf()).fit_snapshots(Q, P, ddt_q=dQ, ddt_p=dP)
     reference = HamiltonianOpInf().fit_snapshots(Phi, Q, P, ddt_q=dQ, ddt_p=dP)
     # the same computation on the same data: bitwise
     np.testing.assert_array_equal(rom.operators_.position, reference.operators_.position)
@@ -95,7 +96,7 @@ def test_fit_and_predict_reproduce_the_hopinf_model(linear):
 
 def test_symplectic_schemes_conserve_the_reduced_hamiltonian(linear):
     K, t, Q, P, dQ, dP, Phi = linear
-    rom = HamiltonianROM(basis=Phi).fit(Q, P, ddt_q=dQ, ddt_p=dP)
+    rom = HamiltonianROM(basis=Phi).fit_snapshots(Q, P, ddt_q=dQ, ddt_p=dP)
     times = np.arange(10001) * 1e-3                          # 5 training windows
     q0, p0 = Phi.T @ Q[:, 0], Phi.T @ P[:, 0]
     H = rom.predict(q0, p0, times, scheme="midpoint").hamiltonian
@@ -118,7 +119,7 @@ def test_symplectic_schemes_conserve_the_reduced_hamiltonian(linear):
 def test_nls_rom_with_a_known_potential_conserves_h_and_mass(nls):
     fom, potential, dt, run, Phi = nls
     rom = HamiltonianROM(basis=Phi, potential=potential,
-                         learner=HamiltonianOpInf(shared=True)).fit(run.q, run.p, dt)
+                         learner=HamiltonianOpInf(shared=True)).fit_snapshots(run.q, run.p, dt)
     times = dt * np.arange(301)
     q0, p0 = Phi.T @ run.q[:, 0], Phi.T @ run.p[:, 0]
     avf = rom.predict(q0, p0, times, scheme="avf")
@@ -148,7 +149,7 @@ def test_nls_rom_with_a_known_potential_conserves_h_and_mass(nls):
 # -- lazy fields -------------------------------------------------------------------
 def test_fields_are_rebuilt_only_when_asked(linear):
     K, t, Q, P, dQ, dP, Phi = linear
-    rom = HamiltonianROM(basis=Phi.copy()).fit(Q, P, ddt_q=dQ, ddt_p=dP)
+    rom = HamiltonianROM(basis=Phi.copy()).fit_snapshots(Q, P, ddt_q=dQ, ddt_p=dP)
     solution = rom.predict(Phi.T @ Q[:, 0], Phi.T @ P[:, 0], t)
     n = Phi.shape[0]
     # nothing of full size was computed: every array held has r or fewer rows
@@ -177,7 +178,7 @@ def test_save_load_predicts_bit_identically(linear, tmp_path):
     K, t, Q, P, dQ, dP, Phi = linear
     Y = Q[:3] + 0.5 * P[10:13]                                 # three outputs linear in [q; p]
     rom = HamiltonianROM(basis=Phi, learner=HamiltonianOpInf(regularization=1e-12),
-                         scheme="verlet").fit(Q, P, t[1] - t[0], order=6, outputs=Y)
+                         scheme="verlet").fit_snapshots(Q, P, t[1] - t[0], order=6, outputs=Y)
     path = tmp_path / "wave.h5"
     rom.save(path)
     loaded = HamiltonianROM.load(path)
@@ -213,7 +214,7 @@ def test_save_load_predicts_bit_identically(linear, tmp_path):
 
 def test_save_load_with_a_known_potential(nls, tmp_path):
     fom, potential, dt, run, Phi = nls
-    rom = HamiltonianROM(basis=Phi, potential=potential).fit(run.q, run.p, dt)
+    rom = HamiltonianROM(basis=Phi, potential=potential).fit_snapshots(run.q, run.p, dt)
     path = tmp_path / "nls.h5"
     rom.save(path)
     # the potential is code: the file names it and asks for it back
@@ -252,7 +253,7 @@ def test_projection_error_matches_a_direct_computation():
     assert split.optimization == pytest.approx(
         np.linalg.norm(R) / np.linalg.norm(np.vstack([Phi.T @ dQ, Phi.T @ dP])), rel=1e-12)
     # reduced data: no projection, no derivative reference
-    plain = HamiltonianOpInf().fit(Qh, Ph, Phi.T @ dQ, Phi.T @ dP).error_split_
+    plain = HamiltonianOpInf().fit(CanonicalData(Qh, Ph, Phi.T @ dQ, Phi.T @ dP)).error_split_
     assert plain.projection is None and plain.derivative is None
     assert HamiltonianOpInf().fit_snapshots(Phi, Q, P, t[1] - t[0]).error_split_.derivative is None
 
@@ -312,9 +313,9 @@ def test_derivative_error_falls_with_the_finite_difference_order():
 def test_bad_input_gives_one_line_errors(linear):
     K, t, Q, P, dQ, dP, Phi = linear
     with pytest.raises(ValueError, match="pass basis=Phi"):
-        HamiltonianROM().fit(Q, P, ddt_q=dQ, ddt_p=dP)
+        HamiltonianROM().fit_snapshots(Q, P, ddt_q=dQ, ddt_p=dP)
     with pytest.raises(ValueError, match="not orthonormal"):
-        HamiltonianROM(basis=2.0 * Phi).fit(Q, P, ddt_q=dQ, ddt_p=dP)
+        HamiltonianROM(basis=2.0 * Phi).fit_snapshots(Q, P, ddt_q=dQ, ddt_p=dP)
     with pytest.raises(ValueError, match="not fitted"):
         HamiltonianROM(basis=Phi).predict(np.zeros(6), np.zeros(6), t)
     rom = HamiltonianROM(HamiltonianOperators(np.eye(6), np.eye(6)), Phi)
@@ -325,7 +326,7 @@ def test_bad_input_gives_one_line_errors(linear):
     with pytest.raises(ValueError, match="need dt"):
         HamiltonianOpInf().fit_snapshots(Phi, Q, P)
     with pytest.raises(ValueError, match="expected"):
-        HamiltonianOpInf().fit(Phi.T @ Q, Phi.T @ P[:, :-1], Phi.T @ dQ, Phi.T @ dP)
+        CanonicalData(Phi.T @ Q, Phi.T @ P[:, :-1], Phi.T @ dQ, Phi.T @ dP)
     with pytest.raises(ValueError, match="unknown derivatives"):
         HamiltonianOpInf().fit_snapshots(Phi, Q, P, 1e-3, derivatives="exact")
     with pytest.raises(ValueError, match="columns"):

@@ -128,7 +128,7 @@ def test_theorem1_learned_stiffness_converges_at_fd_order(beam, order):
         t = np.arange(0.0, T + 0.5 * dt, dt)
         Q, _, _ = modal_solution(w, Phi, a, b, t)
         data = reduce_snapshots(V, Q, dt, product=M, order=order)
-        learned = LagrangianOpInf(damping=False).fit(data)
+        learned = LagrangianOpInf().fit(data)
         errors.append(relative(learned.stiffness_, K_intrusive))
     slope = np.polyfit(np.log(steps), np.log(errors), 1)[0]
     # Theorem 1: ||K^ - K~|| = O(dt^p) for derivative data of order p;
@@ -162,7 +162,7 @@ def test_newmark_accelerations_give_the_intrusive_operators_exactly(beam):
                             accelerations=trajectory.a, derivatives="stored", inputs=U)
     intrusive = galerkin(system, V, mass_orthonormal=True)
     for solver in ("fast", "clarabel"):
-        learned = LagrangianOpInf(solver=solver).fit(data)
+        learned = LagrangianOpInf(["damping"], solver=solver).fit(data)
         # the FOM trajectory leaves span(V) (the input excites every mode), but
         # with a modal basis the projected equations decouple exactly: the data
         # then satisfy the intrusive ROM to round-off (fast: 1e-8; Clarabel's
@@ -172,7 +172,7 @@ def test_newmark_accelerations_give_the_intrusive_operators_exactly(beam):
         assert relative(learned.damping_, intrusive.damping) < tol * 1e3  # C is 1e3 x smaller
         assert relative(learned.input_matrix_, intrusive.input_matrix) < tol
     # Rayleigh check: C^ = alpha I + beta K~ (V^T M V = I)
-    learned = LagrangianOpInf().fit(data)
+    learned = LagrangianOpInf(["damping"]).fit(data)
     target = alpha * np.eye(r) + beta * intrusive.stiffness
     assert relative(learned.damping_, target) < 1e-6
     assert learned.error_split_.derivative == 0.0
@@ -195,7 +195,7 @@ def test_rayleigh_damping_learned_from_finite_differences_approaches_intrusive(b
         x = np.exp(-zeta[:, None] * w[:r, None] * t) * np.cos(wd[:, None] * t)
         Q = V @ x
         data = reduce_snapshots(V, Q, dt, product=M, order=4)
-        errors.append(relative(LagrangianOpInf().fit(data).damping_, C_intrusive))
+        errors.append(relative(LagrangianOpInf(["damping"]).fit(data).damping_, C_intrusive))
     assert errors[-1] < 1e-4 and errors[0] > errors[1] > errors[2]
 
 
@@ -221,7 +221,7 @@ def test_learned_operators_are_symmetric_and_definite(case, solver):
     data = {"noisy": lambda: random_data(rng, r, 200, noise=1.0),
             "rank_deficient": lambda: random_data(rng, r, 200, rank=3),
             "few_snapshots": lambda: random_data(rng, r, 6)}[case]()
-    learner = LagrangianOpInf(solver=solver, regularization=1e-8).fit(data)
+    learner = LagrangianOpInf(["damping"], solver=solver, regularization=1e-8).fit(data)
     Kh, Ch = learner.stiffness_, learner.damping_
     # symmetric blocks are symmetrised exactly: equality, not a tolerance
     assert np.array_equal(Kh, Kh.T) and np.array_equal(Ch, Ch.T)
@@ -236,7 +236,7 @@ def test_learned_operators_are_symmetric_and_definite(case, solver):
 def test_fast_solver_matches_cvxpy_on_random_problems(seed):
     rng = np.random.default_rng(10 + seed)
     data = random_data(rng, 10, 100)
-    problem = LagrangianOpInf(regularization=1e-6).regression(data)
+    problem = LagrangianOpInf(["damping"], regularization=1e-6).regression(data)
     X_fast, fast = solve_fast(problem)
     X_ref, ref = solve_conic(problem, "CLARABEL")
     # the issue's acceptance bound: objectives within 1e-6 relative; the fast
@@ -265,7 +265,7 @@ def test_fast_solver_matches_cvxpy_on_a_beam_problem(beam):
               1500, consumers=[trajectory])
     U = np.column_stack([inputs(t) for t in trajectory.t])
     data = reduce_snapshots(Phi[:, :6], trajectory.q, dt, product=M, inputs=U, order=2)
-    problem = LagrangianOpInf(regularization=1e-9).regression(data)
+    problem = LagrangianOpInf(["damping"], regularization=1e-9).regression(data)
     _, fast = solve_fast(problem)
     _, ref = solve_conic(problem, "CLARABEL")
     _, scs = solve_conic(problem, "SCS")
@@ -280,7 +280,7 @@ def test_fast_solver_certifies_a_large_active_set():
     minutes at this size, benchmarks/fit_ladder.py)."""
     rng = np.random.default_rng(40)
     data = random_data(rng, 30, 300)
-    problem = LagrangianOpInf(regularization=1e-8).regression(data)
+    problem = LagrangianOpInf(["damping"], regularization=1e-8).regression(data)
     X, fast = solve_fast(problem)
     _, scs = solve_conic(problem, "SCS")
     assert fast["status"] == "optimal" and fast["gap_estimate"] < 1e-8
@@ -310,7 +310,7 @@ def test_fast_solver_matches_cvxpy_on_ill_conditioned_pod_data(beam):
     V = np.linalg.solve(R, np.linalg.svd(R @ Q, full_matrices=False)[0][:, :8])
     U = np.column_stack([inputs(t) for t in trajectory.t])
     data = reduce_snapshots(V, Q, dt, product=M, inputs=U, order=4)
-    problem = LagrangianOpInf(regularization=1e-8).regression(data)
+    problem = LagrangianOpInf(["damping"], regularization=1e-8).regression(data)
     g = np.linalg.eigvalsh(problem.scaled()[0].regularized_gram())
     assert g[-1] / g[0] > 1e6                                   # the data are ill-conditioned
     X, fast = solve_fast(problem)
@@ -322,7 +322,7 @@ def test_fast_solver_matches_cvxpy_on_ill_conditioned_pod_data(beam):
 def test_gram_problem_adds_trajectories_like_concatenation():
     rng = np.random.default_rng(5)
     d1, d2 = random_data(rng, 4, 30), random_data(rng, 4, 40)
-    learner = LagrangianOpInf()
+    learner = LagrangianOpInf(["damping"])
     both = learner.regression([d1, d2])
     summed = learner.regression(d1) + learner.regression(d2)
     np.testing.assert_allclose(both.gram, summed.gram, rtol=1e-12)
@@ -350,16 +350,16 @@ def test_euclidean_basis_needs_the_reduced_mass(beam):
     Q, _, _ = modal_solution(w, Phi, a, b, t)
     data = reduce_snapshots(V, Q, dt, order=6)                        # Euclidean product
     # with the reduced mass known, the learned K^ is the intrusive K~ (symmetric)
-    known = LagrangianOpInf(damping=False, mass=intrusive.mass, mass_orthonormal=False).fit(data)
+    known = LagrangianOpInf(mass=intrusive.mass, mass_orthonormal=False).fit(data)
     assert relative(known.stiffness_, intrusive.stiffness) < 1e-6
     # assuming M^ = I: the data follow M~^-1 K~ (not symmetric); warned, and wrong
     with pytest.warns(UserWarning, match="not mass-orthonormal"):
-        assumed = LagrangianOpInf(damping=False, mass_orthonormal=False).fit(data)
+        assumed = LagrangianOpInf(mass_orthonormal=False).fit(data)
     target = np.linalg.solve(intrusive.mass, intrusive.stiffness)
     assert relative(target, target.T) > 0.1                           # the structure is lost
     assert relative(assumed.stiffness_, intrusive.stiffness) > 0.1
     # plain OpInf on the same data finds the non-symmetric M~^-1 K~
-    plain = SecondOrderOpInf(damping=False, mass_orthonormal=False)
+    plain = SecondOrderOpInf(mass_orthonormal=False)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)
         plain.fit(data)
@@ -371,7 +371,7 @@ def test_plain_opinf_agrees_with_first_order_opinf_package():
     opinf = pytest.importorskip("opinf")
     rng = np.random.default_rng(7)
     data = random_data(rng, 5, 300, noise=0.3)
-    plain = SecondOrderOpInf().fit(data)
+    plain = SecondOrderOpInf(["damping"]).fit(data)
     # first-order form x = [q; q'], dx/dt = A x + B u with the same derivative data
     X = np.vstack([data.states, data.velocities])
     dX = np.vstack([data.velocities, data.accelerations])
@@ -404,7 +404,7 @@ def test_error_split_and_outputs(beam):
     for order in (2, 4):
         data = reduce_snapshots(Phi[:, :r], Q, dt, product=M, velocities=Vel, accelerations=Acc,
                                 order=order, outputs=E @ Q)
-        learner = LagrangianOpInf(damping=False).fit(data)
+        learner = LagrangianOpInf().fit(data)
         splits.append(learner.error_split_)
     assert 0 < splits[0].projection == pytest.approx(splits[1].projection)   # same basis
     assert splits[1].derivative < splits[0].derivative                       # higher order
@@ -431,7 +431,7 @@ def test_optimization_residual_resolves_a_near_exact_fit():
     Acc = B @ U - damping @ V - stiffness @ Q              # M^ = I
     noise = 1e-10 * np.linalg.norm(Acc) / np.sqrt(Acc.size) * rng.standard_normal(Acc.shape)
     data = SecondOrderData(states=Q, velocities=V, accelerations=Acc + noise, inputs=U)
-    learner = LagrangianOpInf().fit(data)
+    learner = LagrangianOpInf(["damping"]).fit(data)
     # least squares leaves the part of the noise outside the data's row space:
     # sqrt(1 - p / K) = 0.98 of it (p = 2 r + m = 14 unknowns a row); the true model
     # is within 1e-10 of feasible-optimal, so the fit is too
@@ -485,7 +485,7 @@ def string_problem(string_snapshots, r, regularization):
     M, Q, U, dt, R, W = string_snapshots
     V = np.linalg.solve(R, W[:, :r])                            # V^T M V = I
     data = reduce_snapshots(V, Q, dt, product=M, inputs=U, order=4)
-    return LagrangianOpInf(regularization=regularization).regression(data)
+    return LagrangianOpInf(["damping"], regularization=regularization).regression(data)
 
 
 @pytest.mark.parametrize("regularization", [1e-8, 1e-4])
@@ -542,7 +542,7 @@ def test_interior_point_and_first_order_paths_agree(seed):
     constraints (well conditioned: either may be used): same optimum, both certified."""
     from femrom.inference import FastOptions
     rng = np.random.default_rng(20 + seed)
-    problem = LagrangianOpInf(regularization=1e-8).regression(random_data(rng, 12, 150))
+    problem = LagrangianOpInf(["damping"], regularization=1e-8).regression(random_data(rng, 12, 150))
     X_ipm, ipm = solve_fast(problem, FastOptions(method="interior_point"))
     X_fo, fo = solve_fast(problem, FastOptions(method="first_order"))
     assert ipm["method"] == "interior_point" and fo["method"] == "first_order"

@@ -23,10 +23,10 @@ from femrom.integrators import (
     estimate_max_frequency,
     integrate,
     iterate,
-    make_solver,
 )
 from femrom.integrators import _midpoint, _newmark
 from femrom.scene import SecondOrderSystem
+from femrom.solvers import make_solver
 
 FORCING_FREQUENCY = 1.3
 
@@ -440,8 +440,8 @@ def test_linear_system_factorises_once_and_never_runs_newton(scheme, monkeypatch
     def forbidden(*args, **kwargs):
         raise AssertionError("Newton ran on a linear system")
 
-    monkeypatch.setattr(_newmark, "solve_newton", forbidden)
-    monkeypatch.setattr(_midpoint, "solve_newton", forbidden)
+    monkeypatch.setattr(_newmark, "ImplicitSolve", forbidden)
+    monkeypatch.setattr(_midpoint, "ImplicitSolve", forbidden)
     system = chain()
     for n_steps in (10, 100):
         calls = []

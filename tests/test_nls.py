@@ -13,7 +13,7 @@ import pytest
 
 from femrom.basis import CotangentLiftPSD
 from femrom.cli import load_case
-from femrom.inference import HamiltonianOpInf, ProjectedPotential
+from femrom.inference import CanonicalData, HamiltonianOpInf, ProjectedPotential
 from femrom.integrators import integrate_canonical
 from femrom.rom import HamiltonianROM
 
@@ -105,7 +105,7 @@ def test_a_wrongly_projected_nonlinear_term_spoils_the_recovery(rich_data, wrong
     gq, gp = fom.potential.gradient(Q, P)                 # dH_nl/dq, dH_nl/dp
     Fq, Fp = {"omitted": (0 * gp, 0 * gq), "q_and_p_swapped": (gq, gp),
               "sign_flipped": (-gp, -gq)}[wrong]
-    learner = HamiltonianOpInf().fit(V.T @ Q, V.T @ P, V.T @ dQ, V.T @ dP, V.T @ Fq, V.T @ Fp)
+    learner = HamiltonianOpInf().fit(CanonicalData(V.T @ Q, V.T @ P, V.T @ dQ, V.T @ dP, V.T @ Fq, V.T @ Fp))
     assert relative(V @ learner.operators_.position @ V.T, fom.position) > 1e-3
     assert learner.residual_ > 1e-3     # measured 2.7e-3 to 7e-3; 1e-14 with the right term
 

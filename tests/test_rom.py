@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from femrom.fem import LocalPotential, rayleigh_damping
+from femrom.fem import JenkinsForce, LocalPotential, rayleigh_damping
 from femrom.inference import (
     LagrangianOpInf,
     ProjectedNonlinearForce,
@@ -98,7 +98,7 @@ def test_lean_stepper_reproduces_the_fom_integrators():
     r = 20
     A = rng.standard_normal((r, r))
     K = A @ A.T + r * np.eye(r)
-    ops = ReducedOperators(stiffness=K, damping=0.01 * K, input_matrix=rng.standard_normal((r, 2)))
+    ops = ReducedOperators.from_matrices(K, damping=0.01 * K, input_matrix=rng.standard_normal((r, 2)))
     inputs = lambda t: np.array([np.sin(t), np.cos(3 * t)])  # noqa: E731
     system = SecondOrderSystem(mass=sp.identity(r, format="csr"), stiffness=sp.csr_matrix(K),
                                damping=sp.csr_matrix(0.01 * K),
@@ -160,7 +160,7 @@ def test_lopinf_energy_stays_bounded_where_plain_opinf_blows_up(beam):
     data = reduce_snapshots(V, trajectory.q, dt, product=M, order=2)
     long_times = np.arange(20 * steps + 1) * dt
     energies, errors = {}, {}
-    for name, learner in (("lopinf", LagrangianOpInf()), ("plain", SecondOrderOpInf())):
+    for name, learner in (("lopinf", LagrangianOpInf(["damping"])), ("plain", SecondOrderOpInf(["damping"]))):
         rom = SecondOrderROM(learner=learner, basis=V, product=M).fit(data)
         with np.errstate(over="ignore", invalid="ignore"):
             solution = rom.predict(data.states[:, 0], long_times)
@@ -171,9 +171,9 @@ def test_lopinf_energy_stays_bounded_where_plain_opinf_blows_up(beam):
     assert np.all(np.isfinite(e)) and e.max() <= e[0] * (1 + 1e-10)
     growth = np.nanmax(np.abs(energies["plain"])) / abs(energies["plain"][0])
     assert growth > 1e10, growth
-    lop = LagrangianOpInf().fit(data)
+    lop = LagrangianOpInf(["damping"]).fit(data)
     assert lop.eigenvalues_["damping"][0] >= -1e-14 and lop.eigenvalues_["stiffness"][0] > 0
-    plain = SecondOrderOpInf().fit(data)
+    plain = SecondOrderOpInf(["damping"]).fit(data)
     assert plain.eigenvalues_["damping"][0] < 0        # the negative damping behind the growth
 
 
@@ -221,7 +221,7 @@ def test_lopinf_with_a_known_nonlinear_force_recovers_the_linear_part():
     data = reduce_snapshots(V, trajectory.q, 1e-3, product=system.mass, velocities=trajectory.v,
                             accelerations=trajectory.a, derivatives="stored",
                             nonlinear_forces=forces)
-    learner = LagrangianOpInf(damping=False, nonlinear=ProjectedNonlinearForce(system.nonlinear, V))
+    learner = LagrangianOpInf([ProjectedNonlinearForce(system.nonlinear, V)])
     learner.fit(data)
     intrusive = galerkin(system, V, mass_orthonormal=True)
     # Newmark accelerations satisfy the equation with the nonlinear force at
@@ -259,7 +259,7 @@ def test_save_load_round_trip(beam, tmp_path):
     V = Phi[:, :4]
     data = reduce_snapshots(V, trajectory.q, 2e-3, product=M, velocities=trajectory.v,
                             accelerations=trajectory.a, inputs=U, outputs=system.outputs(trajectory.q))
-    rom = SecondOrderROM(learner=LagrangianOpInf(regularization=1e-10), basis=V, product=M).fit(data)
+    rom = SecondOrderROM(learner=LagrangianOpInf(["damping"], regularization=1e-10), basis=V, product=M).fit(data)
     path = tmp_path / "rom.h5"
     rom.save(path)
     loaded = SecondOrderROM.load(path, product=M)
@@ -276,10 +276,24 @@ def test_save_load_round_trip(beam, tmp_path):
     np.testing.assert_allclose(a.q, b.q, rtol=1e-12, atol=1e-14 * np.abs(a.q).max())
     rom.save(tmp_path / "nobasis.h5", include_basis=False)
     assert SecondOrderROM.load(tmp_path / "nobasis.h5").basis is None
-    nonlinear = SecondOrderROM.galerkin(spring_chain(), np.eye(8) / np.sqrt(0.1))
+    # a projected known force is stored with its parameters: the model loads whole
+    chain = spring_chain()
+    nonlinear = SecondOrderROM.galerkin(chain, np.eye(8) / np.sqrt(0.1))
     nonlinear.save(tmp_path / "nl.h5")
-    with pytest.raises(ValueError, match="nonlinear"):
-        SecondOrderROM.load(tmp_path / "nl.h5")
+    whole = SecondOrderROM.load(tmp_path / "nl.h5")
+    t, q0 = np.arange(201) * 2e-3, 0.05 * np.ones(8)
+    np.testing.assert_array_equal(whole.predict(q0, t).q, nonlinear.predict(q0, t).q)
+    # a force femrom cannot rebuild (its density is code, not a named one) is passed again, checked
+    unnamed = LocalPotential(np.ones(8), lambda q: q**4, lambda q: 4 * q**3, lambda q: 12 * q**2)
+    custom = SecondOrderROM.galerkin(SecondOrderSystem(mass=chain.mass, stiffness=chain.stiffness,
+                                                       nonlinear=unnamed), np.eye(8) / np.sqrt(0.1))
+    custom.save(tmp_path / "custom.h5")
+    with pytest.raises(ValueError, match="no stored parameters: pass nonlinear="):
+        SecondOrderROM.load(tmp_path / "custom.h5")
+    with pytest.raises(ValueError, match="does not match the saved"):
+        SecondOrderROM.load(tmp_path / "custom.h5", nonlinear=JenkinsForce(1.0, 1.0, 8))
+    again = SecondOrderROM.load(tmp_path / "custom.h5", nonlinear=unnamed)
+    np.testing.assert_array_equal(again.predict(q0, t).q, custom.predict(q0, t).q)
 
 
 def test_select_regularization_returns_a_stable_model(beam):
@@ -294,7 +308,7 @@ def test_select_regularization_returns_a_stable_model(beam):
     V = np.linalg.solve(R, np.linalg.svd(R @ trajectory.q, full_matrices=False)[0][:, :8])
     data = reduce_snapshots(V, trajectory.q, dt, product=M, order=2)
     best, learner, scores = select_regularization(
-        lambda rho: SecondOrderOpInf(regularization=rho), data, trajectory.t,
+        lambda rho: SecondOrderOpInf(["damping"], regularization=rho), data, trajectory.t,
         q0=data.states[:, 0], grid=(0.0, 1e-6, 1e-3, 1e-1), extension=20.0)
     # plain OpInf without regularization is unstable here (previous test):
     # the selection must skip it and pick a stable weight
@@ -324,7 +338,7 @@ def test_select_regularization_with_lagrangian_opinf_on_noisy_beam_data(beam):
     data = reduce_snapshots(V, Q, dt, product=M, order=2, inputs=U)
     grid, extension, bound = (0.0, 1e-8, 1e-6, 1e-4, 1e-2, 1.0), 20.0, 2.0
     best, learner, scores = select_regularization(
-        lambda rho: LagrangianOpInf(regularization=rho), data, trajectory.t, q0=data.states[:, 0],
+        lambda rho: LagrangianOpInf(["damping"], regularization=rho), data, trajectory.t, q0=data.states[:, 0],
         inputs=system.inputs, grid=grid, extension=extension, energy_bound=bound)
     assert [s.value for s in scores] == list(grid)
     # K^ >= eps I, C^ >= 0 and Newmark: the energy can only grow by what the input
@@ -340,7 +354,7 @@ def test_select_regularization_with_lagrangian_opinf_on_noisy_beam_data(beam):
     h = trajectory.t[1] - trajectory.t[0]
     long_times = h * np.arange(int(extension * 500) + 1)
     for score in scores:
-        rom = SecondOrderROM(learner=LagrangianOpInf(regularization=score.value)).fit(data)
+        rom = SecondOrderROM(learner=LagrangianOpInf(["damping"], regularization=score.value)).fit(data)
         short = rom.predict(data.states[:, 0], trajectory.t, inputs=system.inputs)
         long = rom.predict(data.states[:, 0], long_times, inputs=system.inputs)
         error = relative(short.q, data.states)
@@ -360,7 +374,7 @@ def test_hamiltonian_opinf_on_a_linear_wave_conserves_the_reduced_hamiltonian():
     eigenvectors, cotangent-lift POD basis r = 6 of [Q, P], exact derivatives.
     H-OpInf recovers the intrusive D~_q = Phi^T K Phi, D~_p = I; the midpoint
     rule conserves the learned H^ exactly, symplectic Euler without drift."""
-    from femrom.inference import HamiltonianOpInf
+    from femrom.inference import CanonicalData, HamiltonianOpInf
     from femrom.rom import HamiltonianROM
 
     n = 64
@@ -374,7 +388,7 @@ def test_hamiltonian_opinf_on_a_linear_wave_conserves_the_reduced_hamiltonian():
     P = E[:, :6] @ (-(w * a)[:, None] * np.sin(np.outer(w, t)))
     Phi = np.linalg.svd(np.hstack([Q, P]), full_matrices=False)[0][:, :6]   # cotangent lift
     Qh, Ph = Phi.T @ Q, Phi.T @ P
-    learner = HamiltonianOpInf().fit(Qh, Ph, Phi.T @ P, -Phi.T @ (K @ Q))
+    learner = HamiltonianOpInf().fit(CanonicalData(Qh, Ph, Phi.T @ P, -Phi.T @ (K @ Q)))
     ops = learner.operators_
     assert np.array_equal(ops.position, ops.position.T)
     # exact derivative data in span(Phi): the Lyapunov solution is the intrusive

@@ -5,10 +5,10 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from femrom.integrators import LinearSolverError, STRATEGIES, choose_strategy, make_solver
-from femrom.fem import _solvers
+from femrom.solvers import (STRATEGIES, SUPERLU_MAX_DOFS, LinearSolverError, choose_strategy, is_available,
+                            make_solver)
 
-needs_pardiso = pytest.mark.skipif(not _solvers.is_available("pardiso"),
+needs_pardiso = pytest.mark.skipif(not is_available("pardiso"),
                                    reason="pypardiso not installed")
 
 
@@ -59,48 +59,43 @@ def test_unknown_strategy_lists_the_valid_ones():
         make_solver(sp.identity(3, format="csr"), "lu")
 
 
-def test_auto_reports_its_choice(monkeypatch):
+def test_auto_reports_its_choice():
     assert make_solver(sp.diags([1.0, 2.0, 3.0], format="csr")).name == "diagonal"
     assert make_solver(poisson_2d(10)).name == "superlu"  # 100 dofs: small
     # A large problem (simulated by lowering the thresholds): pardiso, then cholmod, then AMG.
-    monkeypatch.setattr(_solvers, "AUTO_SMALL", 50)
-    monkeypatch.setattr(_solvers, "AUTO_DIRECT_THRESHOLD", 50)
     A = poisson_2d(10)
     available = {"pardiso": True, "cholmod": True, "amg-cg": True}
-    monkeypatch.setattr(_solvers, "is_available", lambda s: available.get(s, True))
-    assert choose_strategy(A) == "pardiso"
+    rule = dict(small=50, direct_threshold=50, available=lambda s: available.get(s, True))
+    assert choose_strategy(A, **rule) == "pardiso"
     available["pardiso"] = False
-    assert choose_strategy(A) == "cholmod"
-    assert choose_strategy(A, spd=False) == "amg-cg"  # cholmod needs SPD
+    assert choose_strategy(A, **rule) == "cholmod"
+    assert choose_strategy(A, spd=False, **rule) == "amg-cg"  # cholmod needs SPD
     available["cholmod"] = False
-    assert choose_strategy(A) == "amg-cg"
+    assert choose_strategy(A, **rule) == "amg-cg"
 
 
-def test_auto_decides_by_size_and_availability_not_dimension(monkeypatch):
+def test_auto_decides_by_size_and_availability_not_dimension():
     # the documented rule (module docstring, "Size, not dimension"): a 1D chain and a 3D
     # elasticity matrix of the same size get the same strategy, whatever is installed
     K3, _ = clamped_elasticity(3)
     n = K3.shape[0]
     K1 = sp.diags([2.0 * np.ones(n), -np.ones(n - 1), -np.ones(n - 1)], [0, 1, -1], format="csr")
     available = {}
-    monkeypatch.setattr(_solvers, "is_available", lambda s: available.get(s, True))
     for small, direct, expected in [(n + 1, n + 1, "superlu"), (n, n, "pardiso"),
                                     (n, n + 1, "cholmod"), (n, n - 1, "amg-cg")]:
-        monkeypatch.setattr(_solvers, "AUTO_SMALL", small)
-        monkeypatch.setattr(_solvers, "AUTO_DIRECT_THRESHOLD", direct)
+        rule = dict(small=small, direct_threshold=direct, available=lambda s: available.get(s, True))
         available.update(pardiso=expected == "pardiso", cholmod=expected == "cholmod")
-        assert choose_strategy(K1) == choose_strategy(K3) == expected
+        assert choose_strategy(K1, **rule) == choose_strategy(K3, **rule) == expected
 
 
-def test_superlu_refuses_large_problems(monkeypatch):
-    monkeypatch.setattr(_solvers, "SUPERLU_MAX_DOFS", 50)
+def test_superlu_refuses_large_problems():
     with pytest.raises(ValueError, match="superlu is limited to 50 dofs"):
-        make_solver(poisson_2d(10), "superlu")
+        make_solver(poisson_2d(10), "superlu", max_dofs=50)
 
 
 @pytest.mark.parametrize("strategy", [s for s in STRATEGIES if s not in ("auto", "diagonal")])
 def test_strategies_agree_on_poisson(strategy):
-    if not _solvers.is_available(strategy):
+    if not is_available(strategy):
         pytest.skip(f"{strategy} not installed")
     m = 40
     A = poisson_2d(m)
@@ -160,7 +155,7 @@ def test_elasticity_rigid_body_modes():
     plain.solve(b)
     # the rigid-body modes are the right near null space: fewer CG iterations
     assert with_modes.last_iterations < plain.last_iterations
-    if _solvers.is_available("pardiso"):
+    if is_available("pardiso"):
         x_pardiso = make_solver(K, "pardiso").solve(b)
         assert np.linalg.norm(x_pardiso - direct) <= 1e-10 * np.linalg.norm(direct)
 
@@ -196,13 +191,13 @@ def test_pardiso_nonsymmetric_and_indefinite():
         make_solver((A - 10.0 * sp.identity(A.shape[0])).tocsr(), "pardiso", spd=True)
 
 
-@pytest.mark.skipif(_solvers.is_available("cholmod"), reason="scikit-sparse is installed")
+@pytest.mark.skipif(is_available("cholmod"), reason="scikit-sparse is installed")
 def test_cholmod_missing_is_a_clear_import_error():
     with pytest.raises(ImportError, match="cholmod.*scikit-sparse"):
         make_solver(poisson_2d(5), "cholmod")
 
 
-@pytest.mark.skipif(not _solvers.is_available("cholmod"), reason="scikit-sparse not installed")
+@pytest.mark.skipif(not is_available("cholmod"), reason="scikit-sparse not installed")
 def test_cholmod_agrees_with_superlu():
     A = poisson_2d(30)
     b = np.ones(A.shape[0])
@@ -243,7 +238,7 @@ def test_jacobi_cg_solves_mass_matrices_in_mesh_independent_iterations():
 
 
 def test_solver_cache_factorises_a_matrix_once_for_several_runs():
-    from femrom.fem import SolverCache
+    from femrom.solvers import SolverCache
     from femrom.integrators import Newmark, integrate
     from femrom.scene import SecondOrderSystem
 
@@ -267,15 +262,16 @@ def test_solver_cache_factorises_a_matrix_once_for_several_runs():
     np.testing.assert_array_equal(a.q, b.q)
 
 
-def test_without_fast_direct_solvers_auto_keeps_superlu_up_to_its_guard(monkeypatch):
+def test_without_fast_direct_solvers_auto_keeps_superlu_up_to_its_guard():
     """Measured (docs/benchmarks.md, "Which strategy is the default"): SuperLU steps
     12-16x faster than AMG-CG from 2e4 to 5.7e4 dofs and is ahead after 4-6 steps, so
     without PARDISO or CHOLMOD ``auto`` hands it everything its guard accepts."""
-    monkeypatch.setattr(_solvers, "is_available", lambda s: s not in ("pardiso", "cholmod"))
+    def available(s):
+        return s not in ("pardiso", "cholmod")
 
     def chain(n):
         return sp.diags([2.0 * np.ones(n), -np.ones(n - 1), -np.ones(n - 1)], [0, 1, -1], format="csr")
 
-    assert choose_strategy(chain(_solvers.SUPERLU_MAX_DOFS)) == "superlu"
-    assert make_solver(chain(_solvers.SUPERLU_MAX_DOFS), "superlu").name == "superlu"  # accepted
-    assert choose_strategy(chain(_solvers.SUPERLU_MAX_DOFS + 1)) == "amg-cg"
+    assert choose_strategy(chain(SUPERLU_MAX_DOFS), available=available) == "superlu"
+    assert make_solver(chain(SUPERLU_MAX_DOFS), "superlu").name == "superlu"  # accepted
+    assert choose_strategy(chain(SUPERLU_MAX_DOFS + 1), available=available) == "amg-cg"

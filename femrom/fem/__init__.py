@@ -1,4 +1,4 @@
-"""Finite-element forms, assembly, boundary conditions, loads and outputs."""
+"""Finite-element forms, assembly, boundary conditions, loads, outputs and nonlinear forces."""
 
 from femrom.fem._condensation import Condensation
 from femrom.fem._damping import rayleigh_damping, rayleigh_from_damping_ratios
@@ -10,15 +10,17 @@ from femrom.fem._line import (
     line_basis,
     line_mass,
 )
-from femrom.fem._nonlinear import LocalPotential, NonlinearForce
-from femrom.fem._solvers import (
-    STRATEGIES,
-    LinearSolver,
-    LinearSolverError,
-    SolverCache,
-    choose_strategy,
-    make_solver,
+from femrom.fem._friction import JenkinsForce
+from femrom.fem._nonlinear import (
+    FORCES,
+    ForceSum,
+    NonlinearForce,
+    force_from_parameters,
+    register_force,
+    selection_map,
+    sum_of_forces,
 )
+from femrom.fem._potentials import DENSITIES, LocalPotential, QuarticPotential
 from femrom.fem._spaces import LineSpace, SolidSpace, SpaceError
 from femrom.fem._vector_ops import (
     average_rows,
@@ -31,8 +33,9 @@ from femrom.fem._vector_ops import (
 )
 
 __all__ = [
-    "STRATEGIES", "LinearSolver", "LinearSolverError", "SolverCache", "choose_strategy", "make_solver",
-    "Condensation", "LineSpace", "LocalPotential", "NonlinearForce", "SolidSpace", "SpaceError",
+    "DENSITIES", "FORCES", "Condensation", "ForceSum", "JenkinsForce", "LineSpace", "LocalPotential",
+    "NonlinearForce", "QuarticPotential", "SolidSpace", "SpaceError", "force_from_parameters",
+    "register_force", "selection_map", "sum_of_forces",
     "average_rows", "axial_stiffness", "bending_stiffness", "dirichlet_dofs", "elasticity_stiffness",
     "hrz_lumped", "lame_parameters", "line_basis", "line_mass", "point_load", "probe_rows",
     "rayleigh_damping", "rayleigh_from_damping_ratios", "rigid_body_modes", "surface_pressure",

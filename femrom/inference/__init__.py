@@ -1,23 +1,31 @@
-"""Learning reduced second-order operators from snapshots.
+"""Learning reduced operators from snapshots, next to their intrusive Galerkin projection.
 
-- :func:`finite_difference`: time derivatives of snapshots (orders 2, 4, 6);
-- :func:`reduce_snapshots` / :class:`SecondOrderData`: projected training data;
-- :func:`galerkin` / :class:`ReducedOperators`: the intrusive reference ROM;
-- :class:`LagrangianOpInf`: structure-preserving inference
-  (``K^ = K^^T >= eps I``, ``C^ = C^^T >= 0``) as a semidefinite program, with
-  the fast dedicated solver :func:`solve_fast` and the cvxpy reference
-  :func:`solve_conic`;
-- :class:`SecondOrderOpInf`: plain least-squares inference (the baseline);
-- :class:`HamiltonianOpInf`: symmetric ``D^_q``, ``D^_p`` of a canonical
-  Hamiltonian ROM from Lyapunov equations (Bartels-Stewart);
+- Reduced terms (:mod:`._terms`): every term of ``M^ q'' + C^ q' + K^ q +
+  f^(q, q'; s) = B^ u + f^_0``, ``y = E^ q`` is one registered class that
+  knows its Galerkin projection, its data block, its structure, its value and
+  tangent in a reduced step and its HDF5 form (:class:`Mass`,
+  :class:`Damping`, :class:`Stiffness`, :class:`Input`, :class:`Output`,
+  :class:`ProjectedNonlinearForce`; :func:`register_term` for more);
+  :class:`ReducedOperators` holds a model's terms, :func:`galerkin` projects
+  every registered term;
+- data: :func:`finite_difference`, :func:`reduce_snapshots` /
+  :class:`SecondOrderData`, :func:`reduce_canonical_snapshots` /
+  :class:`CanonicalData`;
+- learners (``fit(data) -> self``, ``operators_``; :func:`registered_learners` by name):
+  :class:`LagrangianOpInf` (structure-preserving, a semidefinite program
+  solved by :func:`solve_fast` or the cvxpy reference :func:`solve_conic`),
+  :class:`SecondOrderOpInf` (plain least squares, the baseline),
+  :class:`HamiltonianOpInf` (symmetric ``D^_q``, ``D^_p`` by Lyapunov
+  equations), :class:`GalerkinProjection` (the intrusive reference);
 - :class:`ErrorSplit`, :class:`HamiltonianErrorSplit`: projection, derivative
-  and optimisation errors of a second-order or Hamiltonian fit.
+  and optimisation errors of a fit.
 """
 
 from femrom.inference._data import (
     DERIVATIVE_SOURCES,
     SecondOrderData,
     concatenate,
+    project_columns,
     reduce_snapshots,
     reduced_coordinates,
 )
@@ -26,40 +34,53 @@ from femrom.inference._fast import FastOptions, solve_fast
 from femrom.inference._hamiltonian import (
     GRADIENT_DATA,
     HAMILTONIAN_DERIVATIVE_SOURCES,
+    CanonicalData,
     HamiltonianErrorSplit,
     HamiltonianOperators,
-    HamiltonianOpInf,
     ProjectedPotential,
     project_potential_gradient,
+    reduce_canonical_snapshots,
     symmetric_lyapunov_fit,
 )
-from femrom.inference._learners import (
-    SOLVERS,
-    ErrorSplit,
-    LagrangianOpInf,
+from femrom.inference._learner import (
+    Learner,
     Regularization,
-    SecondOrderOpInf,
+    learner_class,
+    register_learner,
+    registered_learners,
 )
-from femrom.inference._operators import (
-    Damping,
-    Input,
-    Mass,
-    Output,
-    ProjectedNonlinearForce,
-    ReducedOperators,
-    Stiffness,
-    galerkin,
-)
+from femrom.inference._operators import ReducedForces, ReducedOperators, galerkin
 from femrom.inference._problem import Block, GramProblem
 from femrom.inference._sdp import CONIC_SOLVERS, solve_conic
+from femrom.inference._second_order import SOLVERS, ErrorSplit, SecondOrderLearner
+from femrom.inference._terms import (
+    VARIABLES,
+    LinearTerm,
+    ReducedTerm,
+    register_term,
+    registered_terms,
+    term_class,
+)
+from femrom.inference.learners.galerkin import GalerkinProjection
+from femrom.inference.learners.hopinf import HamiltonianOpInf
+from femrom.inference.learners.lopinf import LagrangianOpInf
+from femrom.inference.learners.opinf import SecondOrderOpInf
+from femrom.inference.terms.damping import Damping
+from femrom.inference.terms.input import Input
+from femrom.inference.terms.mass import Mass
+from femrom.inference.terms.output import Output
+from femrom.inference.terms.projected_force import ProjectedNonlinearForce
+from femrom.inference.terms.stiffness import Stiffness
 
 __all__ = [
-    "CONIC_SOLVERS", "DERIVATIVE_SOURCES", "SOLVERS", "Block", "Damping", "ErrorSplit",
-    "FastOptions", "GramProblem", "HamiltonianOperators", "HamiltonianOpInf", "Input", "LagrangianOpInf", "Mass", "Output",
-    "ProjectedNonlinearForce", "ReducedOperators", "Regularization", "SecondOrderData",
-    "SecondOrderOpInf", "Stiffness", "concatenate", "finite_difference", "galerkin",
-    "reduce_snapshots", "reduced_coordinates", "solve_conic", "solve_fast", "stencil_weights",
-    "symmetric_lyapunov_fit",
-    "GRADIENT_DATA", "HAMILTONIAN_DERIVATIVE_SOURCES", "HamiltonianErrorSplit",
-    "ProjectedPotential", "project_potential_gradient",
+    "CONIC_SOLVERS", "DERIVATIVE_SOURCES", "GRADIENT_DATA", "HAMILTONIAN_DERIVATIVE_SOURCES", "SOLVERS",
+    "VARIABLES", "Block", "CanonicalData", "Damping", "ErrorSplit", "FastOptions", "GalerkinProjection",
+    "GramProblem", "HamiltonianErrorSplit", "HamiltonianOperators", "HamiltonianOpInf", "Input",
+    "LagrangianOpInf", "Learner", "LinearTerm", "Mass", "Output", "ProjectedNonlinearForce",
+    "ProjectedPotential", "ReducedForces", "ReducedOperators", "ReducedTerm", "Regularization",
+    "SecondOrderData", "SecondOrderLearner", "SecondOrderOpInf", "Stiffness", "concatenate",
+    "finite_difference", "galerkin", "learner_class", "project_columns",
+    "project_potential_gradient", "reduce_canonical_snapshots", "reduce_snapshots", "reduced_coordinates",
+    "register_learner", "register_term", "registered_learners", "registered_terms", "solve_conic", "solve_fast", "stencil_weights",
+    "symmetric_lyapunov_fit", "term_class",
 ]

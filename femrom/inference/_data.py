@@ -54,12 +54,16 @@ class SecondOrderData:
     outputs : (p, K) ndarray or None
         Recorded outputs ``Y`` (for the output map ``E^``).
     times : (K,) ndarray or None
+    starts : tuple of int
+        Columns where a trajectory begins (``(0,)`` for one trajectory): a
+        stateful known force restarts its state there.
     diagnostics : dict
         ``projection_error``, ``velocity_error``, ``acceleration_error``
         (relative, when known), ``derivative_source``, ``order``, ``dt``,
         ``n_trajectories``; from :func:`reduce_snapshots` also
         ``projection_residual`` ``||Q - V Q^||_W`` and ``state_norm``
-        ``||Q||_W`` (Frobenius), which :meth:`truncated` updates.
+        ``||Q||_W`` (Frobenius), which :meth:`truncated` updates;
+        ``trimmed_columns`` after :meth:`without_boundary`.
     """
 
     states: np.ndarray
@@ -70,9 +74,15 @@ class SecondOrderData:
     outputs: np.ndarray | None = None
     times: np.ndarray | None = None
     diagnostics: dict = field(default_factory=dict)
+    starts: tuple = (0,)
 
     def __post_init__(self):
         shape = self.states.shape
+        starts = tuple(int(s) for s in self.starts)
+        if not starts or starts[0] != 0 or any(b <= a for a, b in zip(starts, starts[1:])) \
+                or starts[-1] >= max(shape[-1], 1):
+            raise ValueError(f"starts must begin at 0 and increase inside the {shape[-1]} columns, got {starts}")
+        object.__setattr__(self, "starts", starts)
         if self.states.ndim != 2:
             raise ValueError(f"states must be (r, K), got shape {shape}")
         for name in ("velocities", "accelerations", "nonlinear_forces"):
@@ -100,12 +110,15 @@ class SecondOrderData:
         """Drop ``count`` columns at each end (e.g. the one-sided stencils)."""
         if count <= 0:
             return self
+        if len(self.starts) > 1:
+            raise ValueError("trim each trajectory before concatenating them")
         keep = slice(count, self.n_samples - count)
         pick = lambda A: None if A is None else A[..., keep]  # noqa: E731
+        diagnostics = dict(self.diagnostics, trimmed_columns=self.diagnostics.get("trimmed_columns", 0) + count)
         return replace(self, states=pick(self.states), velocities=pick(self.velocities),
                        accelerations=pick(self.accelerations), inputs=pick(self.inputs),
                        nonlinear_forces=pick(self.nonlinear_forces), outputs=pick(self.outputs),
-                       times=pick(self.times))
+                       times=pick(self.times), diagnostics=diagnostics)
 
 
     def truncated(self, r: int) -> "SecondOrderData":
@@ -181,10 +194,15 @@ def concatenate(datasets) -> SecondOrderData:
     sources = {d.diagnostics.get("derivative_source") for d in datasets}
     if len(sources) == 1:
         diagnostics["derivative_source"] = sources.pop()
+    trimmed = max(d.diagnostics.get("trimmed_columns", 0) for d in datasets)
+    if trimmed:
+        diagnostics["trimmed_columns"] = trimmed
+    offsets = np.cumsum([0] + [d.n_samples for d in datasets[:-1]])
+    starts = tuple(int(o + s) for o, d in zip(offsets, datasets) for s in d.starts)
     return SecondOrderData(states=cat("states"), velocities=cat("velocities"),
                            accelerations=cat("accelerations"), inputs=cat("inputs"),
                            nonlinear_forces=cat("nonlinear_forces"), outputs=cat("outputs"),
-                           times=None, diagnostics=diagnostics)
+                           times=None, diagnostics=diagnostics, starts=starts)
 
 
 def reduced_coordinates(basis: np.ndarray, X, product=None) -> np.ndarray:

@@ -32,10 +32,10 @@ whose optimality conditions are Lyapunov equations
 
 Known nonlinear Hamiltonian terms (Sharma, Wang & Kramer 2022, Sec. 3): with
 ``H = q^T D_q q / 2 + p^T D_p p / 2 + H_nl(q, p)`` and ``H_nl`` known (a
-potential object, :mod:`femrom.integrators._hamiltonian`), the forcing data are
+potential object), the forcing data are
 the projected gradients ``F^_q = Phi^T dH_nl/dp (Q, P)`` and
 ``F^_p = Phi^T dH_nl/dq (Q, P)``, subtracted before the Lyapunov fits
-(:meth:`HamiltonianOpInf.fit_snapshots`); the reduced model evaluates the same
+(:func:`reduce_canonical_snapshots`); the reduced model evaluates the same
 term through :class:`ProjectedPotential`, ``H^_nl(q^, p^) = H_nl(Phi q^, Phi p^)``,
 so its right-hand side stays ``J_{2r} grad H^``.
 
@@ -54,10 +54,12 @@ q^ sin a + p^ cos a)`` whenever ``H_nl`` is, and the reduced mass
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.linalg as sl
+
+from femrom.inference._derivatives import finite_difference
 
 
 def symmetric_lyapunov_fit(X: np.ndarray, R: np.ndarray, regularization: float = 0.0) -> np.ndarray:
@@ -146,10 +148,10 @@ def project_potential_gradient(basis: np.ndarray, potential, Q: np.ndarray,
     return basis.T @ gp, basis.T @ gq
 
 
-#: Where :meth:`HamiltonianOpInf.fit_snapshots` evaluates the known gradient.
+#: Where :func:`reduce_canonical_snapshots` evaluates the known gradient.
 GRADIENT_DATA = ("snapshots", "reconstructed")
 
-#: Where :meth:`HamiltonianOpInf.fit_snapshots` takes the time derivatives from.
+#: Where :func:`reduce_canonical_snapshots` takes the time derivatives from.
 HAMILTONIAN_DERIVATIVE_SOURCES = ("finite_difference", "stored")
 
 
@@ -198,164 +200,133 @@ def _projection_residual2(V: np.ndarray, X: np.ndarray, Xh: np.ndarray, block: i
     return total
 
 
-class HamiltonianOpInf:
-    r"""Learn ``D^_q``, ``D^_p`` (symmetric) from reduced canonical data.
-
-    Parameters
-    ----------
-    regularization : float
-        Relative Tikhonov weight: ``lambda = rho * trace(X X^T) / r``.
-    shared : bool
-        Fit one symmetric ``D^ = D^_q = D^_p`` (module docstring).
+@dataclass(frozen=True, eq=False)
+class CanonicalData:
+    r"""Reduced canonical training data ``[Q^; P^]`` with their time derivatives and known forcing.
 
     Attributes
     ----------
-    operators_ : HamiltonianOperators
-    residual_ : float
-        Relative residual of both regressions together (``error_split_.optimization``).
-    error_split_ : HamiltonianErrorSplit
-        Projection, derivative and optimisation errors (projection and
-        derivative only from :meth:`fit_snapshots`).
+    states_q, states_p : (r, K) ndarray
+        ``Q^``, ``P^``.
+    ddt_q, ddt_p : (r, K) ndarray
+        ``Q^'``, ``P^'``.
+    forces_q, forces_p : (r, K) ndarray or None
+        ``F^_q = Phi^T dH_nl/dp``, ``F^_p = Phi^T dH_nl/dq`` of a known potential.
+    outputs : (m, K) ndarray or None
+        Measured outputs ``Y``.
+    diagnostics : dict
+        ``projection_error``, ``derivative_error``, ``position_derivative_error``,
+        ``momentum_derivative_error`` (when known), ``derivative_source``,
+        ``gradient_data``, ``order``, ``dt``.
     """
 
-    method = "hamiltonian_opinf"
+    states_q: np.ndarray
+    states_p: np.ndarray
+    ddt_q: np.ndarray
+    ddt_p: np.ndarray
+    forces_q: np.ndarray | None = None
+    forces_p: np.ndarray | None = None
+    outputs: np.ndarray | None = None
+    diagnostics: dict = field(default_factory=dict)
 
-    def __init__(self, regularization: float = 0.0, shared: bool = False):
-        if not regularization >= 0:
-            raise ValueError(f"regularization must be >= 0, got {regularization}")
-        self.regularization = float(regularization)
-        self.shared = bool(shared)
-
-    def fit(self, states_q: np.ndarray, states_p: np.ndarray, ddt_q: np.ndarray,
-            ddt_p: np.ndarray, forces_q: np.ndarray | None = None,
-            forces_p: np.ndarray | None = None) -> "HamiltonianOpInf":
-        """Fit from reduced (r, K) data ``Q^, P^, Q^', P^'`` and known ``F^_q, F^_p``."""
-        states_q, states_p = np.asarray(states_q, float), np.asarray(states_p, float)
-        shape = states_q.shape
-        if states_q.ndim != 2:
+    def __post_init__(self):
+        shape = np.shape(self.states_q)
+        if len(shape) != 2:
             raise ValueError(f"states_q must be (r, K), got shape {shape}")
-        for name, A in (("states_p", states_p), ("ddt_q", ddt_q), ("ddt_p", ddt_p),
-                        ("forces_q", forces_q), ("forces_p", forces_p)):
+        for name in ("states_p", "ddt_q", "ddt_p", "forces_q", "forces_p"):
+            A = getattr(self, name)
             if A is not None and np.shape(A) != shape:
                 raise ValueError(f"{name} has shape {np.shape(A)}, expected {shape} like states_q")
-        Rp = ddt_q - (0.0 if forces_q is None else forces_q)
-        Rq = -ddt_p - (0.0 if forces_p is None else forces_p)
-        lam_p = self.regularization * np.sum(states_p**2) / states_p.shape[0]
-        lam_q = self.regularization * np.sum(states_q**2) / states_q.shape[0]
-        if self.shared:
-            Dp = Dq = symmetric_lyapunov_fit(np.hstack([states_p, states_q]), np.hstack([Rp, Rq]),
-                                             lam_p + lam_q)
-        else:
-            Dp = symmetric_lyapunov_fit(states_p, Rp, lam_p)
-            Dq = symmetric_lyapunov_fit(states_q, Rq, lam_q)
-        self.operators_ = HamiltonianOperators(position=Dq, momentum=Dp)
-        # from the data columns, not from the Gram matrices (cancellation below sqrt(eps))
-        num = np.linalg.norm(Rp - Dp @ states_p) ** 2 + np.linalg.norm(Rq - Dq @ states_q) ** 2
-        den = np.linalg.norm(Rp) ** 2 + np.linalg.norm(Rq) ** 2
-        self.residual_ = float(np.sqrt(num / den)) if den > 0 else 0.0
-        self.error_split_ = HamiltonianErrorSplit(projection=None, derivative=None,
-                                                  position_derivative=None,
-                                                  momentum_derivative=None,
-                                                  optimization=self.residual_)
-        self.data_ = {"forces": forces_q is not None or forces_p is not None,
-                      "n_samples": int(shape[1])}
-        return self
+        if self.outputs is not None and np.shape(self.outputs)[-1] != shape[1]:
+            raise ValueError(f"outputs have {np.shape(self.outputs)[-1]} columns, snapshots {shape[1]}")
 
-    def fit_snapshots(self, basis: np.ndarray, Q: np.ndarray, P: np.ndarray, dt: float | None = None,
-                      *, ddt_q: np.ndarray | None = None, ddt_p: np.ndarray | None = None,
-                      potential=None, order: int = 4, gradient_data: str = "snapshots",
-                      derivatives: str | None = None) -> "HamiltonianOpInf":
-        r"""Project full snapshots through ``Phi`` and fit.
+    @property
+    def r(self) -> int:
+        return self.states_q.shape[0]
 
-        ``Q^ = Phi^T Q``, ``P^ = Phi^T P``; derivative data ``Phi^T Q'``,
-        ``Phi^T P'`` from the given full derivatives (``derivatives="stored"``,
-        the default when they are given) or finite differences of order
-        ``order`` of the reduced snapshots (``"finite_difference"``, uniform
-        ``dt``; the given derivatives, if any, are then the reference of the
-        derivative error); forcing data from :func:`project_potential_gradient`
-        at the snapshots (``gradient_data="snapshots"``, the paper's choice) or
-        at ``Phi Q^``, ``Phi P^`` (``"reconstructed"``, what the ROM evaluates).
+    @property
+    def n_samples(self) -> int:
+        return self.states_q.shape[1]
 
-        Parameters
-        ----------
-        basis : (n, r) ndarray
-            ``Phi`` of the cotangent lift (``Phi^T Phi = I``).
-        Q, P : (n, K) ndarray
-        dt : float, optional
-            Snapshot spacing (needed for finite differences).
-        ddt_q, ddt_p : (n, K) ndarray, optional
-            Full time derivatives.
-        potential : object, optional
-            The known ``H_nl``.
-        order : {2, 4, 6}
-        gradient_data : {"snapshots", "reconstructed"}
-        derivatives : {"stored", "finite_difference"}, optional
-            Default: ``"stored"`` when ``ddt_q``, ``ddt_p`` are given.
 
-        Attributes set
-        --------------
-        basis_ : (n, r) ndarray
-        potential_ : ProjectedPotential or None
-        error_split_ : HamiltonianErrorSplit
-            With the projection error of ``[Q; P]`` and the derivative error.
-        """
-        from femrom.inference._derivatives import finite_difference
+def reduce_canonical_snapshots(basis: np.ndarray, Q: np.ndarray, P: np.ndarray, dt: float | None = None,
+                               *, ddt_q: np.ndarray | None = None, ddt_p: np.ndarray | None = None,
+                               potential=None, order: int = 4, gradient_data: str = "snapshots",
+                               derivatives: str | None = None,
+                               outputs: np.ndarray | None = None) -> CanonicalData:
+    r"""Project full canonical snapshots through a cotangent lift ``Phi``.
 
-        if gradient_data not in GRADIENT_DATA:
-            raise ValueError(f"unknown gradient_data {gradient_data!r}; valid: {GRADIENT_DATA}")
-        if (ddt_q is None) != (ddt_p is None):
-            raise ValueError("give both ddt_q and ddt_p, or neither")
-        if derivatives is None:
-            derivatives = "finite_difference" if ddt_q is None else "stored"
-        if derivatives not in HAMILTONIAN_DERIVATIVE_SOURCES:
-            raise ValueError(f"unknown derivatives {derivatives!r}; valid: "
-                             f"{HAMILTONIAN_DERIVATIVE_SOURCES}")
-        if derivatives == "stored" and ddt_q is None:
-            raise ValueError("derivatives='stored' needs ddt_q and ddt_p")
-        V = np.asarray(basis, dtype=float)
-        Q, P = np.asarray(Q, dtype=float), np.asarray(P, dtype=float)
-        if V.ndim != 2 or Q.ndim != 2 or Q.shape != P.shape or Q.shape[0] != V.shape[0]:
-            raise ValueError(f"basis {V.shape}, Q {Q.shape} and P {P.shape} do not match: "
-                             "expected (n, r), (n, K), (n, K)")
-        Qh, Ph = V.T @ Q, V.T @ P
-        stored = None if ddt_q is None else (V.T @ ddt_q, V.T @ ddt_p)
-        if derivatives == "stored":
-            dQ, dP = stored
-        else:
-            if dt is None:
-                raise ValueError("finite-difference derivatives need dt")
-            dQ, dP = finite_difference(Qh, dt, order), finite_difference(Ph, dt, order)
-        Fq = Fp = None
-        if potential is not None:
-            at = (Q, P) if gradient_data == "snapshots" else (V @ Qh, V @ Ph)
-            Fq, Fp = project_potential_gradient(V, potential, *at)
-        self.fit(Qh, Ph, dQ, dP, Fq, Fp)
-        self.basis_ = V
-        self.potential_ = None if potential is None else ProjectedPotential(potential, V)
-        # the error split: projection residual from the columns (||X||^2 - ||Phi^T X||^2 cancels)
-        residual2 = _projection_residual2(V, Q, Qh) + _projection_residual2(V, P, Ph)
-        norm2 = float(np.sum(Q * Q) + np.sum(P * P))
-        split = {"projection": float(np.sqrt(residual2 / norm2)) if norm2 > 0 else 0.0}
-        if derivatives == "stored":
-            split.update(derivative=0.0, position_derivative=0.0, momentum_derivative=0.0)
-        elif stored is not None:
-            split.update(derivative=_relative(np.vstack([dQ - stored[0], dP - stored[1]]),
-                                              np.vstack(stored)),
-                         position_derivative=_relative(dQ - stored[0], stored[0]),
-                         momentum_derivative=_relative(dP - stored[1], stored[1]))
-        self.error_split_ = replace(self.error_split_, **split)
-        self.data_.update(derivative_source=derivatives, gradient_data=gradient_data,
-                          order=int(order) if derivatives == "finite_difference" else None,
-                          dt=None if dt is None else float(dt))
-        return self
+    ``Q^ = Phi^T Q``, ``P^ = Phi^T P``; derivative data ``Phi^T Q'``,
+    ``Phi^T P'`` from the given full derivatives (``derivatives="stored"``,
+    the default when they are given) or finite differences of order
+    ``order`` of the reduced snapshots (``"finite_difference"``, uniform
+    ``dt``; the given derivatives, if any, are then the reference of the
+    derivative error); forcing data from :func:`project_potential_gradient`
+    at the snapshots (``gradient_data="snapshots"``, the paper's choice) or
+    at ``Phi Q^``, ``Phi P^`` (``"reconstructed"``, what the ROM evaluates).
 
-    def describe(self) -> dict:
-        """What was fitted how (stored with a saved :class:`~femrom.rom.HamiltonianROM`)."""
-        out = {"method": self.method, "regularization": self.regularization,
-               "shared": self.shared}
-        if hasattr(self, "error_split_"):
-            out["residual"] = self.residual_
-            out["error_split"] = {k: getattr(self.error_split_, k)
-                                  for k in self.error_split_.__dataclass_fields__}
-            out["data"] = dict(self.data_)
-        return out
+    Parameters
+    ----------
+    basis : (n, r) ndarray
+        ``Phi`` of the cotangent lift (``Phi^T Phi = I``).
+    Q, P : (n, K) ndarray
+    dt : float, optional
+        Snapshot spacing (needed for finite differences).
+    ddt_q, ddt_p : (n, K) ndarray, optional
+        Full time derivatives.
+    potential : object, optional
+        The known ``H_nl``.
+    order : {2, 4, 6}
+    gradient_data : {"snapshots", "reconstructed"}
+    derivatives : {"stored", "finite_difference"}, optional
+    outputs : (m, K) ndarray, optional
+
+    Returns
+    -------
+    CanonicalData
+        With the projection error of ``[Q; P]`` and the derivative errors in its diagnostics.
+    """
+    if gradient_data not in GRADIENT_DATA:
+        raise ValueError(f"unknown gradient_data {gradient_data!r}; valid: {GRADIENT_DATA}")
+    if (ddt_q is None) != (ddt_p is None):
+        raise ValueError("give both ddt_q and ddt_p, or neither")
+    if derivatives is None:
+        derivatives = "finite_difference" if ddt_q is None else "stored"
+    if derivatives not in HAMILTONIAN_DERIVATIVE_SOURCES:
+        raise ValueError(f"unknown derivatives {derivatives!r}; valid: "
+                         f"{HAMILTONIAN_DERIVATIVE_SOURCES}")
+    if derivatives == "stored" and ddt_q is None:
+        raise ValueError("derivatives='stored' needs ddt_q and ddt_p")
+    V = np.asarray(basis, dtype=float)
+    Q, P = np.asarray(Q, dtype=float), np.asarray(P, dtype=float)
+    if V.ndim != 2 or Q.ndim != 2 or Q.shape != P.shape or Q.shape[0] != V.shape[0]:
+        raise ValueError(f"basis {V.shape}, Q {Q.shape} and P {P.shape} do not match: "
+                         "expected (n, r), (n, K), (n, K)")
+    Qh, Ph = V.T @ Q, V.T @ P
+    stored = None if ddt_q is None else (V.T @ ddt_q, V.T @ ddt_p)
+    if derivatives == "stored":
+        dQ, dP = stored
+    else:
+        if dt is None:
+            raise ValueError("finite-difference derivatives need dt")
+        dQ, dP = finite_difference(Qh, dt, order), finite_difference(Ph, dt, order)
+    Fq = Fp = None
+    if potential is not None:
+        at = (Q, P) if gradient_data == "snapshots" else (V @ Qh, V @ Ph)
+        Fq, Fp = project_potential_gradient(V, potential, *at)
+    # the projection residual from the columns (||X||^2 - ||Phi^T X||^2 cancels)
+    residual2 = _projection_residual2(V, Q, Qh) + _projection_residual2(V, P, Ph)
+    norm2 = float(np.sum(Q * Q) + np.sum(P * P))
+    diagnostics = {"projection_error": float(np.sqrt(residual2 / norm2)) if norm2 > 0 else 0.0,
+                   "derivative_source": derivatives, "gradient_data": gradient_data,
+                   "order": int(order) if derivatives == "finite_difference" else None,
+                   "dt": None if dt is None else float(dt)}
+    if derivatives == "stored":
+        diagnostics.update(derivative_error=0.0, position_derivative_error=0.0, momentum_derivative_error=0.0)
+    elif stored is not None:
+        diagnostics.update(derivative_error=_relative(np.vstack([dQ - stored[0], dP - stored[1]]),
+                                                      np.vstack(stored)),
+                           position_derivative_error=_relative(dQ - stored[0], stored[0]),
+                           momentum_derivative_error=_relative(dP - stored[1], stored[1]))
+    Y = None if outputs is None else np.atleast_2d(np.asarray(outputs, dtype=float))
+    return CanonicalData(Qh, Ph, dQ, dP, Fq, Fp, Y, diagnostics)

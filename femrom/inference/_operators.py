@@ -1,233 +1,200 @@
-r"""Reduced second-order operators and their two views.
-
-A reduced model in ``r`` generalized coordinates ``q^`` reads
+r"""A reduced second-order model as a list of terms, and its intrusive Galerkin projection.
 
 .. math::
 
     \hat M \ddot{\hat q} + \hat C \dot{\hat q} + \hat K \hat q
-        + \hat f(\hat q, \dot{\hat q}) = \hat B u(t), \qquad y = \hat E \hat q .
+        + \hat f(\hat q, \dot{\hat q}; s) = \hat B u(t) + \hat f_0, \qquad y = \hat E \hat q ,
 
-Each term is an operator with two views (as in the ``opinf`` package):
-
-- :meth:`galerkin` -- its intrusive projection onto a basis ``V`` (n, r) of a
-  :class:`~femrom.scene.SecondOrderSystem` (``V^T K V``, ``V^T C V``,
-  ``V^T B``, ``E V``, ``V^T f(V q^)``);
-- :meth:`datablock` -- its rows of data in the regression
-  ``|| M^ Q'' + F^ + X D ||_F`` (the reduced states for ``K``, the velocities
-  for ``C``, minus the inputs for ``B``).
-
-Whether the mass is the identity depends on the basis: ``V^T M V = I`` holds
-for a mass-orthonormal basis only (``../shared/DESIGN.md``, "The reduced
-mass").
+each term an object of :mod:`._terms` (mass, damping, stiffness, inputs,
+known or learned forces, constant loads, the output map). Whether the mass is
+the identity depends on the basis: ``V^T M V = I`` holds for a
+mass-orthonormal basis only (``../shared/DESIGN.md``, "The reduced mass").
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
-import scipy.sparse as sp
+
+from femrom.inference._terms import LinearTerm, ReducedTerm, registered_terms
 
 
-def _dense(A) -> np.ndarray:
-    return A.toarray() if sp.issparse(A) else np.asarray(A, dtype=float)
+class ReducedForces:
+    """Several nonlinear terms acting together: ``f^ = sum_j f^_j(q, v; s_j)``, state ``(s_1, ...)``."""
 
+    def __init__(self, terms):
+        self.terms = tuple(terms)
 
-def _sym_project(A, V: np.ndarray) -> np.ndarray:
-    """``V^T A V`` symmetrised (round-off only) for a symmetric ``A``."""
-    P = V.T @ np.asarray(A @ V)
-    return 0.5 * (P + P.T)
+    @property
+    def conservative(self) -> bool:
+        return all(t.conservative for t in self.terms)
 
+    @property
+    def velocity_dependent(self) -> bool:
+        return any(t.velocity_dependent for t in self.terms)
 
-@dataclass(frozen=True)
-class Stiffness:
-    r"""``K^ q^``: symmetric positive definite, ``K^ >= eps I`` when learned."""
+    @property
+    def stateful(self) -> bool:
+        return any(t.stateful for t in self.terms)
 
-    name = "stiffness"
-    structure = "psd"
+    def initial_state(self):
+        return tuple(t.initial_state() for t in self.terms)
 
-    @staticmethod
-    def galerkin(system, V: np.ndarray) -> np.ndarray:
-        """(r, r) ndarray ``V^T K V``."""
-        return _sym_project(system.stiffness, V)
-
-    @staticmethod
-    def datablock(data) -> np.ndarray:
-        """(r, K) ndarray: the reduced states ``Q^``."""
-        return data.states
-
-
-@dataclass(frozen=True)
-class Damping:
-    r"""``C^ q^'``: symmetric positive semidefinite."""
-
-    name = "damping"
-    structure = "psd"
-
-    @staticmethod
-    def galerkin(system, V: np.ndarray) -> np.ndarray | None:
-        """(r, r) ndarray ``V^T C V`` (``None`` without damping)."""
-        return None if system.damping is None else _sym_project(system.damping, V)
-
-    @staticmethod
-    def datablock(data) -> np.ndarray:
-        """(r, K) ndarray: the reduced velocities ``Q^'``."""
-        return data.velocities
-
-
-@dataclass(frozen=True)
-class Input:
-    r"""``B^ u``: unconstrained (r, m)."""
-
-    name = "input"
-    structure = "free"
-
-    @staticmethod
-    def galerkin(system, V: np.ndarray) -> np.ndarray | None:
-        """(r, m) ndarray ``V^T B`` (``None`` without inputs)."""
-        if system.input_matrix is None:
-            return None
-        return np.asarray(V.T @ _dense(system.input_matrix))
-
-    @staticmethod
-    def datablock(data) -> np.ndarray:
-        """(m, K) ndarray ``-U``: the sign moves ``B^ U`` to the residual's side."""
-        return -data.inputs
-
-
-@dataclass(frozen=True)
-class Mass:
-    r"""``M^ q^''``: the identity for a mass-orthonormal basis."""
-
-    name = "mass"
-
-    @staticmethod
-    def galerkin(system, V: np.ndarray) -> np.ndarray:
-        """(r, r) ndarray ``V^T M V``."""
-        return _sym_project(system.mass, V)
-
-    @staticmethod
-    def datablock(data) -> np.ndarray:
-        """(r, K) ndarray: the reduced accelerations ``Q^''``."""
-        return data.accelerations
-
-
-@dataclass(frozen=True)
-class Output:
-    r"""``y = E^ q^``, fitted by least squares from recorded outputs."""
-
-    name = "output"
-
-    @staticmethod
-    def galerkin(system, V: np.ndarray) -> np.ndarray | None:
-        """(p, r) ndarray ``E V`` (``None`` without outputs)."""
-        if system.output_matrix is None:
-            return None
-        return np.asarray(system.output_matrix @ V)
-
-    @staticmethod
-    def datablock(data) -> np.ndarray:
-        """(r, K) ndarray: the reduced states ``Q^``."""
-        return data.states
-
-
-class ProjectedNonlinearForce:
-    r"""``f^(q^, v^) = V^T f_nl(V q^, V v^)`` with tangent ``V^T J V``.
-
-    The projection of a known nonlinear force (``femrom.fem.NonlinearForce``):
-    every evaluation costs a full-order one (no hyper-reduction). Internal
-    state (stick-slip joints) is carried through on the full dofs.
-
-    Parameters
-    ----------
-    force : NonlinearForce
-    basis : (n, r) ndarray
-    """
-
-    def __init__(self, force, basis: np.ndarray):
-        self.force_model = force
-        self.basis = np.asarray(basis, dtype=float)
-        self.conservative = bool(getattr(force, "conservative", False))
-        self.velocity_dependent = bool(getattr(force, "velocity_dependent", False))
-
-    def initial_state(self) -> Any:
-        return self.force_model.initial_state()
-
-    def force(self, q, v=None, state=None) -> np.ndarray:
-        """(r,) ndarray ``V^T f_nl(V q, V v)``."""
-        V = self.basis
-        return V.T @ self.force_model.force(V @ q, None if v is None else V @ v, state)
-
-    def forces(self, Q: np.ndarray, Vel: np.ndarray | None = None) -> np.ndarray:
-        """(r, K) ndarray: :meth:`force` of every column (stateless forces)."""
-        return np.column_stack([self.force(Q[:, k], None if Vel is None else Vel[:, k])
-                                for k in range(Q.shape[1])])
+    def force(self, q, v=None, state=None):
+        states = state if state is not None else (None,) * len(self.terms)
+        return sum(t.lhs(q, v, state=s) for t, s in zip(self.terms, states))
 
     def tangent(self, q, v=None, state=None):
-        """``(V^T df/dq V, V^T df/dv V)`` as (r, r) ndarrays (the second may be ``None``)."""
-        V = self.basis
-        dq, dv = self.force_model.tangent(V @ q, None if v is None else V @ v, state)
-        Jq = None if dq is None else V.T @ np.asarray(dq @ V)
-        Jv = None if dv is None else V.T @ np.asarray(dv @ V)
-        return Jq, Jv
+        states = state if state is not None else (None,) * len(self.terms)
+        parts = [t.tangent(q, v, s) for t, s in zip(self.terms, states)]
+        return tuple(_sum([p[k] for p in parts]) for k in range(2))
 
     def potential(self, q) -> float:
-        return self.force_model.potential(self.basis @ q)
+        return float(sum(t.potential(q) for t in self.terms))
 
     def commit(self, q, v, state):
-        return self.force_model.commit(self.basis @ q, self.basis @ v, state)
+        return tuple(t.commit(q, v, s) for t, s in zip(self.terms, state))
+
+
+def _sum(matrices):
+    present = [m for m in matrices if m is not None]
+    return None if not present else sum(present[1:], present[0])
 
 
 @dataclass(frozen=True, eq=False)
 class ReducedOperators:
-    r"""``M^ q'' + C^ q' + K^ q + f^(q, q') = B^ u``,  ``y = E^ q``  in r coordinates.
+    r"""The terms of a reduced second-order model in r coordinates.
 
     Attributes
     ----------
-    stiffness : (r, r) ndarray
-    mass : (r, r) ndarray or None
-        ``None`` means the identity (mass-orthonormal basis).
-    damping : (r, r) ndarray or None
-    input_matrix : (r, m) ndarray or None
-    output_matrix : (p, r) ndarray or None
-    nonlinear : ProjectedNonlinearForce or None
+    terms : tuple of ReducedTerm
+        At most one of each name, kept in equation order; no mass term means
+        ``M^ = I``.
+    metadata : dict
+        How the terms were obtained (``method``, learner settings, error split).
+
+    The usual operators are views of the terms: :attr:`stiffness`,
+    :attr:`damping`, :attr:`mass` (``None`` for the identity),
+    :attr:`input_matrix`, :attr:`output_matrix`, :attr:`nonlinear` (the
+    nonlinear terms together) and :attr:`load`.
     """
 
-    stiffness: np.ndarray
-    mass: np.ndarray | None = None
-    damping: np.ndarray | None = None
-    input_matrix: np.ndarray | None = None
-    output_matrix: np.ndarray | None = None
-    nonlinear: ProjectedNonlinearForce | None = None
+    terms: tuple = ()
     metadata: dict = field(default_factory=dict)
 
     def __post_init__(self):
-        r = self.stiffness.shape[0]
-        if self.stiffness.shape != (r, r):
-            raise ValueError(f"stiffness has shape {self.stiffness.shape}, expected square")
-        for name in ("mass", "damping"):
-            A = getattr(self, name)
-            if A is not None and A.shape != (r, r):
-                raise ValueError(f"{name} has shape {A.shape}, expected ({r}, {r})")
-        if self.input_matrix is not None and self.input_matrix.shape[0] != r:
-            raise ValueError(f"input_matrix has {self.input_matrix.shape[0]} rows, expected {r}")
-        if self.output_matrix is not None and self.output_matrix.shape[1] != r:
-            raise ValueError(f"output_matrix has {self.output_matrix.shape[1]} columns, "
-                             f"expected {r}")
+        terms = tuple(sorted(self.terms, key=lambda t: t.order))
+        names = [t.name for t in terms]
+        if len(set(names)) != len(names):
+            raise ValueError(f"a reduced model holds at most one term of each name, got {names}")
+        if self.term("stiffness", terms) is None:
+            raise ValueError("a reduced second-order model needs a stiffness term")
+        object.__setattr__(self, "terms", terms)
+        r = self.r
+        for t in terms:
+            if isinstance(t, LinearTerm):
+                rows, cols = t.matrix.shape
+                if t.role == "output":
+                    if cols != r:
+                        raise ValueError(f"{t.name} has {cols} columns, expected r = {r}")
+                elif rows != r or (t.variable in ("q", "v", "a") and cols != r):
+                    raise ValueError(f"{t.name} has shape {t.matrix.shape}, expected ({r}, "
+                                     f"{r if t.variable in ('q', 'v', 'a') else 'm'})")
 
+    @classmethod
+    def from_matrices(cls, stiffness, *, mass=None, damping=None, input_matrix=None, output_matrix=None,
+                      nonlinear=None, load=None, metadata=None) -> "ReducedOperators":
+        """The model of the given operators (``mass=None``: the identity; ``nonlinear``: a force term)."""
+        known = registered_terms()
+        parts = [("stiffness", stiffness), ("mass", mass), ("damping", damping), ("input", input_matrix),
+                 ("output", output_matrix)]
+        terms = [known[name](np.asarray(value, dtype=float)) for name, value in parts if value is not None]
+        if load is not None:
+            terms.append(_load_term(known)(np.asarray(load, dtype=float)))
+        if nonlinear is not None:
+            terms.append(nonlinear)
+        return cls(tuple(terms), dict(metadata or {}))
+
+    # -- the terms ---------------------------------------------------------------------
+    def term(self, name: str, terms=None) -> ReducedTerm | None:
+        """The term called ``name`` (``None`` if absent)."""
+        return next((t for t in (self.terms if terms is None else terms) if t.name == name), None)
+
+    def with_terms(self, *terms: ReducedTerm) -> "ReducedOperators":
+        """The model with these terms added, replacing terms of the same names."""
+        names = {t.name for t in terms}
+        return ReducedOperators(tuple(t for t in self.terms if t.name not in names) + terms, dict(self.metadata))
+
+    def without(self, *names: str) -> "ReducedOperators":
+        """The model without the terms called ``names``."""
+        return ReducedOperators(tuple(t for t in self.terms if t.name not in names), dict(self.metadata))
+
+    def _linear(self, variable: str):
+        matrices = [t.sign * t.matrix for t in self.terms
+                    if isinstance(t, LinearTerm) and t.role == "balance" and t.variable == variable]
+        return _sum(matrices)
+
+    # -- views ---------------------------------------------------------------------------
     @property
     def r(self) -> int:
-        return self.stiffness.shape[0]
+        return self.term("stiffness").matrix.shape[0]
 
     @property
-    def n_inputs(self) -> int:
-        return 0 if self.input_matrix is None else self.input_matrix.shape[1]
+    def stiffness(self) -> np.ndarray:
+        """(r, r) ndarray ``K^`` (all linear terms in ``q``)."""
+        return self._linear("q")
+
+    @property
+    def damping(self) -> np.ndarray | None:
+        """(r, r) ndarray ``C^`` (all linear terms in ``q'``), or ``None``."""
+        return self._linear("v")
+
+    @property
+    def mass(self) -> np.ndarray | None:
+        """(r, r) ndarray ``M^``, or ``None`` for the identity (mass-orthonormal basis)."""
+        return self._linear("a")
 
     @property
     def mass_matrix(self) -> np.ndarray:
-        """(r, r) ndarray ``M^`` (the identity when ``mass`` is ``None``)."""
-        return np.eye(self.r) if self.mass is None else self.mass
+        """(r, r) ndarray ``M^`` (the identity when :attr:`mass` is ``None``)."""
+        M = self.mass
+        return np.eye(self.r) if M is None else M
+
+    @property
+    def input_matrix(self) -> np.ndarray | None:
+        """(r, m) ndarray ``B^`` of ``+ B^ u`` on the right side, or ``None``."""
+        B = self._linear("u")
+        return None if B is None else -B
+
+    @property
+    def load(self) -> np.ndarray | None:
+        """(r,) ndarray ``f^_0`` (constant forcing on the right side), or ``None``."""
+        f = self._linear("1")
+        return None if f is None else -f[:, 0]
+
+    @property
+    def output_matrix(self) -> np.ndarray | None:
+        """(p, r) ndarray ``E^``, or ``None``."""
+        E = self.term("output")
+        return None if E is None else E.matrix
+
+    @property
+    def nonlinear(self):
+        """The nonlinear terms as one force (``force``, ``tangent``, state), or ``None``."""
+        forces = [t for t in self.terms if not isinstance(t, LinearTerm) and t.role == "balance"]
+        if not forces:
+            return None
+        return forces[0] if len(forces) == 1 else ReducedForces(forces)
+
+    @property
+    def n_inputs(self) -> int:
+        B = self.input_matrix
+        return 0 if B is None else B.shape[1]
+
+    @property
+    def is_linear(self) -> bool:
+        return self.nonlinear is None
 
     def eigenvalues(self) -> dict:
         """Eigenvalues of the symmetric parts of ``K^`` and ``C^`` (ascending)."""
@@ -248,13 +215,35 @@ class ReducedOperators:
         out[real] = np.sqrt(w2.real[real])
         return out
 
+    def energy(self, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """(k,) ``v^T M^ v / 2 + sum of the terms' potentials`` for (r, k) columns."""
+        M = self.mass
+        Mv = v if M is None else M @ v
+        e = 0.5 * np.sum(v * Mv, axis=0)
+        for t in self.terms:
+            if t.role != "balance" or isinstance(t, LinearTerm) and t.variable in ("a", "v", "u"):
+                continue
+            if isinstance(t, LinearTerm):
+                e = e + t.potential(q)
+            elif t.conservative:
+                e = e + np.array([t.potential(q[:, k]) for k in range(q.shape[1])])
+        return e
+
+
+def _load_term(known):
+    for cls in known.values():
+        if getattr(cls, "variable", None) == "1" and cls.learnable:
+            return cls
+    raise ValueError("no registered term holds a constant load (variable '1'): register one")
+
 
 def galerkin(system, basis: np.ndarray, *, mass_orthonormal: bool = False,
              rtol: float = 1e-8) -> ReducedOperators:
     r"""Intrusive Galerkin ROM of a :class:`~femrom.scene.SecondOrderSystem`.
 
-    ``M~ = V^T M V``, ``C~ = V^T C V``, ``K~ = V^T K V``, ``B~ = V^T B``,
-    ``E~ = E V`` and ``f~(q) = V^T f_nl(V q)`` (tangent ``V^T J V``).
+    Every registered term contributes its projection (``V^T M V``, ``V^T C V``,
+    ``V^T K V``, ``V^T B``, ``E V``, ``V^T f(V q)``, ...); every effect of the
+    system must be covered by some term, else this raises.
 
     Parameters
     ----------
@@ -262,8 +251,8 @@ def galerkin(system, basis: np.ndarray, *, mass_orthonormal: bool = False,
     basis : (n, r) ndarray
         ``V``; with ``mass_orthonormal`` it must satisfy ``V^T M V = I``.
     mass_orthonormal : bool
-        Check ``||V^T M V - I||_F <= rtol sqrt(r)`` and store ``M~ = I``
-        (``mass=None``), else raise.
+        Check ``||V^T M V - I||_F <= rtol sqrt(r)`` and keep ``M^ = I`` (no mass
+        term), else raise.
 
     Returns
     -------
@@ -272,19 +261,21 @@ def galerkin(system, basis: np.ndarray, *, mass_orthonormal: bool = False,
     V = np.asarray(basis, dtype=float)
     if V.ndim != 2 or V.shape[0] != system.n_dofs:
         raise ValueError(f"basis has shape {V.shape}, expected ({system.n_dofs}, r)")
-    mass = Mass.galerkin(system, V)
-    if mass_orthonormal:
-        r = V.shape[1]
-        defect = np.linalg.norm(mass - np.eye(r))
-        if defect > rtol * np.sqrt(r):
-            raise ValueError(f"basis is not mass-orthonormal: ||V^T M V - I||_F = {defect:.3e}")
-        mass = None
-    return ReducedOperators(
-        stiffness=Stiffness.galerkin(system, V),
-        mass=mass,
-        damping=Damping.galerkin(system, V),
-        input_matrix=Input.galerkin(system, V),
-        output_matrix=Output.galerkin(system, V),
-        nonlinear=None if system.nonlinear is None else ProjectedNonlinearForce(system.nonlinear, V),
-        metadata={"method": "galerkin", "mass_orthonormal": bool(mass_orthonormal)},
-    )
+    terms, covered = [], set()
+    for cls in registered_terms().values():
+        term = cls.galerkin(system, V)
+        if term is None:
+            continue
+        covered.add(cls.effect)
+        if cls.name == "mass" and mass_orthonormal:
+            r = V.shape[1]
+            defect = np.linalg.norm(term.matrix - np.eye(r))
+            if defect > rtol * np.sqrt(r):
+                raise ValueError(f"basis is not mass-orthonormal: ||V^T M V - I||_F = {defect:.3e}")
+            continue
+        terms.append(term)
+    missing = sorted(set(system.effects) - covered)
+    if missing:
+        raise ValueError(f"no registered reduced term projects the system's {', '.join(missing)}: "
+                         "write one (femrom.inference.register_term)")
+    return ReducedOperators(tuple(terms), {"method": "galerkin", "mass_orthonormal": bool(mass_orthonormal)})

@@ -1,18 +1,21 @@
-"""Time integrators for ``M q'' + C q' + K q + f_nl(q, q') = B u(t)``.
+"""Time integrators for ``M q'' + C q' + K q + f_nl(q, q'; s) = B u(t) + f_0``.
 
 Three separate pieces:
 
 - a *scheme* takes one step and declares its ``order``: :class:`Newmark`
   (average acceleration by default), :class:`GeneralizedAlpha`,
   :class:`CentralDifference` (explicit Stoermer-Verlet), :class:`ImplicitMidpoint`;
+  each is registered by the name a scene's ``[time] integrator`` uses
+  (:data:`SCHEMES`, :func:`register_scheme`, :func:`scheme_for`);
 - the *driver* :func:`iterate` loops and yields :class:`StepResult`;
   :func:`integrate` feeds them to *consumers* (:class:`Trajectory`,
   :class:`OutputRecorder`, :class:`EnergyRecorder`, or any callable);
-- a *linear-solver strategy* (:func:`make_solver`) factorises (or
-  preconditions) an effective matrix once and solves with it every step.
+- a *linear-solver strategy* (:func:`femrom.solvers.make_solver`) factorises
+  (or preconditions) an effective matrix once and solves with it every step.
 
 Linear systems take the linear path (one factorisation per ``dt``); Newton
-runs only when the system has a nonlinear force.
+runs only when the system has a nonlinear force, and only on that force's own
+coordinates when it acts on a few dofs (:class:`Newton`, ``method``).
 """
 
 from femrom.integrators._central_difference import CentralDifference
@@ -25,57 +28,25 @@ from femrom.integrators._driver import (
     integrate,
     iterate,
 )
-from femrom.integrators._midpoint import ImplicitMidpoint
 from femrom.integrators._hamiltonian import (
     CANONICAL_SCHEMES,
     CanonicalSystem,
     CanonicalTrajectory,
-    QuarticPotential,
     integrate_canonical,
 )
+from femrom.integrators._implicit import ImplicitSolve
+from femrom.integrators._midpoint import ImplicitMidpoint
 from femrom.integrators._newmark import GeneralizedAlpha, Newmark, NewmarkAverageAcceleration
-from femrom.integrators._newton import ConvergenceError, Newton, solve_newton
-from femrom.fem import (
-    STRATEGIES,
-    LinearSolver,
-    LinearSolverError,
-    choose_strategy,
-    make_solver,
-)
-from femrom.integrators._simulate import SimulationResult, scheme_for, simulate
+from femrom.integrators._newton import NEWTON_METHODS, ConvergenceError, Newton, solve_newton
+from femrom.integrators._schemes import SCHEMES, register_scheme, scheme_for
+from femrom.integrators._simulate import SimulationResult, simulate
 from femrom.integrators._stability import MaxFrequency, bound_max_frequency, estimate_max_frequency
 
 __all__ = [
-    "CANONICAL_SCHEMES",
-    "CanonicalSystem",
-    "CanonicalTrajectory",
-    "QuarticPotential",
-    "integrate_canonical",
-    "STRATEGIES",
-    "CentralDifference",
-    "ConvergenceError", "solve_newton",
-    "EnergyRecorder",
-    "GeneralizedAlpha",
-    "ImplicitMidpoint",
-    "Integration",
-    "IntegrationError",
-    "IntegrationSummary",
-    "LinearSolver",
-    "LinearSolverError",
-    "MaxFrequency",
-    "Newmark",
-    "NewmarkAverageAcceleration",
-    "Newton",
-    "OutputRecorder",
-    "SimulationResult",
-    "StepResult",
-    "Trajectory",
-    "bound_max_frequency",
-    "choose_strategy",
-    "estimate_max_frequency",
-    "integrate",
-    "iterate",
-    "make_solver",
-    "scheme_for",
-    "simulate",
+    "CANONICAL_SCHEMES", "NEWTON_METHODS", "SCHEMES", "CanonicalSystem", "CanonicalTrajectory",
+    "CentralDifference", "ConvergenceError", "EnergyRecorder", "GeneralizedAlpha", "ImplicitMidpoint",
+    "ImplicitSolve", "Integration", "IntegrationError", "IntegrationSummary", "MaxFrequency", "Newmark",
+    "NewmarkAverageAcceleration", "Newton", "OutputRecorder", "SimulationResult", "StepResult",
+    "Trajectory", "bound_max_frequency", "estimate_max_frequency", "integrate", "integrate_canonical",
+    "iterate", "register_scheme", "scheme_for", "simulate", "solve_newton",
 ]

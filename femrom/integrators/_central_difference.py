@@ -37,8 +37,9 @@ from typing import Any
 import numpy as np
 import scipy.sparse as sp
 
-from femrom.fem._solvers import _is_diagonal
+from femrom.integrators._schemes import register_scheme
 from femrom.integrators._stability import bound_max_frequency, central_difference_bound
+from femrom.solvers import is_diagonal
 
 
 @dataclass
@@ -53,6 +54,7 @@ class CentralDifferenceCache:
     details: dict | None = None
 
 
+@register_scheme("central_difference")
 @dataclass(frozen=True)
 class CentralDifference:
     """Explicit central difference / velocity Stoermer-Verlet (second order, symplectic).
@@ -70,16 +72,21 @@ class CentralDifference:
     order = 2
     name = "CentralDifference"
 
+    @classmethod
+    def from_config(cls, time_config) -> "CentralDifference":
+        """With the stability check (a scene's ``integrator = "central_difference"``)."""
+        return cls()
+
     def init(self, system, dt: float, make_solver, mass_solver, t0, q0, v0, a0, state0):
         """Check the mass is diagonal and ``dt`` is stable; precompute the diagonal solve."""
-        if not _is_diagonal(system.mass):
+        if not is_diagonal(system.mass):
             raise ValueError("CentralDifference needs a diagonal (lumped) mass matrix; "
                              "this system's mass has off-diagonal entries")
         m = np.asarray(system.mass.diagonal(), dtype=float)
         cache = CentralDifferenceCache(dt=float(dt), inverse_mass=1.0 / m, details={})
         C = system.damping
         if C is not None:
-            if _is_diagonal(C):
+            if is_diagonal(C):
                 c = np.asarray(C.diagonal(), dtype=float)
                 cache.diagonal_damping = c
                 cache.inverse_mass = 1.0 / (m + 0.5 * dt * c)

@@ -35,7 +35,7 @@ import numpy as np
 
 from femrom._progress import Progress
 from femrom.integrators._newton import ConvergenceError
-from femrom.fem._solvers import LinearSolver, LinearSolverError, make_solver
+from femrom.solvers import LinearSolver, LinearSolverError, make_solver
 
 
 class IntegrationError(RuntimeError):

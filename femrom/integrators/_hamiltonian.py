@@ -49,30 +49,6 @@ from femrom.integrators._newton import ConvergenceError, Newton
 CANONICAL_SCHEMES = ("midpoint", "avf")
 
 
-@dataclass(frozen=True)
-class QuarticPotential:
-    r"""``H_nl = -(gamma / 4) sum_j (q_j^2 + p_j^2)^2``: the cubic NLS term.
-
-    With ``psi = q + i p`` and ``D_q = D_p = -Laplacian``, Hamilton's equations
-    are ``i psi_t + psi_xx + gamma |psi|^2 psi = 0`` on the grid.
-    """
-
-    gamma: float
-
-    def value(self, q: np.ndarray, p: np.ndarray):
-        w = q * q + p * p
-        return -0.25 * self.gamma * np.sum(w * w, axis=0)
-
-    def gradient(self, q: np.ndarray, p: np.ndarray):
-        w = q * q + p * p
-        return -self.gamma * w * q, -self.gamma * w * p
-
-    def hessian(self, q: np.ndarray, p: np.ndarray):
-        w = q * q + p * p
-        g = -self.gamma
-        return g * (w + 2 * q * q), g * (2 * q * p), g * (w + 2 * p * p)
-
-
 def _block(h, m: int):
     """A Hessian block as an (m, m) matrix (dense or sparse) from an (m,) diagonal or a matrix."""
     if sp.issparse(h):

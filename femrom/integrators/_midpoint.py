@@ -19,26 +19,30 @@ undamped system (Hairer, Lubich & Wanner, Geometric Numerical Integration,
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
-from femrom.integrators._newton import Newton, TangentMatrix, solve_newton
+from femrom.integrators._implicit import ImplicitSolve
+from femrom.integrators._newton import Newton
+from femrom.integrators._schemes import register_scheme
 
 
 @dataclass
 class MidpointCache:
-    """What a midpoint step reuses: ``dt``, the effective matrix, its solver, the mass solver."""
+    """What a midpoint step reuses: ``dt``, the effective matrix, its solver (linear
+    systems) or the nonlinear step's :class:`ImplicitSolve`, the mass solver."""
 
     dt: float
     effective_matrix: Any
     mass_solver: Any
     solver: Any = None
-    make_solver: Any = None
-    tangent: TangentMatrix | None = None
+    nonlinear: ImplicitSolve | None = None
+    details: dict = field(default_factory=dict)
 
 
+@register_scheme("implicit_midpoint")
 @dataclass(frozen=True)
 class ImplicitMidpoint:
     """Implicit midpoint rule (symplectic, second order).
@@ -59,6 +63,11 @@ class ImplicitMidpoint:
     order = 2
     name = "ImplicitMidpoint"
 
+    @classmethod
+    def from_config(cls, time_config) -> "ImplicitMidpoint":
+        """With accelerations (a scene's ``integrator = "implicit_midpoint"``)."""
+        return cls()
+
     @property
     def uses_mass_solver(self) -> bool:
         """Whether steps solve with M (the driver frees M's factor otherwise)."""
@@ -71,12 +80,13 @@ class ImplicitMidpoint:
             S = S + (0.5 * dt) * system.damping
         S = S.tocsr()
         cache = MidpointCache(dt=float(dt), effective_matrix=S,
-                              mass_solver=mass_solver() if self.accelerations else None,
-                              make_solver=make_solver)
+                              mass_solver=mass_solver() if self.accelerations else None)
         if system.nonlinear is None:
             cache.solver = make_solver(S, spd=True)
         else:
-            cache.tangent = TangentMatrix(S, 0.25 * dt * dt, 0.5 * dt)
+            # M (v_m - v) + h/2 [K q_m + C v_m + f(q_m, v_m) - B u] = 0 with q_m = q + h/2 v_m
+            cache.nonlinear = ImplicitSolve(system, S, 0.5 * dt, 1.0, 0.5 * dt, make_solver, self.newton)
+            cache.details.update(cache.nonlinear.details)
         return cache
 
     def step(self, system, cache: MidpointCache, t, q, v, a, state):
@@ -84,14 +94,14 @@ class ImplicitMidpoint:
         h = cache.dt
         guess = v if a is None else v + (0.5 * h) * a
         f_ext = system.external_force(t + 0.5 * h)
+        rhs = system.mass @ v - (0.5 * h) * (system.stiffness @ q)
+        if f_ext is not None:
+            rhs += (0.5 * h) * f_ext
         if system.nonlinear is None:
-            rhs = system.mass @ v - (0.5 * h) * (system.stiffness @ q)
-            if f_ext is not None:
-                rhs += (0.5 * h) * f_ext
             v_mid = cache.solver.solve(rhs, x0=guess)
             iterations = 0
         else:
-            v_mid, iterations = self._newton_step(system, cache, q, v, state, f_ext, guess)
+            v_mid, iterations = cache.nonlinear(rhs, q, np.zeros_like(v), state, guess)
         q1 = q + h * v_mid
         v1 = 2.0 * v_mid - v
         state1 = state if system.nonlinear is None else system.nonlinear.commit(q1, v1, state)
@@ -99,22 +109,3 @@ class ImplicitMidpoint:
         if self.accelerations:
             a1 = cache.mass_solver.solve(system.residual_force(t + h, q1, v1, state1))
         return q1, v1, a1, state1, iterations
-
-    def _newton_step(self, system, cache, q, v, state, f_ext, guess):
-        h = cache.dt
-        nl = system.nonlinear
-
-        def residual(v_mid):
-            q_mid = q + (0.5 * h) * v_mid
-            terms = [system.mass @ (v_mid - v), (0.5 * h) * (system.stiffness @ q_mid),
-                     (0.5 * h) * nl.force(q_mid, v_mid, state)]
-            if system.damping is not None:
-                terms.append((0.5 * h) * (system.damping @ v_mid))
-            if f_ext is not None:
-                terms.append((-0.5 * h) * f_ext)
-            return sum(terms), sum(float(np.linalg.norm(x)) for x in terms)
-
-        def jacobian(v_mid):
-            return cache.tangent(*nl.tangent(q + (0.5 * h) * v_mid, v_mid, state))
-
-        return solve_newton(residual, jacobian, guess, cache.make_solver, self.newton)

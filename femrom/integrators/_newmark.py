@@ -25,20 +25,20 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
-import numpy as np
-
-from femrom.integrators._newton import Newton, TangentMatrix, solve_newton
+from femrom.integrators._implicit import ImplicitSolve
+from femrom.integrators._newton import Newton
+from femrom.integrators._schemes import register_scheme
 
 
 @dataclass
 class NewmarkCache:
-    """What a Newmark-family step reuses: ``dt``, the effective matrix and its solver."""
+    """What a Newmark-family step reuses: ``dt``, the effective matrix and its solver
+    (linear systems) or the nonlinear step's :class:`ImplicitSolve`."""
 
     dt: float
     effective_matrix: Any
     solver: Any = None
-    make_solver: Any = None
-    tangent: TangentMatrix | None = None
+    nonlinear: ImplicitSolve | None = None
     details: dict = field(default_factory=dict)
 
 
@@ -53,12 +53,13 @@ class _NewmarkFamily:
         if system.damping is not None:
             S = S + ((1.0 - af) * self.gamma * dt) * system.damping
         S = S.tocsr()
-        cache = NewmarkCache(dt=float(dt), effective_matrix=S, make_solver=make_solver)
+        cache = NewmarkCache(dt=float(dt), effective_matrix=S)
         if system.nonlinear is None:
             cache.solver = make_solver(S, spd=True)
         else:
-            cache.tangent = TangentMatrix(S, (1.0 - af) * self.beta * dt * dt,
-                                          (1.0 - af) * self.gamma * dt)
+            cache.nonlinear = ImplicitSolve(system, S, (1.0 - af) * self.beta * dt * dt,
+                                            (1.0 - af) * self.gamma * dt, 1.0, make_solver, self.newton)
+            cache.details.update(cache.nonlinear.details)
         return cache
 
     def step(self, system, cache: NewmarkCache, t, q, v, a, state):
@@ -67,13 +68,15 @@ class _NewmarkFamily:
         q_pred = q + h * v + ((0.5 - beta) * h * h) * a
         v_pred = v + ((1.0 - gamma) * h) * a
         t_balance = t + (1.0 - af) * h
+        rhs = self._linear_rhs(system, t_balance, q, v, a, q_pred, v_pred)
         if system.nonlinear is None:
-            a1 = cache.solver.solve(self._linear_rhs(system, t_balance, q, v, a, q_pred, v_pred),
-                                    x0=a)
+            a1 = cache.solver.solve(rhs, x0=a)
             iterations, state1 = 0, state
         else:
-            a1, iterations = self._newton_step(system, cache, t_balance, q, v, a, state,
-                                               q_pred, v_pred)
+            # the force at the balance point: q_bal = (1 - af) q1 + af q = q_bal(pred) + c_q a1
+            q_bal = q_pred if af == 0.0 else (1.0 - af) * q_pred + af * q
+            v_bal = v_pred if af == 0.0 else (1.0 - af) * v_pred + af * v
+            a1, iterations = cache.nonlinear(rhs, q_bal, v_bal, state, a)
         q1 = q_pred + (beta * h * h) * a1
         v1 = v_pred + (gamma * h) * a1
         if system.nonlinear is not None:
@@ -92,32 +95,8 @@ class _NewmarkFamily:
         f = system.external_force(t_balance)
         return rhs if f is None else rhs + f
 
-    def _newton_step(self, system, cache, t_balance, q, v, a, state, q_pred, v_pred):
-        h, beta, gamma, am, af = cache.dt, self.beta, self.gamma, self.alpha_m, self.alpha_f
-        nl = system.nonlinear
-        f_ext = system.external_force(t_balance)
 
-        def balanced(a1):
-            q1 = q_pred + (beta * h * h) * a1
-            v1 = v_pred + (gamma * h) * a1
-            return (1.0 - af) * q1 + af * q, (1.0 - af) * v1 + af * v
-
-        def residual(a1):
-            q_bal, v_bal = balanced(a1)
-            terms = [system.mass @ ((1.0 - am) * a1 + am * a), system.stiffness @ q_bal,
-                     nl.force(q_bal, v_bal, state)]
-            if system.damping is not None:
-                terms.append(system.damping @ v_bal)
-            if f_ext is not None:
-                terms.append(-f_ext)
-            return sum(terms), sum(float(np.linalg.norm(x)) for x in terms)
-
-        def jacobian(a1):
-            return cache.tangent(*nl.tangent(*balanced(a1), state))
-
-        return solve_newton(residual, jacobian, a, cache.make_solver, self.newton)
-
-
+@register_scheme("newmark")
 @dataclass(frozen=True)
 class Newmark(_NewmarkFamily):
     r"""Newmark's method; the default ``beta = 1/4, gamma = 1/2`` is average acceleration.
@@ -147,6 +126,11 @@ class Newmark(_NewmarkFamily):
         if self.beta < 0 or self.gamma < 0:
             raise ValueError(f"Newmark needs beta, gamma >= 0, got {self.beta}, {self.gamma}")
 
+    @classmethod
+    def from_config(cls, time_config) -> "Newmark":
+        """Average acceleration (a scene's ``integrator = "newmark"``)."""
+        return cls()
+
     @property
     def order(self) -> int:
         return 2 if self.gamma == 0.5 else 1
@@ -163,6 +147,7 @@ def NewmarkAverageAcceleration(newton: Newton = Newton()) -> Newmark:
     return Newmark(beta=0.25, gamma=0.5, newton=newton)
 
 
+@register_scheme("generalized_alpha")
 @dataclass(frozen=True)
 class GeneralizedAlpha(_NewmarkFamily):
     r"""Generalized-alpha (Chung & Hulbert 1993) with high-frequency spectral radius ``rho_inf``.
@@ -187,6 +172,11 @@ class GeneralizedAlpha(_NewmarkFamily):
     def __post_init__(self):
         if not 0.0 <= self.spectral_radius <= 1.0:
             raise ValueError(f"spectral_radius must lie in [0, 1], got {self.spectral_radius}")
+
+    @classmethod
+    def from_config(cls, time_config) -> "GeneralizedAlpha":
+        """With ``[time] spectral_radius``."""
+        return cls(spectral_radius=time_config.spectral_radius)
 
     @property
     def alpha_m(self) -> float:

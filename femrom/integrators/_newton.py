@@ -27,9 +27,13 @@ class ConvergenceError(RuntimeError):
     """Newton did not converge (the driver adds the step and time)."""
 
 
+#: How an implicit step's nonlinear equation is solved (:mod:`._implicit`).
+NEWTON_METHODS = ("auto", "full", "condensed")
+
+
 @dataclass(frozen=True)
 class Newton:
-    """Tolerances of the Newton iterations of a step.
+    """Tolerances of the Newton iterations of a step, and where they run.
 
     Attributes
     ----------
@@ -39,11 +43,30 @@ class Newton:
         Absolute residual tolerance (in the units of the residual).
     max_iterations : int
         Jacobian solves allowed per step before :class:`ConvergenceError`.
+    method : {"auto", "full", "condensed"}
+        ``"full"``: Newton on all dofs, the tangent refactorised every
+        iteration; ``"condensed"``: Newton on the nonlinear force's own
+        coordinates with the linear part condensed once per ``dt``
+        (:mod:`femrom.integrators._implicit`); ``"auto"``: condensed when the
+        force has at most ``condense_max`` coordinates and at most
+        ``condense_fraction`` of the dofs.
+    condense_max : int
+        Largest number of condensed coordinates ``"auto"`` takes (a dense
+        (s, s) factorisation per iteration: 0.1-0.2 s at 4000).
+    condense_fraction : float
+        Largest share of the dofs ``"auto"`` condenses.
+    condense_memory : float
+        Bytes the condensed step may keep for ``Z = S^-1 L^T`` (n x s); above
+        it, each step solves once more with ``S`` instead.
     """
 
     rtol: float = 1e-10
     atol: float = 0.0
     max_iterations: int = 20
+    method: str = "auto"
+    condense_max: int = 4000
+    condense_fraction: float = 0.25
+    condense_memory: float = 2.0**30
 
     def __post_init__(self):
         if self.rtol < 0 or self.atol < 0 or (self.rtol == 0 and self.atol == 0):
@@ -51,6 +74,11 @@ class Newton:
                              f"got {self.rtol}, {self.atol}")
         if self.max_iterations < 1:
             raise ValueError(f"Newton max_iterations must be >= 1, got {self.max_iterations}")
+        if self.method not in NEWTON_METHODS:
+            raise ValueError(f"unknown Newton method {self.method!r}; valid: {', '.join(NEWTON_METHODS)}")
+        if not (self.condense_max >= 1 and 0 < self.condense_fraction <= 1 and self.condense_memory >= 0):
+            raise ValueError("Newton needs condense_max >= 1, 0 < condense_fraction <= 1, "
+                             "condense_memory >= 0")
 
 
 def solve_newton(residual: Callable, jacobian: Callable, x0: np.ndarray, make_solver: Callable,

@@ -7,28 +7,12 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from femrom.fem import make_solver
-from femrom.integrators._central_difference import CentralDifference
 from femrom.integrators._consumers import EnergyRecorder, OutputRecorder, Trajectory
 from femrom.integrators._driver import integrate
-from femrom.integrators._midpoint import ImplicitMidpoint
-from femrom.integrators._newmark import GeneralizedAlpha, Newmark
+from femrom.integrators._schemes import scheme_for
+from femrom.solvers import make_solver
 
 _FIELD_KEYS = {"displacement": "q", "velocity": "v", "acceleration": "a"}
-
-
-def scheme_for(time_config):
-    """The scheme a scene's ``[time]`` names."""
-    name = time_config.integrator
-    if name == "newmark":
-        return Newmark()
-    if name == "generalized_alpha":
-        return GeneralizedAlpha(spectral_radius=time_config.spectral_radius)
-    if name == "central_difference":
-        return CentralDifference()
-    if name == "implicit_midpoint":
-        return ImplicitMidpoint()
-    raise ValueError(f"unknown integrator {name!r}")
 
 
 @dataclass(frozen=True, eq=False)

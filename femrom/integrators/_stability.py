@@ -36,7 +36,7 @@ import scipy.linalg as sla
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from femrom.fem._solvers import _is_diagonal, make_solver
+from femrom.solvers import is_diagonal, make_solver
 
 #: Below this size the dense eigensolver is cheaper and exact.
 _DENSE_LIMIT = 64
@@ -94,7 +94,7 @@ def bound_max_frequency(stiffness, mass, *, rtol: float = 1e-3, seed: int = 0) -
     """
     K = sp.csr_matrix(stiffness, dtype=float)
     n = K.shape[0]
-    diagonal_mass = _is_diagonal(mass)
+    diagonal_mass = is_diagonal(mass)
     if diagonal_mass:
         d = np.asarray(mass.diagonal(), dtype=float)
         if np.any(d <= 0.0):

@@ -1,6 +1,7 @@
 """Post-processing: metrics files, plots of responses and energy, accuracy-vs-cost tables,
 deformed-shape renders and ParaView time series."""
 
+from femrom._json import jsonable
 from femrom.post._render import (
     mesh_arrays,
     render_available,
@@ -10,11 +11,16 @@ from femrom.post._render import (
 )
 from femrom.post._report import (
     accuracy_cost_table,
+    machine_description,
     plot_accuracy_cost,
+    plot_accuracy_cost_groups,
     plot_response,
+    plot_time_series,
+    pyplot,
+    save_figure,
     write_metrics,
 )
 
-__all__ = ["accuracy_cost_table", "mesh_arrays", "plot_accuracy_cost", "plot_response",
-           "render_available", "render_grid", "vertex_displacements", "write_metrics",
-           "write_vtu_series"]
+__all__ = ["accuracy_cost_table", "jsonable", "machine_description", "mesh_arrays", "plot_accuracy_cost",
+           "plot_accuracy_cost_groups", "plot_response", "plot_time_series", "pyplot", "render_available",
+           "render_grid", "save_figure", "vertex_displacements", "write_metrics", "write_vtu_series"]

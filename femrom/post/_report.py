@@ -2,17 +2,16 @@
 
 from __future__ import annotations
 
-import json
-import math
 import os
 import platform
 from pathlib import Path
 
 import numpy as np
 
+from femrom._json import dumps
 
 
-def _pyplot():
+def pyplot():
     """matplotlib.pyplot on the non-interactive Agg backend (no display needed)."""
     import matplotlib
 
@@ -22,7 +21,7 @@ def _pyplot():
     return plt
 
 
-def _save(fig, path, *, dpi: int) -> Path:
+def save_figure(fig, path, *, dpi: int) -> Path:
     """Lay out, write (making the folder) and close a figure; returns the path."""
     import matplotlib.pyplot as plt
 
@@ -32,21 +31,6 @@ def _save(fig, path, *, dpi: int) -> Path:
     fig.savefig(path, dpi=dpi)
     plt.close(fig)
     return path
-
-def _jsonable(value):
-    if isinstance(value, dict):
-        return {str(k): _jsonable(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_jsonable(v) for v in value]
-    if isinstance(value, np.ndarray):
-        return _jsonable(value.tolist())
-    if isinstance(value, (np.floating, float)):
-        value = float(value)
-        return value if math.isfinite(value) else str(value)
-    if isinstance(value, np.integer):
-        return int(value)
-    return value
-
 
 def machine_description() -> dict:
     """Where a measurement was taken (for metrics and benchmark files)."""
@@ -62,7 +46,7 @@ def write_metrics(path, metrics: dict) -> Path:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_suffix(path.suffix + ".tmp")
-    tmp.write_text(json.dumps(_jsonable(metrics), indent=2) + "\n")
+    tmp.write_text(dumps(metrics, indent=2) + "\n")
     os.replace(tmp, path)
     return path
 
@@ -76,7 +60,7 @@ def plot_response(path, times, outputs=None, output_names=(), energy=None, title
     outputs : (p, k) ndarray or None
     energy : (k,) ndarray or None
     """
-    plt = _pyplot()
+    plt = pyplot()
 
     panels = [x for x in (outputs, energy) if x is not None]
     fig, axes = plt.subplots(max(len(panels), 1), 1, figsize=(8, 3.2 * max(len(panels), 1)),
@@ -99,7 +83,7 @@ def plot_response(path, times, outputs=None, output_names=(), energy=None, title
     axes[-1].set_xlabel("t [s]")
     if title:
         axes[0].set_title(title)
-    return _save(fig, path, dpi=120)
+    return save_figure(fig, path, dpi=120)
 
 
 def accuracy_cost_table(rows: list[dict], columns: list[str]) -> str:
@@ -116,7 +100,7 @@ def accuracy_cost_table(rows: list[dict], columns: list[str]) -> str:
 
 def plot_accuracy_cost(path, rows: list[dict], cost: str, error: str, label: str, title="") -> Path:
     """Log-log error against cost, one point per row, annotated with ``label``."""
-    plt = _pyplot()
+    plt = pyplot()
 
     fig, ax = plt.subplots(figsize=(6, 4))
     x = [r[cost] for r in rows]
@@ -129,7 +113,7 @@ def plot_accuracy_cost(path, rows: list[dict], cost: str, error: str, label: str
     ax.grid(alpha=0.3, which="both")
     if title:
         ax.set_title(title)
-    return _save(fig, path, dpi=120)
+    return save_figure(fig, path, dpi=120)
 
 
 def plot_time_series(path, times, series: dict, *, ylabel: str = "", logy: bool = False,
@@ -150,7 +134,7 @@ def plot_time_series(path, times, series: dict, *, ylabel: str = "", logy: bool 
     ymax : float, optional
         Clip values above (a blow-up then runs along the top edge, marked "clipped").
     """
-    plt = _pyplot()
+    plt = pyplot()
 
     fig, ax = plt.subplots(figsize=(8, 3.6))
     styles = ("-", "--", ":", "-.")
@@ -179,14 +163,14 @@ def plot_time_series(path, times, series: dict, *, ylabel: str = "", logy: bool 
     ax.legend(loc="best", fontsize=8)
     if title:
         ax.set_title(title)
-    return _save(fig, path, dpi=100)
+    return save_figure(fig, path, dpi=100)
 
 
 def plot_accuracy_cost_groups(path, rows: list[dict], cost: str, error: str, label: str,
                               group: str, title: str = "") -> Path:
     """Log-log error against cost, one line per value of ``group`` (e.g. the method),
     each point annotated with ``label`` (e.g. r). Non-finite errors are left out."""
-    plt = _pyplot()
+    plt = pyplot()
 
     fig, ax = plt.subplots(figsize=(6.4, 4.2))
     for name in dict.fromkeys(r[group] for r in rows):
@@ -203,4 +187,4 @@ def plot_accuracy_cost_groups(path, rows: list[dict], cost: str, error: str, lab
     ax.legend(fontsize=8)
     if title:
         ax.set_title(title, fontsize=10)
-    return _save(fig, path, dpi=100)
+    return save_figure(fig, path, dpi=100)

@@ -1,18 +1,25 @@
-"""Reduced second-order models and their structure-preserving time stepping.
+"""Reduced models: fit, predict, step, export, save.
 
 - :class:`SecondOrderROM`: intrusive (:meth:`SecondOrderROM.galerkin`) or
-  learned (``SecondOrderROM(learner=LagrangianOpInf()).fit(data)``) models with
-  ``predict``, outputs, reduced energy, lazy full-field reconstruction and
-  HDF5 ``save``/``load``;
+  learned (``SecondOrderROM(learner=LagrangianOpInf()).fit(data)``) models of
+  any :class:`~femrom.inference.ReducedOperators` with ``predict``, a
+  ``stepper`` (one input at a time), ``to_state_space(dt)`` for linear models,
+  outputs, reduced energy, lazy full-field reconstruction and HDF5
+  ``save``/``load`` (term by term);
 - :class:`ReducedSolution`: what ``predict`` returns;
-- reduced schemes (:data:`SCHEMES`): Newmark average acceleration, the
-  implicit midpoint rule, Stoermer-Verlet, as precomputed linear step maps;
+- reduced schemes: registered classes (:func:`registered_schemes`,
+  :func:`register_reduced_scheme`): Newmark average acceleration, the implicit
+  midpoint rule, Stoermer-Verlet, each a precomputed linear step map and a
+  nonlinear step;
+- :class:`DiscreteStateSpace`: ``z+ = A z + B u``, ``y = C z + D u``, with
+  ``simulate``, a stepper and HDF5 (the form of identified first-order models);
 - :class:`HamiltonianROM`: canonical Hamiltonian ROMs, intrusive
-  (:meth:`HamiltonianROM.galerkin`) or learned (``fit`` through
+  (:meth:`HamiltonianROM.galerkin`) or learned (``fit`` on
+  :class:`~femrom.inference.CanonicalData` through
   :class:`~femrom.inference.HamiltonianOpInf`), with symplectic Euler A/B,
   Stoermer-Verlet, the implicit midpoint rule and AVF, outputs, the reduced
-  Hamiltonian, lazy full fields (:class:`HamiltonianSolution`) and HDF5
-  ``save``/``load``;
+  Hamiltonian, lazy full fields (:class:`HamiltonianSolution`), a stepper and
+  HDF5 ``save``/``load``;
 - :func:`select_regularization`: a grid of regularization weights scored by
   training fit and by energy over an extended window;
 - :class:`HyperReducedPotential`, :func:`ecsw_weights`, :func:`sparse_nnls`:
@@ -20,19 +27,33 @@
   and non-negative weights; the reduced force stays an exact gradient).
 """
 
+from femrom.rom._base import LazyFields, ReducedModel, uniform_step
 from femrom.rom._hamiltonian import (
     HAMILTONIAN_SCHEMES,
     HamiltonianROM,
     HamiltonianSolution,
+    HamiltonianStepper,
     hamiltonian_step_matrix,
 )
 from femrom.rom._hyper import HyperReducedPotential, ecsw_weights, sparse_nnls
 from femrom.rom._model import ReducedSolution, SecondOrderROM
+from femrom.rom._schemes import (
+    LinearParts,
+    ReducedNewton,
+    ReducedScheme,
+    reduced_scheme,
+    register_reduced_scheme,
+    registered_schemes,
+)
 from femrom.rom._selection import RegularizationScore, select_regularization
-from femrom.rom._steppers import SCHEMES, linear_step_map, verlet_bound
+from femrom.rom._statespace import DiscreteStateSpace, StateSpaceStepper
+from femrom.rom._steppers import ReducedStepper, run_linear
+from femrom.rom.schemes.verlet import verlet_bound
 
 __all__ = [
-    "HAMILTONIAN_SCHEMES", "HamiltonianROM", "HamiltonianSolution", "SCHEMES", "hamiltonian_step_matrix", "ReducedSolution", "RegularizationScore", "SecondOrderROM", "linear_step_map",
-    "select_regularization", "verlet_bound",
-    "HyperReducedPotential", "ecsw_weights", "sparse_nnls",
+    "HAMILTONIAN_SCHEMES", "DiscreteStateSpace", "HamiltonianROM", "HamiltonianSolution", "HamiltonianStepper",
+    "HyperReducedPotential", "LazyFields", "LinearParts", "ReducedModel", "ReducedNewton", "ReducedScheme",
+    "ReducedSolution", "ReducedStepper", "RegularizationScore", "SecondOrderROM", "StateSpaceStepper",
+    "ecsw_weights", "hamiltonian_step_matrix", "reduced_scheme", "register_reduced_scheme",
+    "registered_schemes", "run_linear", "select_regularization", "sparse_nnls", "uniform_step", "verlet_bound",
 ]

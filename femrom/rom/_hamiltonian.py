@@ -27,7 +27,8 @@ gradient is its midpoint value).
 
 :class:`HamiltonianROM` is built intrusively (:meth:`HamiltonianROM.galerkin`,
 ``D~ = Phi^T D Phi``) or learned (``HamiltonianROM(basis=Phi,
-learner=HamiltonianOpInf()).fit(Q, P, dt)``); :meth:`HamiltonianROM.predict`
+learner=HamiltonianOpInf()).fit(data)`` on :class:`~femrom.inference.CanonicalData`,
+or :meth:`HamiltonianROM.fit_snapshots` on full snapshots); :meth:`HamiltonianROM.predict`
 returns a :class:`HamiltonianSolution` (reduced trajectories, ``H^``, outputs;
 full fields rebuilt only on request) and :meth:`HamiltonianROM.save` /
 :meth:`HamiltonianROM.load` keep the model in HDF5 with its metadata.
@@ -43,10 +44,11 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.linalg as sl
 
-from femrom.inference._hamiltonian import HamiltonianOperators, HamiltonianOpInf, ProjectedPotential
-from femrom.integrators._hamiltonian import CANONICAL_SCHEMES, CanonicalSystem, integrate_canonical
-from femrom.integrators._newton import Newton
-from femrom.rom._model import LazyFields, _jsonable
+from femrom._json import dumps
+from femrom.inference import CanonicalData, HamiltonianOperators, HamiltonianOpInf, ProjectedPotential
+from femrom.integrators import CANONICAL_SCHEMES, CanonicalSystem, Newton, integrate_canonical
+from femrom.rom._base import LazyFields, ReducedModel, uniform_step
+from femrom.rom._statespace import DiscreteStateSpace
 from femrom.rom._steppers import run_linear
 
 #: Symplectic schemes for Hamiltonian ROMs.
@@ -61,23 +63,39 @@ _LINEAR_SCHEMES = HAMILTONIAN_SCHEMES + ("avf",)
 _ORTHONORMALITY = 1e-8
 
 
+def _kick(ops, h, c):
+    """``p -= c h D_q q``."""
+    r = ops.r
+    return np.block([[np.eye(r), np.zeros((r, r))], [-c * h * ops.position, np.eye(r)]])
+
+
+def _drift(ops, h, c):
+    """``q += c h D_p p``."""
+    r = ops.r
+    return np.block([[np.eye(r), c * h * ops.momentum], [np.zeros((r, r)), np.eye(r)]])
+
+
+def _midpoint(ops, h):
+    r = ops.r
+    A = np.block([[np.zeros((r, r)), ops.momentum], [-ops.position, np.zeros((r, r))]])
+    return sl.solve(np.eye(2 * r) - 0.5 * h * A, np.eye(2 * r) + 0.5 * h * A)
+
+
+#: The (2r, 2r) step matrix of each linear symplectic scheme, by name.
+_STEP_MATRICES = {
+    "symplectic_euler_a": lambda ops, h: _kick(ops, h, 1.0) @ _drift(ops, h, 1.0),
+    "symplectic_euler_b": lambda ops, h: _drift(ops, h, 1.0) @ _kick(ops, h, 1.0),
+    "verlet": lambda ops, h: _kick(ops, h, 0.5) @ _drift(ops, h, 1.0) @ _kick(ops, h, 0.5),
+    "midpoint": _midpoint,
+    "avf": _midpoint,     # the average of a linear gradient is its midpoint value
+}
+
+
 def hamiltonian_step_matrix(ops: HamiltonianOperators, dt: float, scheme: str) -> np.ndarray:
     """(2r, 2r) ndarray ``S`` with ``[q; p]_{k+1} = S [q; p]_k`` (``"avf"``: the midpoint rule)."""
-    r, h = ops.r, float(dt)
-    I, Z = np.eye(r), np.zeros((r, r))
-    Dq, Dp = ops.position, ops.momentum
-    kick = lambda c: np.block([[I, Z], [-c * h * Dq, I]])   # noqa: E731  p -= c h Dq q
-    drift = lambda c: np.block([[I, c * h * Dp], [Z, I]])   # noqa: E731  q += c h Dp p
-    if scheme == "symplectic_euler_a":
-        return kick(1.0) @ drift(1.0)
-    if scheme == "symplectic_euler_b":
-        return drift(1.0) @ kick(1.0)
-    if scheme == "verlet":
-        return kick(0.5) @ drift(1.0) @ kick(0.5)
-    if scheme in ("midpoint", "avf"):
-        A = np.block([[Z, Dp], [-Dq, Z]])
-        return sl.solve(np.eye(2 * r) - 0.5 * h * A, np.eye(2 * r) + 0.5 * h * A)
-    raise ValueError(f"unknown Hamiltonian scheme {scheme!r}; valid: {_LINEAR_SCHEMES}")
+    if scheme not in _STEP_MATRICES:
+        raise ValueError(f"unknown Hamiltonian scheme {scheme!r}; valid: {_LINEAR_SCHEMES}")
+    return _STEP_MATRICES[scheme](ops, float(dt))
 
 
 @dataclass(frozen=True, eq=False)
@@ -121,7 +139,7 @@ class HamiltonianSolution(LazyFields):
     FIELDS = ("q", "p")
 
 
-class HamiltonianROM:
+class HamiltonianROM(ReducedModel):
     r"""A canonical Hamiltonian ROM (linear, or with a known projected potential).
 
     .. math::
@@ -221,15 +239,31 @@ class HamiltonianROM:
         rom.metadata_ = {"method": "galerkin"}
         return rom
 
-    def fit(self, Q: np.ndarray, P: np.ndarray, dt: float | None = None, *,
-            ddt_q: np.ndarray | None = None, ddt_p: np.ndarray | None = None,
-            derivatives: str | None = None, order: int = 4, gradient_data: str = "snapshots",
-            outputs: np.ndarray | None = None) -> "HamiltonianROM":
-        r"""Learn ``D^_q``, ``D^_p`` from full snapshots with the learner.
+    def fit(self, data: CanonicalData) -> "HamiltonianROM":
+        r"""Learn ``D^_q``, ``D^_p`` (and ``E^`` when the data carry outputs) with the learner.
 
-        :meth:`HamiltonianOpInf.fit_snapshots` on ``Phi`` and this model's
-        potential; with ``outputs`` also
-        ``E^ = argmin_E ||Y - E [Q^; P^]||_F`` (least squares on the data columns).
+        Parameters
+        ----------
+        data : CanonicalData
+            Reduced data, e.g. :func:`femrom.inference.reduce_canonical_snapshots`
+            of full snapshots on this model's basis and potential (what
+            :meth:`fit_snapshots` does).
+
+        Returns
+        -------
+        self
+        """
+        if self.learner is None:
+            self.learner = HamiltonianOpInf()
+        learner = self.learner.fit(data)
+        self.operators_ = learner.operators_
+        if learner.output_matrix_ is not None:
+            self.output_matrix_ = learner.output_matrix_
+        self.metadata_ = learner.describe()
+        return self
+
+    def fit_snapshots(self, Q: np.ndarray, P: np.ndarray, dt: float | None = None, **options) -> "HamiltonianROM":
+        r"""Project full snapshots on this model's basis (and potential) and :meth:`fit`.
 
         Parameters
         ----------
@@ -237,36 +271,16 @@ class HamiltonianROM:
             Position and momentum snapshots on a uniform grid of step ``dt``.
         dt : float, optional
             Needed for finite-difference derivatives.
-        ddt_q, ddt_p : (n, K) ndarray, optional
-            Full time derivatives (training data, or the reference of the
-            derivative error with ``derivatives="finite_difference"``).
-        derivatives : {"stored", "finite_difference"}, optional
-        order : {2, 4, 6}
-        gradient_data : {"snapshots", "reconstructed"}
-        outputs : (m, K) ndarray, optional
-            Measured outputs ``Y``.
-
-        Returns
-        -------
-        self
+        **options
+            Of :func:`femrom.inference.reduce_canonical_snapshots`: ``ddt_q``,
+            ``ddt_p``, ``derivatives``, ``order``, ``gradient_data``, ``outputs``.
         """
+        from femrom.inference import reduce_canonical_snapshots
+
         if self.basis is None:
             raise ValueError("fit projects full snapshots onto the cotangent lift: pass basis=Phi")
         _cotangent_lift(self.basis)
-        if self.learner is None:
-            self.learner = HamiltonianOpInf()
-        learner = self.learner.fit_snapshots(
-            self.basis, Q, P, dt, ddt_q=ddt_q, ddt_p=ddt_p, potential=self.potential, order=order,
-            gradient_data=gradient_data, derivatives=derivatives)
-        self.operators_ = learner.operators_
-        if outputs is not None:
-            Y = np.atleast_2d(np.asarray(outputs, dtype=float))
-            X = np.vstack([self.basis.T @ Q, self.basis.T @ P])
-            if Y.shape[1] != X.shape[1]:
-                raise ValueError(f"outputs have {Y.shape[1]} columns, snapshots {X.shape[1]}")
-            self.output_matrix_ = np.linalg.lstsq(X.T, Y.T, rcond=None)[0].T
-        self.metadata_ = learner.describe()
-        return self
+        return self.fit(reduce_canonical_snapshots(self.basis, Q, P, dt, potential=self.potential, **options))
 
     # -- evaluation ----------------------------------------------------------
     def _ops(self) -> HamiltonianOperators:
@@ -292,27 +306,17 @@ class HamiltonianROM:
         E = self.output_matrix_
         return None if E is None else E @ np.vstack([q, p])
 
-    def reduce(self, x: np.ndarray) -> np.ndarray:
-        """(r,) or (r, k) ``Phi^T x`` of full (n,) or (n, k) positions or momenta."""
-        if self.basis is None:
-            raise ValueError("a full-order vector needs the basis to be reduced")
-        return self.basis.T @ np.asarray(x, dtype=float)
-
     def reconstruct(self, q: np.ndarray, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Full ``(Phi q^, Phi p^)`` now (a solution's :meth:`~HamiltonianSolution.fields` streams them)."""
         if self.basis is None:
             raise ValueError("this model has no basis: full fields cannot be reconstructed")
         return self.basis @ q, self.basis @ p
 
-    def _initial(self, x, name: str) -> np.ndarray:
-        r = self.r
-        x = np.asarray(x, dtype=float).ravel()
-        if x.size == r:
-            return x
-        if self.basis is not None and x.size == self.basis.shape[0]:
-            return self.reduce(x)
-        raise ValueError(f"{name} has {x.size} entries: expected r = {r} (reduced) "
-                         f"or n = {None if self.basis is None else self.basis.shape[0]} (full)")
+    def reduce(self, x: np.ndarray) -> np.ndarray:
+        """(r,) or (r, k) ``Phi^T x`` of full (n,) or (n, k) positions or momenta."""
+        if self.basis is None:
+            raise ValueError("a full-order vector needs the basis to be reduced")
+        return self.basis.T @ np.asarray(x, dtype=float)
 
     def predict(self, q0: np.ndarray, p0: np.ndarray, times: np.ndarray,
                 scheme: str | None = None) -> HamiltonianSolution:
@@ -337,13 +341,8 @@ class HamiltonianROM:
         """
         scheme = self.scheme if scheme is None else scheme
         ops = self._ops()
-        times = np.asarray(times, dtype=float)
-        if times.ndim != 1 or times.size < 2:
-            raise ValueError("times must be a 1-d grid of at least two points")
-        h = float(times[1] - times[0])
-        if not h > 0 or not np.allclose(np.diff(times), h, rtol=1e-9, atol=0.0):
-            raise ValueError("times must be uniformly spaced and increasing")
-        q0, p0 = self._initial(q0, "q0"), self._initial(p0, "p0")
+        times, h = uniform_step(times)
+        q0, p0 = self._initial(q0, "q0", default_zero=False), self._initial(p0, "p0", default_zero=False)
         r, n_steps = ops.r, times.size - 1
         info = {"scheme": scheme, "dt": h, "n_steps": n_steps}
         tic = time.perf_counter()
@@ -369,6 +368,22 @@ class HamiltonianROM:
         return HamiltonianSolution(t=times, q=Q, p=P, hamiltonian=H, outputs=self.outputs(Q, P),
                                    basis=self.basis, info=info)
 
+    def stepper(self, q0, p0, *, dt: float, scheme: str | None = None) -> "HamiltonianStepper":
+        """A :class:`HamiltonianStepper` at ``(q0, p0)`` (reduced or full): ``y = stepper.step()``."""
+        q0, p0 = self._initial(q0, "q0", default_zero=False), self._initial(p0, "p0", default_zero=False)
+        return HamiltonianStepper(self, q0, p0, float(dt), self.scheme if scheme is None else scheme)
+
+    def to_state_space(self, dt: float, scheme: str | None = None) -> DiscreteStateSpace:
+        """``z+ = S z``, ``y = E^ z`` (``z = [q^; p^]``, no inputs) of a model without a potential."""
+        if self.potential_ is not None:
+            raise ValueError("the model has a nonlinear potential: it has no linear state-space form")
+        S = hamiltonian_step_matrix(self._ops(), dt, self.scheme if scheme is None else scheme)
+        n = S.shape[0]
+        C = np.eye(n) if self.output_matrix_ is None else self.output_matrix_
+        return DiscreteStateSpace(A=S, B=np.zeros((n, 0)), C=C, D=np.zeros((C.shape[0], 0)), dt=float(dt),
+                                  metadata={"scheme": self.scheme if scheme is None else scheme,
+                                            "state": "[q; p]"})
+
     # -- storage -------------------------------------------------------------
     def save(self, path, *, include_basis: bool = True) -> None:
         """Write operators, output map, optional basis, scheme, Newton tolerances and metadata to HDF5.
@@ -391,7 +406,7 @@ class HamiltonianROM:
             f.attrs["newton"] = json.dumps(dataclasses.asdict(self.newton))
             f.attrs["potential"] = json.dumps(None if self.potential is None
                                               else _describe_potential(self.potential))
-            f.attrs["metadata"] = json.dumps(_jsonable(self.metadata_))
+            f.attrs["metadata"] = dumps(self.metadata_)
             g = f.create_group("operators")
             g.create_dataset("position", data=ops.position)
             g.create_dataset("momentum", data=ops.momentum)
@@ -483,3 +498,39 @@ def _cotangent_lift(basis) -> np.ndarray:
         raise ValueError(f"basis is not orthonormal (max |Phi^T Phi - I| = {error:.2g}): "
                          "a cotangent lift needs Phi^T Phi = I")
     return V
+
+
+class HamiltonianStepper:
+    """A canonical ROM one step at a time: ``y_{k+1} = stepper.step()`` (no inputs).
+
+    Linear models apply the scheme's step matrix; with a potential each step
+    is one :func:`~femrom.integrators.integrate_canonical` step.
+    """
+
+    def __init__(self, rom: HamiltonianROM, q0, p0, dt: float, scheme: str):
+        self.rom, self.dt, self.scheme = rom, dt, scheme
+        self.q, self.p, self.t = np.array(q0, dtype=float), np.array(p0, dtype=float), 0.0
+        self._S = None if rom.potential_ is not None else hamiltonian_step_matrix(rom._ops(), dt, scheme)
+        if rom.potential_ is not None and scheme not in CANONICAL_SCHEMES:
+            raise ValueError(f"scheme {scheme!r} needs a separable Hamiltonian; with a potential use one of "
+                             f"{CANONICAL_SCHEMES}")
+
+    @property
+    def outputs(self) -> np.ndarray:
+        E = self.rom.output_matrix_
+        y = np.concatenate([self.q, self.p])
+        return y if E is None else E @ y
+
+    def step(self, u=None) -> np.ndarray:
+        """Advance by ``dt``; return ``E^ [q; p]`` (``[q; p]`` without an output map)."""
+        if u is not None and np.size(u):
+            raise ValueError("a canonical Hamiltonian ROM has no inputs")
+        if self._S is not None:
+            y = self._S @ np.concatenate([self.q, self.p])
+            r = self.q.size
+            self.q, self.p = y[:r], y[r:]
+        else:
+            tr = integrate_canonical(self.rom.system_, self.q, self.p, self.dt, 1, self.scheme, self.rom.newton)
+            self.q, self.p = tr.q[:, 1], tr.p[:, 1]
+        self.t += self.dt
+        return self.outputs

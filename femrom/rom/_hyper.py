@@ -35,14 +35,20 @@ import time
 
 import numpy as np
 
+from femrom.fem import DENSITIES
+from femrom.inference import ReducedTerm, register_term
+
 __all__ = ["HyperReducedPotential", "ecsw_weights", "sparse_nnls"]
 
 
-class HyperReducedPotential:
+@register_term
+class HyperReducedPotential(ReducedTerm):
     r"""``Phi^(q^) = sum_j omega_j phi((V_S q^)_j)`` with its gradient and symmetric Hessian.
 
-    A drop-in reduced nonlinear force for :class:`~femrom.inference.ReducedOperators`
-    (``nonlinear=``): conservative, stateless, no velocity dependence.
+    A reduced nonlinear force term of :class:`~femrom.inference.ReducedOperators`
+    (e.g. in place of the projected force: ``ops.without("projected_force").with_terms(hyper)``):
+    conservative, stateless, no velocity dependence; saved with its density's
+    name and parameters, so a model holding it loads whole.
 
     Parameters
     ----------
@@ -54,12 +60,17 @@ class HyperReducedPotential:
         The potential density and its first two derivatives (vectorised).
     nodes : (s,) int ndarray, optional
         Indices of the sampled nodes among the free dofs (for reports).
+    density : str, optional
+        The :data:`femrom.fem.DENSITIES` name of ``phi``, with ``density_parameters``
+        (what :meth:`save` writes).
     """
 
-    conservative = True
-    velocity_dependent = False
+    name = "hyper_reduced_potential"
+    structure = "known"
+    order = 31
 
-    def __init__(self, rows, weights, phi, dphi, ddphi, nodes=None):
+    def __init__(self, rows, weights, phi, dphi, ddphi, nodes=None, *, density: str | None = None,
+                 density_parameters: dict | None = None):
         self.rows = np.ascontiguousarray(rows, dtype=float)
         self.weights = np.asarray(weights, dtype=float)
         if self.rows.ndim != 2 or self.weights.shape != (self.rows.shape[0],):
@@ -68,20 +79,25 @@ class HyperReducedPotential:
             raise ValueError("hyper-reduction weights must be non-negative")
         self.phi, self.dphi, self.ddphi = phi, dphi, ddphi
         self.nodes = None if nodes is None else np.asarray(nodes, dtype=np.int64)
+        self.density = density
+        self.density_parameters = dict(density_parameters or {})
 
     @classmethod
     def from_potential(cls, potential, basis: np.ndarray, nodes, xi) -> "HyperReducedPotential":
-        """Sample a :class:`~femrom.fem.LocalPotential` on ``nodes`` with weights ``xi``."""
+        """Sample a :class:`~femrom.fem.LocalPotential` on ``nodes`` (indices of its local
+        coordinates, as :func:`ecsw_weights` returns them) with weights ``xi``."""
         nodes = np.asarray(nodes, dtype=np.int64)
-        V = np.asarray(basis, dtype=float)
+        V = np.asarray(potential.localize(np.asarray(basis, dtype=float)))
         return cls(V[nodes], np.asarray(xi, dtype=float) * potential.weights[nodes],
-                   potential.phi, potential.dphi, potential.ddphi, nodes)
+                   potential.phi, potential.dphi, potential.ddphi, nodes,
+                   density=getattr(potential, "density", None),
+                   density_parameters=getattr(potential, "density_parameters", None))
 
     @classmethod
     def full(cls, potential, basis: np.ndarray) -> "HyperReducedPotential":
         """Every node with ``xi = 1``: the unreduced projected potential."""
-        n = np.asarray(basis).shape[0]
-        return cls.from_potential(potential, basis, np.arange(n), np.ones(n))
+        s = potential.weights.size
+        return cls.from_potential(potential, basis, np.arange(s), np.ones(s))
 
     @property
     def n_samples(self) -> int:
@@ -91,12 +107,16 @@ class HyperReducedPotential:
     def r(self) -> int:
         return self.rows.shape[1]
 
-    # -- the NonlinearForce interface of the reduced steppers ----------------
-    def initial_state(self):
-        return None
+    # -- the term in a reduced step ------------------------------------------
+    @property
+    def conservative(self) -> bool:
+        return True
 
-    def commit(self, q, v, state):
-        return state
+    def lhs(self, q, v=None, a=None, u=None, state=None):
+        return self.force(q)
+
+    def target(self, data) -> np.ndarray:
+        return self.forces(data.states)
 
     def potential(self, q) -> float:
         """``Phi^(q^)``."""
@@ -115,6 +135,31 @@ class HyperReducedPotential:
         d = self.weights * self.ddphi(self.rows @ q)
         J = self.rows.T @ (d[:, None] * self.rows)
         return 0.5 * (J + J.T), None                # symmetric to the last bit (BLAS is not)
+
+    # -- storage ----------------------------------------------------------------
+    def save(self, group) -> None:
+        if self.density is None:
+            raise ValueError("a hyper-reduced potential without a named density cannot be saved")
+        group.attrs["density"] = self.density
+        for key, value in self.density_parameters.items():
+            group.attrs[f"density.{key}"] = float(value)
+        group.create_dataset("rows", data=self.rows)
+        group.create_dataset("weights", data=self.weights)
+        if self.nodes is not None:
+            group.create_dataset("nodes", data=self.nodes)
+
+    @classmethod
+    def load(cls, group, **context) -> "HyperReducedPotential":
+        density = str(group.attrs["density"])
+        parameters = {k.split(".", 1)[1]: float(v) for k, v in group.attrs.items() if k.startswith("density.")}
+        phi, dphi, ddphi = DENSITIES[density](**parameters)
+        nodes = group["nodes"][()] if "nodes" in group else None
+        return cls(group["rows"][()], group["weights"][()], phi, dphi, ddphi, nodes, density=density,
+                   density_parameters=parameters)
+
+    def describe(self) -> dict:
+        return {"term": self.name, "structure": self.structure, "samples": self.n_samples,
+                "density": self.density}
 
 
 def sparse_nnls(G: np.ndarray, b: np.ndarray, *, tolerance: float = 1e-3,
@@ -185,7 +230,7 @@ def ecsw_weights(potential, basis: np.ndarray, states: np.ndarray, *, tolerance:
     Parameters
     ----------
     potential : LocalPotential
-        ``U(q) = sum_i w_i phi(q_i)`` on the n free dofs.
+        ``U(q) = sum_i w_i phi(x_i)`` on its s local coordinates ``x = L q``.
     basis : (n, r) ndarray
         ``V``.
     states : (n, K) ndarray
@@ -198,14 +243,15 @@ def ecsw_weights(potential, basis: np.ndarray, states: np.ndarray, *, tolerance:
 
     Returns
     -------
-    nodes : (s,) int ndarray
-    xi : (s,) ndarray
+    nodes : (k,) int ndarray
+        Sampled local coordinates (the dofs themselves for a potential on all dofs).
+    xi : (k,) ndarray
     info : dict
         ``residual``, ``support``, ``seconds``, ``rows`` of ``G``.
     """
     tic = time.perf_counter()
-    V = np.asarray(basis, dtype=float)
-    X = np.asarray(states, dtype=float)
+    V = np.asarray(potential.localize(np.asarray(basis, dtype=float)))
+    X = np.asarray(potential.localize(np.asarray(states, dtype=float)))
     n, r = V.shape
     w = potential.weights
     F = w[:, None] * potential.dphi(X)                     # (n, K) nodal forces

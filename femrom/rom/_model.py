@@ -1,13 +1,13 @@
-r"""Reduced second-order models: fit, predict, energy, reconstruction, HDF5.
+r"""Reduced second-order models: fit, predict, step, state space, energy, reconstruction, HDF5.
 
 .. math::
 
-    \hat M \ddot{\hat q} + \hat C \dot{\hat q} + \hat K \hat q + \hat f(\hat q, \dot{\hat q})
-        = \hat B u(t), \qquad y = \hat E \hat q, \qquad q \approx V \hat q,
+    \hat M \ddot{\hat q} + \hat C \dot{\hat q} + \hat K \hat q + \hat f(\hat q, \dot{\hat q}; s)
+        = \hat B u(t) + \hat f_0, \qquad y = \hat E \hat q, \qquad q \approx V \hat q,
 
-integrated with a reduced variational scheme (:mod:`._steppers`: Newmark
-average acceleration by default, the implicit midpoint rule, or
-Stoermer-Verlet).
+the terms of a :class:`~femrom.inference.ReducedOperators`, integrated with a
+registered reduced scheme (:mod:`._schemes`: Newmark average acceleration by
+default, the implicit midpoint rule, Stoermer-Verlet).
 """
 
 from __future__ import annotations
@@ -15,43 +15,18 @@ from __future__ import annotations
 import json
 import time
 from dataclasses import dataclass, field
-from typing import Iterator
 
 import numpy as np
 
-from femrom.inference import ReducedOperators, galerkin, reduced_coordinates
-from femrom.rom._steppers import SCHEMES, linear_step_map, run_linear, run_nonlinear, verlet_bound
+from femrom._json import dumps
+from femrom.inference import ReducedOperators, galerkin, term_class
+from femrom.rom._base import LazyFields, ReducedModel, uniform_step
+from femrom.rom._schemes import LinearParts, ReducedNewton, reduced_scheme
+from femrom.rom._statespace import DiscreteStateSpace
+from femrom.rom._steppers import ReducedStepper, run_linear
 
-
-class LazyFields:
-    """Full fields ``V x(t_k)`` of a reduced solution, rebuilt only on request.
-
-    For dataclasses with ``t`` (k,), ``basis`` (n, r) or ``None`` and the (r, k)
-    coordinate arrays named in ``FIELDS``.
-    """
-
-    FIELDS: tuple[str, ...] = ("q",)
-
-    def _coordinates(self, which: str) -> np.ndarray:
-        if self.basis is None:
-            raise ValueError("this model has no basis: full fields cannot be reconstructed")
-        if which not in self.FIELDS:
-            raise ValueError(f"unknown field {which!r}; valid: {self.FIELDS}")
-        return getattr(self, which)
-
-    def field(self, k: int, which: str = "q") -> np.ndarray:
-        """(n,) ndarray ``V x(t_k)``, ``x`` one of :attr:`FIELDS`."""
-        return self.basis @ self._coordinates(which)[:, k]
-
-    def fields(self, block: int = 256, which: str = "q") -> Iterator[tuple[np.ndarray, np.ndarray]]:
-        """Yield ``(t_block, V X_block)``, ``X`` one of :attr:`FIELDS`, ``block`` steps at a time.
-
-        Memory stays at (n, block) whatever the trajectory's length.
-        """
-        X = self._coordinates(which)
-        for start in range(0, X.shape[1], block):
-            stop = min(start + block, X.shape[1])
-            yield self.t[start:stop], self.basis @ X[:, start:stop]
+#: Version of the HDF5 layout :meth:`SecondOrderROM.save` writes (one group per term).
+FILE_VERSION = 2
 
 
 @dataclass(frozen=True, eq=False)
@@ -64,13 +39,14 @@ class ReducedSolution(LazyFields):
     q, v, a : (r, k) ndarray
         Reduced displacements, velocities, accelerations.
     energy : (k,) ndarray
-        ``v^T M^ v / 2 + q^T K^ q / 2`` (plus the projected nonlinear potential
-        when it is conservative).
+        ``v^T M^ v / 2`` plus the terms' potentials (``q^T K^ q / 2``, a
+        conservative force's, ``- f_0^T q``).
     outputs : (p, k) ndarray or None
         ``E^ q``.
     basis : (n, r) ndarray or None
     info : dict
-        Scheme, step, timings (``stepping_seconds``, ``seconds_per_step``).
+        Scheme, step, timings (``stepping_seconds``, ``seconds_per_step``),
+        Newton iterations of a nonlinear model.
     """
 
     t: np.ndarray
@@ -85,19 +61,19 @@ class ReducedSolution(LazyFields):
     FIELDS = ("q", "v", "a")
 
 
-class SecondOrderROM:
+class SecondOrderROM(ReducedModel):
     r"""A reduced second-order model, intrusive or learned.
 
     Parameters
     ----------
     operators : ReducedOperators, optional
-        Given operators (e.g. from :func:`femrom.inference.galerkin`).
+        Given terms (e.g. from :func:`femrom.inference.galerkin`).
     basis : (n, r) ndarray, optional
         ``V``: projects full initial conditions and rebuilds full fields.
     product : (n, n) sparse or ndarray, optional
         ``W`` with ``V^T W V = I`` (the mass for a mass-orthonormal basis).
-    learner : LagrangianOpInf or SecondOrderOpInf, optional
-        What :meth:`fit` uses.
+    learner : Learner, optional
+        What :meth:`fit` uses (:class:`~femrom.inference.LagrangianOpInf`, ...).
 
     Attributes
     ----------
@@ -120,14 +96,14 @@ class SecondOrderROM:
         ops = galerkin(system, basis, mass_orthonormal=mass_orthonormal)
         return cls(ops, basis, product=product)
 
-    def fit(self, data) -> "SecondOrderROM":
+    def fit(self, data=None) -> "SecondOrderROM":
         """Fit the learner on ``data`` (SecondOrderData or a list) and keep its operators."""
         if self.learner is None:
             raise ValueError("this ROM has no learner; pass learner=LagrangianOpInf(...)")
         self.operators_ = self.learner.fit(data).operators_
         return self
 
-    # -- evaluation --------------------------------------------------------
+    # -- evaluation --------------------------------------------------------------
     @property
     def r(self) -> int:
         return self._ops().r
@@ -137,34 +113,10 @@ class SecondOrderROM:
             raise ValueError("this ROM is not fitted: call fit(data) or pass operators")
         return self.operators_
 
-    def reduce(self, x: np.ndarray) -> np.ndarray:
-        """(r,) reduced coordinates of a full (n,) vector, ``V^T W x``."""
-        if self.basis is None:
-            raise ValueError("a full-order vector needs the basis to be reduced")
-        return reduced_coordinates(self.basis, np.asarray(x, dtype=float), self.product)
-
-    def _initial(self, x, name: str) -> np.ndarray:
-        r = self.r
-        if x is None:
-            return np.zeros(r)
-        x = np.asarray(x, dtype=float).ravel()
-        if x.size == r:
-            return x
-        if self.basis is not None and x.size == self.basis.shape[0]:
-            return self.reduce(x)
-        raise ValueError(f"{name} has {x.size} entries: expected r = {r} (reduced) "
-                         f"or n = {None if self.basis is None else self.basis.shape[0]} (full)")
-
     def energy(self, q: np.ndarray, v: np.ndarray) -> np.ndarray:
-        """(k,) or scalar: ``v^T M^ v / 2 + q^T K^ q / 2 (+ U^(q))`` column by column."""
-        ops = self._ops()
+        """(k,) or scalar: ``v^T M^ v / 2`` plus the terms' potentials, column by column."""
         q2, v2 = np.atleast_2d(q.T).T, np.atleast_2d(v.T).T
-        Mv = v2 if ops.mass is None else ops.mass @ v2
-        Ksym = 0.5 * (ops.stiffness + ops.stiffness.T)
-        e = 0.5 * np.sum(v2 * Mv, axis=0) + 0.5 * np.sum(q2 * (Ksym @ q2), axis=0)
-        nl = ops.nonlinear
-        if nl is not None and nl.conservative:
-            e = e + np.array([nl.potential(q2[:, k]) for k in range(q2.shape[1])])
+        e = self._ops().energy(q2, v2)
         return e if np.ndim(q) > 1 else float(e[0])
 
     def outputs(self, q: np.ndarray) -> np.ndarray | None:
@@ -172,9 +124,8 @@ class SecondOrderROM:
         E = self._ops().output_matrix
         return None if E is None else E @ q
 
-    def _forcing(self, inputs, times: np.ndarray, where: str):
-        """(m, .) ndarray ``u`` at ``t_{k+1}`` (``where="end"``), ``t_k + h/2`` (``"mid"``)
-        or every ``t_k`` (``"grid"``); ``None`` without inputs."""
+    def _samples(self, inputs, times: np.ndarray) -> np.ndarray | None:
+        """(m, k) input samples on ``times`` (``None`` without inputs); checks the model has inputs."""
         m = self._ops().n_inputs
         if m == 0:
             if inputs is not None:
@@ -183,20 +134,36 @@ class SecondOrderROM:
         if inputs is None:
             raise ValueError(f"this model has {m} inputs: pass inputs (callable u(t) or (m, k) array)")
         if callable(inputs):
-            ts = {"end": times[1:], "mid": 0.5 * (times[1:] + times[:-1]), "grid": times}[where]
-            U = np.column_stack([np.atleast_1d(np.asarray(inputs(t), dtype=float)) for t in ts])
-        else:
-            U = np.atleast_2d(np.asarray(inputs, dtype=float))
-            if U.shape != (m, times.size):
-                raise ValueError(f"inputs have shape {U.shape}, expected ({m}, {times.size})")
-            # midpoint values of a sampled signal: the average (second order)
-            if where == "end":
-                U = U[:, 1:]
-            elif where == "mid":
-                U = 0.5 * (U[:, 1:] + U[:, :-1])
+            return np.column_stack([np.atleast_1d(np.asarray(inputs(t), dtype=float)) for t in times])
+        U = np.atleast_2d(np.asarray(inputs, dtype=float))
+        if U.shape != (m, times.size):
+            raise ValueError(f"inputs have shape {U.shape}, expected ({m}, {times.size})")
         return U
 
-    def predict(self, q0, times, *, v0=None, inputs=None, scheme: str = "newmark") -> ReducedSolution:
+    def _forcing(self, inputs, times: np.ndarray, scheme) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(F_grid, F_input, F_end)``: ``B^ u + f^_0`` on the grid (r, k), at each step's input time
+        and at its end (r, k - 1). A callable is evaluated at the input time itself; samples
+        are averaged for a mid-step input time (second order)."""
+        ops = self._ops()
+        U = self._samples(inputs, times)
+        B, f0 = ops.input_matrix, ops.load
+        grid = np.zeros((ops.r, times.size)) if U is None else B @ U
+        if f0 is not None:
+            grid = grid + f0[:, None]
+        end = grid[:, 1:]
+        if scheme.input_time == "end":
+            return grid, end, end
+        if callable(inputs):
+            middle = 0.5 * (times[1:] + times[:-1])
+            mid = B @ np.column_stack([np.atleast_1d(np.asarray(inputs(t), dtype=float)) for t in middle])
+            if f0 is not None:
+                mid = mid + f0[:, None]
+        else:
+            mid = 0.5 * (grid[:, 1:] + grid[:, :-1])
+        return grid, mid, end
+
+    def predict(self, q0, times, *, v0=None, inputs=None, scheme: str = "newmark",
+                newton: ReducedNewton = ReducedNewton()) -> ReducedSolution:
         r"""Integrate the reduced model on a uniform time grid.
 
         Parameters
@@ -210,121 +177,140 @@ class SecondOrderROM:
             Initial velocity (default zero).
         inputs : callable or (m, k) ndarray, optional
             ``u(t) -> (m,)`` or the sampled inputs on ``times``.
-        scheme : {"newmark", "midpoint", "verlet"}
+        scheme : str
+            A registered reduced scheme (``"newmark"``, ``"midpoint"``, ``"verlet"``).
+        newton : ReducedNewton
+            Tolerances of the Newton iterations of a nonlinear model.
 
         Returns
         -------
         ReducedSolution
         """
-        if scheme not in SCHEMES:
-            raise ValueError(f"unknown reduced scheme {scheme!r}; valid: {SCHEMES}")
+        step = reduced_scheme(scheme)
         ops = self._ops()
-        times = np.asarray(times, dtype=float)
-        if times.ndim != 1 or times.size < 2:
-            raise ValueError("times must be a 1-d grid of at least two points")
-        h = float(times[1] - times[0])
-        if not h > 0 or not np.allclose(np.diff(times), h, rtol=1e-9, atol=0.0):
-            raise ValueError("times must be uniformly spaced and increasing")
+        times, h = uniform_step(times)
         q0, v0 = self._initial(q0, "q0"), self._initial(v0, "v0")
-        M, C, K, B = ops.mass_matrix, ops.damping, ops.stiffness, ops.input_matrix
-        if scheme == "verlet":
-            bound = verlet_bound(M, 0.5 * (K + K.T))
-            if h > bound:
-                raise ValueError(f"dt = {h:.6g} exceeds the Stoermer-Verlet bound "
-                                 f"2/omega_max = {bound:.6g} of the reduced model")
         tic = time.perf_counter()
+        F_grid, F_input, F_end = self._forcing(inputs, times, step)
+        parts = LinearParts(ops.mass_matrix, ops.damping, ops.stiffness)
+        step.check(parts, h)
+        n_steps, r = times.size - 1, ops.r
+        info = {"scheme": scheme, "dt": h, "n_steps": n_steps}
         if ops.nonlinear is None:
-            r = ops.r
-            A, F = linear_step_map(M, C, K, B, h, scheme)
-            U = self._forcing(inputs, times, "mid" if scheme == "midpoint" else "end")
-            forcing = None if U is None else F @ U
-            grid_inputs = self._forcing(inputs, times, "grid")
-            f0 = 0.0 if grid_inputs is None else B @ grid_inputs[:, 0]
-            a0 = np.linalg.solve(M, f0 - (0.0 if C is None else C @ v0) - K @ q0)
-            x0 = np.concatenate([q0, v0] if scheme == "midpoint" else [q0, v0, a0])
+            A, G = step.step_map(parts, h, np.eye(r))
+            a0 = parts.acceleration(F_grid[:, 0], q0, v0)
+            x0 = np.concatenate([q0, v0, a0] if step.carries_acceleration else [q0, v0])
+            forcing = G @ F_input if (ops.input_matrix is not None or ops.load is not None) else None
             step_tic = time.perf_counter()
-            X = run_linear(A, x0, times.size - 1, forcing)
+            X = run_linear(A, x0, n_steps, forcing)
             stepping = time.perf_counter() - step_tic
             Q, Vel = X[:r], X[r:2 * r]
-            if scheme == "midpoint":
-                # the rule never needs accelerations: recover them from the equation of motion
-                rhs = -K @ Q - (0.0 if C is None else C @ Vel)
-                if grid_inputs is not None:
-                    rhs = rhs + B @ grid_inputs
-                Acc = np.linalg.solve(M, rhs)
-            else:
+            if step.carries_acceleration:
                 Acc = X[2 * r:]
+            else:
+                # the scheme never needs accelerations: recover them from the equation of motion
+                Acc = np.linalg.solve(parts.mass, F_grid - parts.damping_matrix @ Vel - ops.stiffness @ Q)
         else:
-            def force_at(t):
-                if B is None:
-                    return np.zeros(ops.r)
-                if not callable(inputs):
-                    raise ValueError("a nonlinear ROM needs inputs as a callable u(t)")
-                return B @ np.atleast_1d(np.asarray(inputs(t), dtype=float))
-
+            stepper = ReducedStepper(ops, step, h, q0, v0, t0=times[0], newton=newton)
+            stepper.a = parts.acceleration(F_grid[:, 0], q0, v0, stepper.nonlinear, stepper.state)
+            Q, Vel, Acc = (np.empty((r, times.size)) for _ in range(3))
+            Q[:, 0], Vel[:, 0], Acc[:, 0] = q0, v0, stepper.a
             step_tic = time.perf_counter()
-            Q, Vel, Acc = run_nonlinear(M, C, K, B, ops.nonlinear, h, scheme, q0, v0, times,
-                                        force_at)
+            for k in range(n_steps):
+                stepper.advance(F_input[:, k], F_end[:, k])
+                Q[:, k + 1], Vel[:, k + 1], Acc[:, k + 1] = stepper.q, stepper.v, stepper.a
             stepping = time.perf_counter() - step_tic
-        n_steps = times.size - 1
-        info = {"scheme": scheme, "dt": h, "n_steps": n_steps,
-                "seconds": time.perf_counter() - tic, "stepping_seconds": stepping,
-                "seconds_per_step": stepping / max(n_steps, 1)}
+            info["newton_iterations"] = stepper.iterations
+        info.update(seconds=time.perf_counter() - tic, stepping_seconds=stepping,
+                    seconds_per_step=stepping / max(n_steps, 1))
         return ReducedSolution(t=times, q=Q, v=Vel, a=Acc, energy=self.energy(Q, Vel),
                                outputs=self.outputs(Q), basis=self.basis, info=info)
 
-    # -- storage -----------------------------------------------------------
+    def stepper(self, q0=None, v0=None, *, dt: float, t0: float = 0.0, u0=None, scheme: str = "newmark",
+                newton: ReducedNewton = ReducedNewton()) -> ReducedStepper:
+        """A :class:`ReducedStepper` at ``(q0, v0)``: ``y = stepper.step(u)`` advances by ``dt``.
+
+        ``q0``, ``v0`` reduced or full (default zero); ``u0`` the input sample at ``t0``.
+        """
+        return ReducedStepper(self._ops(), reduced_scheme(scheme), dt, self._initial(q0, "q0"),
+                              self._initial(v0, "v0"), t0=t0, u0=u0, newton=newton)
+
+    def to_state_space(self, dt: float, scheme: str = "newmark") -> DiscreteStateSpace:
+        r"""The discrete state space ``z+ = A z + B u``, ``y = C z + D u`` of a linear model.
+
+        On the samples ``u_k = u(t_k)`` (and ``u = [u; 1]`` when the model has a
+        constant load), with ``x = [q; v] = z + E u`` (``input_offset = E``):
+        the scheme's step written on ``[q; v]`` (the acceleration eliminated
+        through ``M a = B u + f_0 - C v - K q``) is ``x_{k+1} = A x_k + E_0 u_k
+        + E u_{k+1}``, hence ``B = A E + E_0`` and ``D = C E``. ``y = E^ q``
+        (``q`` without an output map). Equal to :meth:`predict` with sampled
+        inputs to round-off.
+        """
+        step = reduced_scheme(scheme)
+        ops = self._ops()
+        if ops.nonlinear is not None:
+            names = ", ".join(t.name for t in ops.terms if not hasattr(t, "matrix"))
+            raise ValueError(f"the model has nonlinear terms ({names}): it has no linear state-space form")
+        r, h = ops.r, float(dt)
+        parts = LinearParts(ops.mass_matrix, ops.damping, ops.stiffness)
+        step.check(parts, h)
+        columns = [c for c in (ops.input_matrix, None if ops.load is None else ops.load[:, None]) if c is not None]
+        forcing = np.hstack(columns) if columns else np.zeros((r, 0))
+        A_full, G = step.step_map(parts, h, forcing)
+        m = forcing.shape[1]
+        if step.carries_acceleration:
+            Minv = np.linalg.inv(parts.mass)
+            P = np.vstack([np.eye(2 * r), np.hstack([-Minv @ parts.stiffness, -Minv @ parts.damping_matrix])])
+            R = np.vstack([np.zeros((2 * r, m)), Minv @ forcing])
+            A2, E0, E1 = (A_full @ P)[:2 * r], (A_full @ R)[:2 * r], G[:2 * r]
+        else:
+            A2, E0, E1 = A_full, 0.5 * G, 0.5 * G
+        E = ops.output_matrix
+        C = np.hstack([np.eye(r) if E is None else E, np.zeros((r if E is None else E.shape[0], r))])
+        return DiscreteStateSpace(A=A2, B=A2 @ E1 + E0, C=C, D=C @ E1, dt=h, input_offset=E1, metadata={
+            "scheme": scheme, "state": "[q; v] - input_offset u", "r": r,
+            "constant_input": ops.load is not None, "outputs": "E q" if E is not None else "q"})
+
+    # -- storage -----------------------------------------------------------------------
     def save(self, path, *, include_basis: bool = True) -> None:
-        """Write operators, optional basis and metadata to an HDF5 file."""
+        """Write every term, the optional basis and the metadata to an HDF5 file.
+
+        Each term writes itself into ``terms/<name>`` (its class is found again
+        by name on :meth:`load`); a projected known force stores its
+        parameters when it has them, so the model loads whole.
+        """
         import h5py
 
         ops = self._ops()
         with h5py.File(path, "w") as f:
             f.attrs["format"] = "femrom.SecondOrderROM"
-            f.attrs["version"] = 1
-            g = f.create_group("operators")
-            for name in ("stiffness", "mass", "damping", "input_matrix", "output_matrix"):
-                value = getattr(ops, name)
-                if value is not None:
-                    g.create_dataset(name, data=value)
-            f.attrs["nonlinear"] = ops.nonlinear is not None
-            f.attrs["metadata"] = json.dumps(_jsonable(ops.metadata))
+            f.attrs["version"] = FILE_VERSION
+            f.attrs["metadata"] = dumps(ops.metadata)
+            group = f.create_group("terms")
+            for term in ops.terms:
+                sub = group.create_group(term.name)
+                term.save(sub)
             if include_basis and self.basis is not None:
                 f.create_dataset("basis", data=self.basis, compression="gzip")
 
     @classmethod
-    def load(cls, path, *, nonlinear=None, product=None) -> "SecondOrderROM":
+    def load(cls, path, *, nonlinear=None, product=None, **context) -> "SecondOrderROM":
         """Read a model written by :meth:`save`.
 
-        A model with a nonlinear force stores only that it had one: pass the
-        :class:`~femrom.inference.ProjectedNonlinearForce` again.
+        ``nonlinear``: the full-order force of a projected-force term whose
+        parameters could not be stored (checked against the saved class);
+        ``context``: passed to the terms' ``load`` (a user's term may need more).
         """
         import h5py
 
         with h5py.File(path, "r") as f:
             if f.attrs.get("format") != "femrom.SecondOrderROM":
                 raise ValueError(f"{path} is not a femrom SecondOrderROM file")
-            g = f["operators"]
-            arrays = {name: (g[name][()] if name in g else None)
-                      for name in ("stiffness", "mass", "damping", "input_matrix", "output_matrix")}
-            had_nonlinear = bool(f.attrs["nonlinear"])
+            version = int(f.attrs.get("version", 1))
+            if version != FILE_VERSION:
+                raise ValueError(f"{path} has layout version {version}; this femrom reads {FILE_VERSION}")
             metadata = json.loads(f.attrs["metadata"])
             basis = f["basis"][()] if "basis" in f else None
-        if had_nonlinear and nonlinear is None:
-            raise ValueError(f"{path} holds a model with a nonlinear force: pass nonlinear=...")
-        ops = ReducedOperators(**arrays, nonlinear=nonlinear, metadata=metadata)
-        return cls(ops, basis, product=product)
-
-
-def _jsonable(value):
-    if isinstance(value, dict):
-        return {str(k): _jsonable(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_jsonable(v) for v in value]
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    if isinstance(value, (np.floating, np.integer)):
-        return value.item()
-    if isinstance(value, (str, int, float, bool)) or value is None:
-        return value
-    return repr(value)
+            terms = [term_class(name).load(group, basis=basis, nonlinear=nonlinear, **context)
+                     for name, group in f["terms"].items()]
+        return cls(ReducedOperators(tuple(terms), metadata), basis, product=product)

@@ -1,9 +1,11 @@
-"""Scenes: structure + material + effects + inputs + outputs -> SecondOrderSystem."""
+"""Scenes: structure + material + effects + inputs + outputs -> SecondOrderSystem.
+
+Effects are registered classes (:class:`Effect`, :func:`register_effect`):
+one module each in the package ``femrom.scene.effects``, found by :func:`registered_effects`.
+"""
 
 from femrom.scene._build import FullOrderModel, build
 from femrom.scene._config import (
-    EFFECTS,
-    INTEGRATORS,
     BoundaryConfig,
     EffectConfig,
     InitialConfig,
@@ -16,12 +18,14 @@ from femrom.scene._config import (
     StructureConfig,
     TimeConfig,
 )
+from femrom.scene._effects import Assembly, Effect, effect_class, register_effect, registered_effects
 from femrom.scene._errors import SceneError
 from femrom.scene._signals import Signal
 from femrom.scene._system import SecondOrderSystem
 
 __all__ = [
-    "EFFECTS", "INTEGRATORS", "BoundaryConfig", "EffectConfig", "FullOrderModel", "InitialConfig",
+    "Assembly", "BoundaryConfig", "Effect", "EffectConfig", "FullOrderModel", "InitialConfig",
     "InputConfig", "LoadConfig", "MaterialConfig", "OutputConfig", "ProbeConfig", "Scene",
     "SceneError", "SecondOrderSystem", "Signal", "StructureConfig", "TimeConfig", "build",
+    "effect_class", "register_effect", "registered_effects",
 ]

@@ -11,13 +11,13 @@ import scipy.sparse as sp
 
 from femrom import fem
 from femrom._progress import Stage
-from femrom.fem import Condensation, LocalPotential
+from femrom.fem import Condensation
 from femrom.mesh import build_mesh
 from femrom.scene._config import Scene
+from femrom.scene._effects import Assembly, registered_effects
 from femrom.scene._errors import SceneError
 from femrom.scene._system import SecondOrderSystem
-
-STIFFNESS_EFFECTS = ("elasticity", "bending")
+from femrom.solvers import make_solver
 
 
 @dataclass(frozen=True, eq=False)
@@ -36,38 +36,16 @@ class FullOrderModel:
         return self.scene.time.dt * np.arange(self.scene.time.n_steps + 1)
 
 
-def _assemble(scene: Scene, mesh, names, stiffness_effect: str, timings: dict):
+def _assemble(scene: Scene, mesh, timings: dict):
     """The system of the listed effects on ``mesh``; fills ``timings`` per stage."""
     with _timed(timings, "space"):
         space = make_space(scene, mesh)
         condensation = _condensation(scene, space)
-
-    material = scene.material
-    with _timed(timings, "stiffness"):
-        stiffness = condensation.matrix(space.stiffness(stiffness_effect, material))
-
-    mass_kind = scene.effect("inertia").option("mass")
-    if mass_kind not in ("consistent", "lumped"):
-        raise SceneError("[effects.inertia] mass must be 'consistent' or 'lumped'")
-    with _timed(timings, "mass"):
-        mass = condensation.matrix(space.mass(material, lumped=mass_kind == "lumped"))
-
-    damping = None
-    if "damping" in names:
-        with _timed(timings, "damping"):
-            damping = _damping(scene.effect("damping"), mass, stiffness)
-
-    input_matrix = inputs = None
-    if "actuation" in names:
-        with _timed(timings, "inputs"):
-            columns = [condensation.vector(sum(space.load_vector(load) for load in i.loads))
-                       for i in scene.inputs]
-            input_matrix = np.column_stack(columns)
-            inputs = _SignalVector(tuple(i.signal for i in scene.inputs))
-
-    nonlinear = None
-    if "nonlinear_potential" in names:
-        nonlinear = _nonlinear_potential(scene.effect("nonlinear_potential"), space, condensation)
+    build = Assembly(scene=scene, space=space, condensation=condensation, timings=timings)
+    known = registered_effects()
+    for name in sorted(scene.effect_names, key=lambda name: list(known).index(name)):
+        effect = known[name]()
+        effect.assemble(build, dict(scene.effect(name).options))
 
     output_matrix = None
     output_names = ()
@@ -78,11 +56,11 @@ def _assemble(scene: Scene, mesh, names, stiffness_effect: str, timings: dict):
             output_names = tuple(p.name for p in scene.outputs.probes)
 
     system = SecondOrderSystem(
-        mass=mass, stiffness=stiffness, damping=damping,
-        input_matrix=input_matrix, inputs=inputs,
-        output_matrix=output_matrix, nonlinear=nonlinear,
+        mass=build.mass, stiffness=build.stiffness, damping=build.damping,
+        input_matrix=build.input_matrix, inputs=build.inputs,
+        output_matrix=output_matrix, nonlinear=build.nonlinear_forces or None, load=build.load,
         condensation=condensation, output_names=output_names,
-        metadata={"scene": scene.name, "effects": names, "n_total": space.n_total,
+        metadata={"scene": scene.name, "effects": scene.effect_names, "n_total": space.n_total,
                   "n_free": condensation.n_free, "element": scene.structure.element},
     )
     with _timed(timings, "initial_conditions"):
@@ -122,29 +100,22 @@ def build(scene: Scene, *, mesh=None) -> FullOrderModel:
     """
     timings = {}
     names = scene.effect_names
-    if "inertia" not in names:
-        raise SceneError("a dynamic scene needs the 'inertia' effect")
-    stiffness_effects = [n for n in names if n in STIFFNESS_EFFECTS]
-    if len(stiffness_effects) != 1:
-        raise SceneError(f"list exactly one stiffness effect of {', '.join(STIFFNESS_EFFECTS)}; got {stiffness_effects}")
+    known = registered_effects()
+    for provides, what in (("mass", "a dynamic scene needs"), ("stiffness", "list")):
+        listed = [n for n in names if known[n].provides == provides]
+        valid = [n for n, e in known.items() if e.provides == provides]
+        if provides == "mass" and not listed:
+            raise SceneError(f"{what} the {' or '.join(repr(v) for v in valid)} effect")
+        if len(listed) != 1:
+            raise SceneError(f"list exactly one {provides} effect of {', '.join(valid)}; got {listed}")
 
     with _timed(timings, "mesh"):
         if mesh is None:
             mesh = build_mesh(scene.structure.geometry, dict(scene.structure.parameters))
     # assembly takes seconds to tens of seconds at 1e5-1e6 dofs: one line on a terminal
     with Stage(f"{scene.name}: assembling {', '.join(names)}"):
-        system, space, q0, v0 = _assemble(scene, mesh, names, stiffness_effects[0], timings)
+        system, space, q0, v0 = _assemble(scene, mesh, timings)
     return FullOrderModel(scene, system, space, q0, v0, timings)
-
-
-class _SignalVector:
-    """``u(t) = [s_1(t), ..., s_m(t)]``."""
-
-    def __init__(self, signals):
-        self.signals = signals
-
-    def __call__(self, t):
-        return np.array([float(s(t)) for s in self.signals])
 
 
 def _condensation(scene, space) -> Condensation:
@@ -152,27 +123,6 @@ def _condensation(scene, space) -> Condensation:
     fixed += [space.boundary_dofs(name, clamped=False) for name in scene.boundary.pinned]
     fixed = np.concatenate(fixed) if fixed else np.zeros(0, dtype=np.int64)
     return Condensation.from_fixed(space.n_total, fixed)
-
-
-def _damping(effect, mass, stiffness):
-    if effect.option("kind") != "rayleigh":
-        raise SceneError(f"unknown damping kind {effect.option('kind')!r}; valid: rayleigh")
-    try:
-        return fem.rayleigh_damping(mass, stiffness, effect.option("alpha"), effect.option("beta"))
-    except ValueError as exc:
-        raise SceneError(f"[effects.damping] {exc}") from None
-
-
-def _nonlinear_potential(effect, space, condensation):
-    if not hasattr(space, "nodal_weights"):
-        raise SceneError("the 'nonlinear_potential' effect is available on line structures only")
-    weights = effect.option("coefficient") * condensation.vector(space.nodal_weights())
-    kind = effect.option("kind")
-    if kind == "sine_gordon":
-        return LocalPotential.sine_gordon(weights)
-    if kind == "quartic":
-        return LocalPotential.cubic(weights, 1.0)
-    raise SceneError(f"unknown nonlinear potential {kind!r}; valid: sine_gordon, quartic")
 
 
 def _initial_state(scene, space, system):
@@ -183,7 +133,7 @@ def _initial_state(scene, space, system):
         return np.zeros(n), np.zeros(n)
     if ic.kind == "static_load":
         f = cond.vector(space.load_vector(ic.load))
-        solver = fem.make_solver(system.stiffness, strategy=scene.time.solver,
+        solver = make_solver(system.stiffness, strategy=scene.time.solver,
                                  near_nullspace=_near_nullspace(space, cond))
         return solver.solve(f), np.zeros(n)
     if ic.kind == "mode":

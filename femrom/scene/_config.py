@@ -40,20 +40,10 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
+from femrom.scene._effects import effect_class
 from femrom.scene._errors import SceneError
 from femrom.scene._signals import Signal
 
-#: Effects a scene may list, with their options and defaults.
-EFFECTS: dict[str, dict[str, Any]] = {
-    "inertia": {"mass": "consistent"},
-    "elasticity": {},
-    "bending": {},
-    "damping": {"kind": "rayleigh", "alpha": 0.0, "beta": 0.0},
-    "actuation": {},
-    "nonlinear_potential": {"kind": "sine_gordon", "coefficient": 1.0},
-}
-
-INTEGRATORS = ("newmark", "generalized_alpha", "central_difference", "implicit_midpoint")
 ELEMENTS = ("hermite", "p1", "p2")
 FIELDS = ("displacement", "velocity", "acceleration")
 LOAD_KINDS = ("point_load", "surface_traction", "surface_pressure")
@@ -132,9 +122,9 @@ def _effects_from_dict(data) -> tuple[EffectConfig, ...]:
         raise SceneError("[effects] must list at least 'inertia' and a stiffness effect")
     effects = []
     for name, options in data.items():
-        if name not in EFFECTS:
-            raise SceneError(f"unknown effect {name!r}; valid effects: {', '.join(EFFECTS)}")
-        opts = _take(options, f"effects.{name}", EFFECTS[name])
+        effect = effect_class(name)
+        opts = _take(options, f"effects.{name}", effect.options)
+        effect.check(opts)
         effects.append(EffectConfig(name, tuple(sorted(opts.items()))))
     return tuple(effects)
 
@@ -251,6 +241,10 @@ class InitialConfig:
 
 @dataclass(frozen=True)
 class TimeConfig:
+    """The time window and scheme. ``integrator`` names a scheme registered in
+    :mod:`femrom.integrators` (checked there, by ``scheme_for``: the scene layer
+    sits below the integrators); ``spectral_radius`` is generalized-alpha's."""
+
     t_end: float
     dt: float
     integrator: str = "newmark"
@@ -261,7 +255,8 @@ class TimeConfig:
     def from_dict(cls, data):
         d = _take(data, "time", {"t_end": None, "dt": None, "integrator": "newmark",
                                  "spectral_radius": 0.8, "solver": "auto"}, ("t_end", "dt"))
-        _choice(d["integrator"], INTEGRATORS, "integrator")
+        if not isinstance(d["integrator"], str) or not d["integrator"]:
+            raise SceneError(f"[time] integrator must be a scheme name, got {d['integrator']!r}")
         if not (0 < float(d["dt"]) <= float(d["t_end"])):
             raise SceneError(f"[time] needs 0 < dt <= t_end, got dt={d['dt']}, t_end={d['t_end']}")
         if not 0 <= float(d["spectral_radius"]) <= 1:

@@ -8,12 +8,12 @@ from typing import Any, Callable
 import numpy as np
 import scipy.sparse as sp
 
-from femrom.fem import Condensation, NonlinearForce
+from femrom.fem import Condensation, ForceSum, NonlinearForce, sum_of_forces
 
 
 @dataclass(frozen=True, eq=False)
 class SecondOrderSystem:
-    r"""``M q'' + C q' + K q + f_nl(q, q') = B u(t)``,  ``y = E q``  on the free dofs.
+    r"""``M q'' + C q' + K q + f_nl(q, q'; s) = B u(t) + f_0``,  ``y = E q``  on the free dofs.
 
     Only the operators of the effects a scene lists are present; an absent
     effect is ``None`` and costs nothing downstream.
@@ -32,8 +32,12 @@ class SecondOrderSystem:
         ``u(t) -> (m,) ndarray``; required when ``input_matrix`` is given.
     output_matrix : (p, n) sparse or None
         Output rows ``E``.
-    nonlinear : NonlinearForce or None
-        Nonlinear internal force with its tangent (and internal state).
+    nonlinear : NonlinearForce, sequence of them, or None
+        Nonlinear internal forces, each on its own local coordinates with its
+        own state; several are kept as one :class:`~femrom.fem.ForceSum`
+        (:attr:`nonlinear_forces` lists them).
+    load : (n,) ndarray or None
+        A constant external force ``f_0`` (gravity, a preload).
     condensation : Condensation
         Free/fixed dof map back to full fields.
     output_names : tuple of str
@@ -49,6 +53,7 @@ class SecondOrderSystem:
     inputs: Callable[[float], np.ndarray] | None = None
     output_matrix: sp.csr_matrix | None = None
     nonlinear: NonlinearForce | None = None
+    load: np.ndarray | None = None
     condensation: Condensation | None = None
     output_names: tuple[str, ...] = ()
     metadata: dict = field(default_factory=dict)
@@ -65,6 +70,16 @@ class SecondOrderSystem:
             raise ValueError(f"input_matrix has {self.input_matrix.shape[0]} rows, expected {n}")
         if self.output_matrix is not None and self.output_matrix.shape[1] != n:
             raise ValueError(f"output_matrix has {self.output_matrix.shape[1]} columns, expected {n}")
+        if self.nonlinear is not None and not isinstance(self.nonlinear, NonlinearForce):
+            object.__setattr__(self, "nonlinear", sum_of_forces(self.nonlinear))
+        size = getattr(self.nonlinear, "n_dofs", n)
+        if size != n:
+            raise ValueError(f"nonlinear force acts on {size} dofs, expected {n}")
+        if self.load is not None:
+            load = np.asarray(self.load, dtype=float).ravel()
+            if load.shape != (n,):
+                raise ValueError(f"load has shape {load.shape}, expected ({n},)")
+            object.__setattr__(self, "load", load)
         if self.condensation is None:
             object.__setattr__(self, "condensation", Condensation.none(n))
         elif self.condensation.n_free != n:
@@ -88,6 +103,15 @@ class SecondOrderSystem:
         return self.nonlinear is None
 
     @property
+    def nonlinear_forces(self) -> tuple[NonlinearForce, ...]:
+        """The nonlinear forces one by one (empty for a linear system)."""
+        if self.nonlinear is None:
+            return ()
+        if isinstance(self.nonlinear, ForceSum):
+            return self.nonlinear.forces
+        return (self.nonlinear,)
+
+    @property
     def has_diagonal_mass(self) -> bool:
         M = sp.csr_matrix(self.mass)
         return M.nnz == np.count_nonzero(M.diagonal()) and M.nnz <= M.shape[0]
@@ -102,17 +126,20 @@ class SecondOrderSystem:
             present.append("nonlinear")
         if self.input_matrix is not None:
             present.append("inputs")
+        if self.load is not None:
+            present.append("load")
         if self.output_matrix is not None:
             present.append("outputs")
         return tuple(present)
 
     # -- evaluations -----------------------------------------------------
     def external_force(self, t: float) -> np.ndarray | None:
-        """(n,) ndarray ``B u(t)``, or ``None`` without inputs."""
+        """(n,) ndarray ``B u(t) + f_0``, or ``None`` without inputs or load."""
         if self.input_matrix is None:
-            return None
+            return self.load
         u = np.atleast_1d(np.asarray(self.inputs(t), dtype=float))
-        return np.asarray(self.input_matrix @ u).ravel()
+        f = np.asarray(self.input_matrix @ u).ravel()
+        return f if self.load is None else f + self.load
 
     def internal_force(self, q: np.ndarray, v: np.ndarray, state: Any = None) -> np.ndarray:
         """(n,) ndarray ``C v + K q + f_nl(q, v)``."""
@@ -133,14 +160,16 @@ class SecondOrderSystem:
         return 0.5 * float(v @ (self.mass @ v))
 
     def potential_energy(self, q: np.ndarray) -> float:
-        """``q^T K q / 2 + U_nl(q)``; raises for a non-conservative nonlinear force."""
+        """``q^T K q / 2 + U_nl(q) - f_0^T q``; raises for a non-conservative nonlinear force."""
         energy = 0.5 * float(q @ (self.stiffness @ q))
         if self.nonlinear is not None:
             energy += self.nonlinear.potential(q)
+        if self.load is not None:
+            energy -= float(self.load @ q)
         return energy
 
     def energy(self, q: np.ndarray, v: np.ndarray) -> float:
-        """Total mechanical energy ``v^T M v / 2 + q^T K q / 2 + U_nl(q)``."""
+        """Total mechanical energy ``v^T M v / 2 + q^T K q / 2 + U_nl(q) - f_0^T q``."""
         return self.kinetic_energy(v) + self.potential_energy(q)
 
     def outputs(self, q: np.ndarray) -> np.ndarray | None:

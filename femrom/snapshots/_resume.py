@@ -6,7 +6,7 @@ import functools
 
 import numpy as np
 
-from femrom.fem import make_solver
+from femrom.solvers import make_solver
 from femrom.integrators import IntegrationSummary, integrate, scheme_for
 from femrom.snapshots._errors import SnapshotStoreError
 from femrom.snapshots._store import SnapshotStore, split_model, trajectory_name

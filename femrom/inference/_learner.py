@@ -1,0 +1,133 @@
+"""The learner protocol, the registry of learners and relative regularisation weights.
+
+A learner is an estimator: ``learner.fit(data) -> learner`` leaves the fitted
+operators in ``learner.operators_`` (a :class:`ReducedOperators` for
+second-order models, a :class:`HamiltonianOperators` for canonical ones, a
+discrete state space for identified first-order models) and
+``learner.describe()`` says what was fitted how. A ROM of :mod:`femrom.rom`
+takes any learner (``SecondOrderROM(learner=...).fit(data)``) and adds
+``predict``, ``stepper`` and ``save``/``load``.
+
+Learners are registered by short name (:func:`register_learner`): the
+built-in ones are the modules of the package ``femrom.inference.learners``
+(found by :func:`registered_learners`), so scene files and studies can name them.
+"""
+
+from __future__ import annotations
+
+import importlib
+import pkgutil
+from collections.abc import Mapping
+from typing import Any, ClassVar
+
+_REGISTRY: dict[str, type["Learner"]] = {}
+_DISCOVERED = False
+
+
+class Learner:
+    """Base of femrom's learners: ``fit(data) -> self``, ``operators_``, ``describe()``.
+
+    Class attributes
+    ----------------
+    method : str
+        What the learner is called in metadata and reports.
+    model : str
+        The kind of model it fits: ``"second_order"``, ``"canonical"`` or ``"state_space"``.
+    """
+
+    method: ClassVar[str] = ""
+    model: ClassVar[str] = "second_order"
+    operators_: Any
+
+    def fit(self, data) -> "Learner":  # pragma: no cover - interface
+        raise NotImplementedError
+
+    def describe(self) -> dict:
+        """What was fitted how (stored with a saved ROM)."""
+        return {"method": self.method}
+
+    @property
+    def is_fitted(self) -> bool:
+        return getattr(self, "operators_", None) is not None
+
+
+def register_learner(name: str):
+    """Class decorator: the learner is known by ``name`` (``learner_class(name)``)."""
+
+    def decorate(cls):
+        _REGISTRY[name] = cls
+        return cls
+
+    return decorate
+
+
+def registered_learners() -> dict[str, type[Learner]]:
+    """The registered learners by name (the built-in modules are imported once)."""
+    global _DISCOVERED
+    if not _DISCOVERED:
+        _DISCOVERED = True
+        package = importlib.import_module("femrom.inference.learners")
+        for module in pkgutil.iter_modules(package.__path__):
+            importlib.import_module(f"{package.__name__}.{module.name}")
+    return dict(_REGISTRY)
+
+
+def learner_class(name: str) -> type[Learner]:
+    """The learner registered as ``name``, or a clear error listing the registered ones."""
+    known = registered_learners()
+    if name not in known:
+        raise ValueError(f"unknown learner {name!r}; registered: {', '.join(sorted(known))}")
+    return known[name]
+
+
+class Regularization(Mapping):
+    """Relative Tikhonov weights by term name (``stiffness``, ``damping``, ``input``, ``output``, ...).
+
+    A weight ``rho_j`` becomes ``lambda_j = rho_j * trace(D_j D_j^T) / size_j``
+    (the mean eigenvalue of the term's data-block Gram matrix), so a value
+    means the same for every data set and unit system.
+
+    Parameters
+    ----------
+    default : float
+        The weight of every term not named.
+    **weights : float
+        Per term.
+    """
+
+    def __init__(self, default: float = 0.0, **weights: float):
+        values = {"default": default, **weights}
+        for name, value in values.items():
+            if not float(value) >= 0:
+                raise ValueError(f"regularization {name} must be >= 0, got {value}")
+        self.default = float(default)
+        self._weights = {k: float(v) for k, v in weights.items()}
+
+    @classmethod
+    def uniform(cls, value: float) -> "Regularization":
+        """The same weight for every term."""
+        return cls(default=value)
+
+    @classmethod
+    def of(cls, value) -> "Regularization":
+        """A Regularization from a float (uniform), a mapping by term name, or itself."""
+        if isinstance(value, Regularization):
+            return value
+        if isinstance(value, Mapping):
+            return cls(**{str(k): float(v) for k, v in value.items()})
+        return cls.uniform(float(value))
+
+    def __getitem__(self, name: str) -> float:
+        return self._weights.get(name, self.default)
+
+    def __iter__(self):
+        return iter(self._weights)
+
+    def __len__(self) -> int:
+        return len(self._weights)
+
+    def to_dict(self) -> dict:
+        return {"default": self.default, **self._weights}
+
+    def __repr__(self) -> str:
+        return f"Regularization({', '.join(f'{k}={v:g}' for k, v in self.to_dict().items())})"

@@ -1,0 +1,331 @@
+r"""Second-order operator inference from the terms of a model.
+
+Given reduced data (:class:`SecondOrderData`) and the model's terms, the
+learners of :mod:`femrom.inference.learners` solve
+
+.. math::
+
+    \min_{X_j \in \mathcal S_j}\;
+    \Big\| \underbrace{\hat M \ddot{\hat Q} + \textstyle\sum_{\text{known}} T_k(\text{data})}_{Y}
+        + \sum_{\text{learned}} X_j D_j \Big\|_F^2 + \sum_j \lambda_j \|X_j\|_F^2 ,
+
+one block ``X_j`` and data block ``D_j`` per learned term (``K^`` on ``Q^``,
+``C^`` on ``Q^'``, ``B^`` on ``-U``, ...), the known terms (the mass, a
+projected known force evaluated along each trajectory) on the target's side.
+:class:`~femrom.inference.LagrangianOpInf` (Sharma & Kramer, Physica D 462,
+2024) asks every term for its structure (``K^ = K^^T >= eps I``, ``C^ =
+C^^T >= 0``), so the learned model has a positive energy that damping can only
+decrease; :class:`~femrom.inference.SecondOrderOpInf` is the unconstrained
+baseline. The output map solves ``min_E ||Y - E Q^||_F^2 + lambda_E ||E||_F^2``.
+
+Which terms: the stiffness always, the input map when the data carry inputs,
+the output map when they carry outputs; any other term only when the caller
+names it (``terms=["damping"]``), or from a system's effects
+(:meth:`for_system`). Without being told, a learner fits no damping.
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import asdict, dataclass
+from typing import ClassVar
+
+import numpy as np
+
+from femrom.inference._data import SecondOrderData, concatenate
+from femrom.inference._fast import FastOptions, solve_fast
+from femrom.inference._learner import Learner, Regularization
+from femrom.inference._operators import ReducedForces, ReducedOperators
+from femrom.inference._problem import Block, GramProblem
+from femrom.inference._sdp import solve_conic
+from femrom.inference._terms import ReducedTerm, registered_terms, term_class
+
+#: Solvers a learner accepts.
+SOLVERS = ("fast", "clarabel", "scs")
+
+#: Block structure a Lagrangian learner gives each term structure.
+_BLOCKS = {"spd": "psd", "psd": "psd", "symmetric": "symmetric", "free": "free"}
+
+
+@dataclass(frozen=True)
+class ErrorSplit:
+    r"""The three error sources of Geng, Singh, Ju, Kramer & Wang (CMAME 427, 2024).
+
+    Attributes
+    ----------
+    projection : float or None
+        ``||Q - V Q^||_W / ||Q||_W`` of the training states (``None`` for
+        data that came reduced).
+    derivative : float or None
+        ``||Q^''_fd - V^T W Q''|| / ||V^T W Q''||``: finite differences
+        against the run's stored accelerations (``None`` without them, ``0``
+        when the stored ones were used).
+    velocity : float or None
+        The same for the velocities.
+    optimization : float
+        ``||Y + sum_j X_j D_j||_F / ||Y||_F``: the relative residual the
+        fitted operators leave.
+    """
+
+    projection: float | None
+    derivative: float | None
+    velocity: float | None
+    optimization: float
+
+
+class SecondOrderLearner(Learner):
+    """Shared machinery of :class:`LagrangianOpInf` and :class:`SecondOrderOpInf`.
+
+    Parameters
+    ----------
+    terms : sequence
+        Terms beyond the stiffness (and the input and output maps, which
+        follow the data): names or classes of registered learnable terms
+        (``"damping"``, a user's term) are learned; term *instances* are
+        known (e.g. a :class:`ProjectedNonlinearForce`) and move to the target.
+    regularization : float, mapping or Regularization
+        Relative Tikhonov weights (a float applies to every term).
+    solver : {"fast", "clarabel", "scs"}
+    mass : (r, r) ndarray, optional
+        Known reduced mass (e.g. ``V^T M V`` of a Euclidean basis); default identity.
+    mass_orthonormal : bool
+        Whether the basis is mass-orthonormal; ``False`` without ``mass``
+        warns that ``M^ = I`` is then an assumption that breaks symmetry.
+    stiffness_margin : float
+        ``eps = margin * ||Y||_F / ||D_j||_F`` in ``X_j >= eps I`` for ``"spd"`` terms.
+    solver_options : dict
+        :class:`FastOptions` fields, or keyword arguments of cvxpy's ``solve``.
+
+    Attributes
+    ----------
+    operators_ : ReducedOperators
+    coefficients_ : dict
+        The fitted block of every learned term, by name.
+    stiffness_, damping_ : (r, r) ndarray (``damping_`` is ``None`` when not learned)
+    input_matrix_ : (r, m) ndarray or None
+    output_matrix_ : (p, r) ndarray or None
+    eigenvalues_ : dict of ndarray
+    objective_ : float
+    error_split_ : ErrorSplit
+    solver_info_ : dict
+    """
+
+    structured: ClassVar[bool] = False
+
+    def __init__(self, terms=(), *, regularization=0.0, solver: str = "fast",
+                 mass: np.ndarray | None = None, mass_orthonormal: bool = True,
+                 stiffness_margin: float = 1e-10, solver_options: dict | None = None):
+        if isinstance(terms, (str, type, ReducedTerm)):
+            terms = (terms,)
+        if solver.lower() not in SOLVERS:
+            raise ValueError(f"unknown solver {solver!r}; valid: {SOLVERS}")
+        self.learned_terms: list[type[ReducedTerm]] = []
+        self.known_terms: list[ReducedTerm] = []
+        for item in terms:
+            if isinstance(item, ReducedTerm):
+                self.known_terms.append(item)
+                continue
+            cls = term_class(item) if isinstance(item, str) else item
+            if not (isinstance(cls, type) and issubclass(cls, ReducedTerm)):
+                raise TypeError(f"terms holds {item!r}: give term names, term classes or known term instances")
+            if not cls.learnable:
+                raise ValueError(f"term {cls.name!r} is not learned from data; pass a known instance of it")
+            if cls.name in ("stiffness", "output"):
+                continue                            # always there (the output map: with output data)
+            self.learned_terms.append(cls)
+        names = [c.name for c in self.learned_terms] + [t.name for t in self.known_terms]
+        if len(set(names)) != len(names):
+            raise ValueError(f"each term may be named once, got {names}")
+        self.regularization = Regularization.of(regularization)
+        self.solver = solver.lower()
+        self.mass = None if mass is None else np.asarray(mass, dtype=float)
+        self.mass_orthonormal = bool(mass_orthonormal)
+        self.stiffness_margin = float(stiffness_margin)
+        self.solver_options = dict(solver_options or {})
+
+    @classmethod
+    def for_system(cls, system, basis: np.ndarray | None = None, **options):
+        """A learner with exactly the terms of ``system``'s effects.
+
+        Learnable terms (damping, a constant load, ...) are learned when the
+        system has their effect; known nonlinear forces are projected
+        (``V^T f(V q)``, which needs ``basis``). Only which effects exist is
+        read, never the operators' values (the learner stays nonintrusive):
+        the projected force is the known nonlinear term, not a matrix.
+
+        Parameters
+        ----------
+        system : SecondOrderSystem
+            Or a built scene (anything with a ``system`` attribute).
+        basis : (n, r) ndarray, optional
+        **options
+            The other constructor arguments (``regularization``, ``solver``, ...).
+        """
+        system = getattr(system, "system", system)
+        if "terms" in options or "damping" in options:
+            raise TypeError(f"for_system sets the terms from the system's effects; "
+                            f"use {cls.__name__}(terms=...) to choose them by hand")
+        terms = []
+        for effect in system.effects:
+            for term in registered_terms().values():
+                if term.effect != effect or term.name in ("stiffness", "mass", "input", "output"):
+                    continue
+                if term.learnable:
+                    terms.append(term)
+                elif term.structure == "known":
+                    if basis is None:
+                        raise ValueError(f"the system has a {effect!r} effect: for_system needs the "
+                                         "basis to project its known force")
+                    terms.append(term.galerkin(system, basis))
+        return cls(terms, **options)
+
+    # -- views -------------------------------------------------------------------------
+    @property
+    def damping(self) -> bool:
+        """Whether the model has a damping term ``C^ q'`` (learned)."""
+        return any(c.name == "damping" for c in self.learned_terms)
+
+    @property
+    def nonlinear(self):
+        """The known nonlinear terms as one force, or ``None``."""
+        forces = [t for t in self.known_terms if t.role == "balance" and not hasattr(t, "matrix")]
+        if not forces:
+            return None
+        return forces[0] if len(forces) == 1 else ReducedForces(forces)
+
+    # -- the regression --------------------------------------------------------------
+    def _learned(self, data) -> list[type[ReducedTerm]]:
+        stiffness = term_class("stiffness")
+        terms = [stiffness, *self.learned_terms]
+        known = {t.name for t in self.known_terms}
+        if data.inputs is not None and "input" not in known and not any(c.name == "input" for c in terms):
+            terms.append(term_class("input"))
+        # stiffness first (the regression's first block), then in equation order
+        return sorted(terms, key=lambda c: (c.name != "stiffness", c.order))
+
+    def _target(self, data: SecondOrderData) -> np.ndarray:
+        Y = data.accelerations if self.mass is None else self.mass @ data.accelerations
+        forces = [t for t in self.known_terms if not hasattr(t, "matrix")]
+        linear = [t for t in self.known_terms if hasattr(t, "matrix")]
+        if data.nonlinear_forces is not None:
+            if not forces:
+                raise ValueError("the data carry nonlinear_forces but the learner has no known force term "
+                                 "to pair them with (name one in terms=, or use for_system)")
+            Y = Y + data.nonlinear_forces
+        else:
+            for term in forces:
+                Y = Y + term.target(data)
+        for term in linear:
+            Y = Y + term.target(data)
+        return Y
+
+    def _datablocks(self, data) -> list[np.ndarray]:
+        return [term.datablock(data) for term in self._learned(data)]
+
+    def regression(self, data) -> GramProblem:
+        """The :class:`GramProblem` this learner solves for ``data`` (one or a list)."""
+        data = concatenate(data) if isinstance(data, (list, tuple)) else data
+        return self._regression(data, self._target(data), self._datablocks(data))
+
+    def _regression(self, data, Y: np.ndarray, blocks_data: list) -> GramProblem:
+        if self.mass is None and not self.mass_orthonormal:
+            warnings.warn(
+                "fitting with reduced mass M^ = I on a basis that is not mass-orthonormal: the "
+                "data then follow M~^-1 K~, which is not symmetric, so the symmetric K^ >= 0 "
+                "structure argument breaks; pass mass=V^T M V or use a mass-orthonormal basis",
+                UserWarning, stacklevel=3)
+        blocks = []
+        for term, D in zip(self._learned(data), blocks_data):
+            structure = _BLOCKS.get(term.structure) if self.structured else "free"
+            if structure is None:
+                raise ValueError(f"term {term.name!r} of structure {term.structure!r} cannot be learned "
+                                 f"by {type(self).__name__}")
+            shift = 0.0
+            if structure == "psd" and term.structure == "spd":
+                shift = self.stiffness_margin * np.linalg.norm(Y) / max(np.linalg.norm(D), np.finfo(float).tiny)
+            scale = float(np.sum(D * D)) / max(D.shape[0], 1)
+            blocks.append(Block(term.name, D.shape[0], structure, shift=shift,
+                                regularization=self.regularization[term.name] * scale))
+        return GramProblem.from_data(Y, blocks_data, blocks)
+
+    @staticmethod
+    def _residual(Y: np.ndarray, blocks_data: list, X: np.ndarray) -> float:
+        """``||Y + X D||_F / ||Y||_F`` from the data columns: the Gram expansion
+        ``<X G, X> + 2 <X, H^T> + c`` cancels down to ``eps ||Y||^2``, so it cannot
+        resolve a relative residual below ``sqrt(eps) ~ 1.5e-8``."""
+        R = Y + X @ np.vstack(blocks_data)
+        return float(np.linalg.norm(R) / max(np.linalg.norm(Y), np.finfo(float).tiny))
+
+    def _solve(self, problem: GramProblem):
+        if self.solver == "fast":
+            options = FastOptions(**self.solver_options) if self.solver_options else FastOptions()
+            return solve_fast(problem, options)
+        return solve_conic(problem, self.solver.upper(), **self.solver_options)
+
+    # -- fit -----------------------------------------------------------------------------
+    def fit(self, data) -> "SecondOrderLearner":
+        r"""Learn the operators from ``data``.
+
+        Parameters
+        ----------
+        data : SecondOrderData or list of SecondOrderData
+            Several trajectories are fitted together (their Gram matrices add;
+            a stateful known force restarts at each trajectory's first column).
+
+        Returns
+        -------
+        self
+        """
+        data = concatenate(data) if isinstance(data, (list, tuple)) else data
+        learned = self._learned(data)
+        # the target (a projected known force costs a force evaluation per snapshot)
+        # and the data blocks, built once for the regression and the residual
+        Y, blocks_data = self._target(data), self._datablocks(data)
+        problem = self._regression(data, Y, blocks_data)
+        X, info = self._solve(problem)
+        self.coefficients_ = {b.name: X[:, s] for b, s in zip(problem.blocks, problem.slices())}
+        terms = [cls.from_coefficients(self.coefficients_[cls.name]) for cls in learned]
+        output = term_class("output").fit(data, self.regularization["output"])
+        if self.mass is not None:
+            terms.append(term_class("mass")(self.mass))
+        terms += self.known_terms + ([output] if output is not None else [])
+        self.stiffness_ = self.coefficients_["stiffness"]
+        self.damping_ = self.coefficients_.get("damping")
+        self.input_matrix_ = self.coefficients_.get("input")
+        self.output_matrix_ = None if output is None else output.matrix
+        self.regression_ = problem
+        self.objective_ = float(info["objective"])
+        self.solver_info_ = info
+        self.stiffness_shift_ = next(b.shift for b in problem.blocks if b.name == "stiffness")
+        diag = data.diagnostics
+        stored = diag.get("derivative_source") == "stored"
+        self.error_split_ = ErrorSplit(
+            projection=diag.get("projection_error"),
+            derivative=0.0 if stored else diag.get("acceleration_error"),
+            velocity=0.0 if stored else diag.get("velocity_error"),
+            optimization=self._residual(Y, blocks_data, X))
+        self.operators_ = ReducedOperators(tuple(terms), self.describe())
+        return self
+
+    # -- reports -------------------------------------------------------------------------
+    @property
+    def eigenvalues_(self) -> dict:
+        """Ascending eigenvalues of ``K^`` and ``C^`` (of their symmetric parts for plain OpInf)."""
+        return self.operators_.eigenvalues()
+
+    def describe(self) -> dict:
+        """What was fitted how (stored with a saved ROM)."""
+        out = {"method": self.method, "solver": self.solver,
+               "terms": ["stiffness"] + [c.name for c in self.learned_terms],
+               "known_terms": [t.name for t in self.known_terms],
+               "damping": self.damping,
+               "regularization": self.regularization.to_dict(),
+               "mass": "identity" if self.mass is None else "given",
+               "mass_orthonormal": self.mass_orthonormal,
+               "nonlinear": self.nonlinear is not None}
+        info = getattr(self, "solver_info_", None)
+        if info is not None:
+            out["solver_info"] = {k: v for k, v in info.items() if k != "active"}
+            out["objective"] = self.objective_
+            out["error_split"] = asdict(self.error_split_)
+        return out

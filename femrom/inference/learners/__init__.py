@@ -1,0 +1,1 @@
+"""The built-in learners, one module each (found by :func:`femrom.inference.registered_learners`)."""

@@ -1,0 +1,201 @@
+"""``f^(q, q'; s) = V^T f(V q, V q'; s)``: a known nonlinear force, projected."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from femrom.fem import force_from_parameters
+from femrom.inference._terms import ReducedTerm, register_term
+
+
+@register_term
+class ProjectedNonlinearForce(ReducedTerm):
+    r"""``f^(q^, v^; s) = V^T f(V q^, V v^; s)`` with tangent ``V^T (df/dq) V``.
+
+    The projection of a known full-order force (:class:`femrom.fem.NonlinearForce`).
+    A force ``f = L^T g(L q, L v; s)`` is evaluated through ``L V`` (s_loc, r)
+    only: a spring layer or a joint costs ``O(s_loc r)`` per call, not
+    ``O(n r)``. A stateful force carries its state on its own local
+    coordinates (frozen during a reduced Newton step, committed after it).
+
+    As a learning target (:meth:`target`) the force is evaluated along each
+    training trajectory in time order from its initial state, committing the
+    state after every column: the target of a hysteretic force is the force
+    the reduced trajectory would feel.
+
+    Parameters
+    ----------
+    force : NonlinearForce
+    basis : (n, r) ndarray
+    """
+
+    name = "projected_force"
+    effect = "nonlinear"
+    structure = "known"
+    order = 30
+
+    def __init__(self, force, basis: np.ndarray):
+        self.force_model = force
+        self.basis = np.asarray(basis, dtype=float)
+        L = getattr(force, "local_map", None)
+        self._local = None if L is None else np.ascontiguousarray(force.localize(self.basis))
+
+    @classmethod
+    def galerkin(cls, system, basis):
+        return None if system.nonlinear is None else cls(system.nonlinear, basis)
+
+    # -- properties of the force ------------------------------------------------------
+    @property
+    def conservative(self) -> bool:
+        return bool(getattr(self.force_model, "conservative", False))
+
+    @property
+    def velocity_dependent(self) -> bool:
+        return bool(getattr(self.force_model, "velocity_dependent", False))
+
+    @property
+    def stateful(self) -> bool:
+        return bool(getattr(self.force_model, "stateful", False))
+
+    @property
+    def r(self) -> int:
+        return self.basis.shape[1]
+
+    def initial_state(self):
+        return self.force_model.initial_state()
+
+    # -- evaluations -------------------------------------------------------------------
+    def force(self, q, v=None, state=None) -> np.ndarray:
+        """(r,) ndarray ``V^T f(V q, V v; state)``."""
+        W = self._local
+        if W is None:
+            V = self.basis
+            return V.T @ self.force_model.force(V @ q, None if v is None else V @ v, state)
+        return W.T @ self.force_model.local_force(W @ q, None if v is None else W @ v, state)
+
+    def lhs(self, q, v=None, a=None, u=None, state=None):
+        return self.force(q, v, state)
+
+    def tangent(self, q, v=None, state=None):
+        """``(V^T df/dq V, V^T df/dv V)`` as (r, r) ndarrays (``None`` where absent)."""
+        W = self._local
+        if W is None:
+            V = self.basis
+            dq, dv = self.force_model.tangent(V @ q, None if v is None else V @ v, state)
+            return tuple(None if D is None else V.T @ np.asarray(D @ V) for D in (dq, dv))
+        parts = self.force_model.local_tangent(W @ q, None if v is None else W @ v, state)
+        out = []
+        for D in parts:
+            if D is None:
+                out.append(None)
+            elif np.ndim(D) == 1 and not hasattr(D, "toarray"):
+                out.append(W.T @ (D[:, None] * W))
+            else:
+                out.append(W.T @ np.asarray(D @ W))
+        return tuple(out)
+
+    def potential(self, q) -> float:
+        if not self.conservative:
+            return 0.0
+        W = self._local
+        if W is None:
+            return self.force_model.potential(self.basis @ q)
+        return float(self.force_model.local_potential(W @ q))
+
+    def commit(self, q, v, state):
+        W = self._local
+        if W is None:
+            return self.force_model.commit(self.basis @ q, self.basis @ v, state)
+        if not self.stateful:
+            return state
+        return self.force_model.local_commit(W @ q, W @ v, state)
+
+    def forces(self, Q: np.ndarray, Vel: np.ndarray | None = None, starts=(0,)) -> np.ndarray:
+        """(r, K) ndarray: the force at every column of ``Q``, ``Vel`` (r, K).
+
+        A stateful force is evaluated in column order, its state starting
+        afresh at each index of ``starts`` (trajectory beginnings) and
+        committed after every column.
+        """
+        K = Q.shape[1]
+        W = self._local
+        if not self.stateful and W is not None and getattr(self.force_model, "columns", False):
+            return W.T @ self.force_model.local_force(W @ Q, None if Vel is None else W @ Vel, None)
+        out = np.empty((self.r, K))
+        starts = set(int(s) for s in starts)
+        state = None
+        for k in range(K):
+            if k in starts or k == 0:
+                state = self.initial_state()
+            v = None if Vel is None else Vel[:, k]
+            out[:, k] = self.force(Q[:, k], v, state)
+            if self.stateful:
+                state = self.commit(Q[:, k], v, state)
+        return out
+
+    def target(self, data) -> np.ndarray:
+        if self.stateful and data.diagnostics.get("trimmed_columns", 0):
+            raise ValueError(f"the stateful force {self.force_model.name!r} is evaluated along each trajectory "
+                             f"from its initial state, but these data were trimmed by "
+                             f"{data.diagnostics['trimmed_columns']} columns at the start; pass untrimmed data "
+                             "or the forces themselves as nonlinear_forces")
+        return self.forces(data.states, data.velocities, data.starts)
+
+    # -- storage -----------------------------------------------------------------------
+    def save(self, group) -> None:
+        """The force's parameters when it has them (rebuilt on load), else its class only.
+
+        The basis is the model's (saved with it): ``load`` needs it.
+        """
+        parameters = getattr(self.force_model, "parameters", lambda: None)()
+        group.attrs["force_class"] = f"{type(self.force_model).__module__}.{type(self.force_model).__qualname__}"
+        if parameters is not None:
+            _write(group.create_group("force"), parameters)
+
+    @classmethod
+    def load(cls, group, *, basis=None, nonlinear=None, **context):
+        stored = str(group.attrs["force_class"])
+        if basis is None:
+            raise ValueError("a projected force is evaluated through the basis: the file holds none")
+        if nonlinear is not None:
+            given = f"{type(nonlinear).__module__}.{type(nonlinear).__qualname__}"
+            if given != stored:
+                raise ValueError(f"nonlinear force {given} does not match the saved {stored}")
+            return cls(nonlinear, basis)
+        if "force" not in group:
+            raise ValueError(f"the model's projected force ({stored}) has no stored parameters: "
+                             "pass nonlinear=... to load")
+        return cls(force_from_parameters(_read(group["force"])), basis)
+
+    def describe(self) -> dict:
+        return {"term": self.name, "structure": self.structure, "force": type(self.force_model).__name__,
+                "conservative": self.conservative, "stateful": self.stateful}
+
+
+def _write(group, parameters: dict) -> None:
+    for key, value in parameters.items():
+        if isinstance(value, dict):
+            _write(group.create_group(key), value)
+        elif isinstance(value, (list, tuple)) and value and isinstance(value[0], dict):
+            sub = group.create_group(key)
+            sub.attrs["sequence"] = len(value)
+            for i, item in enumerate(value):
+                _write(sub.create_group(str(i)), item)
+        elif isinstance(value, str):
+            group.attrs[key] = value
+        else:
+            group.create_dataset(key, data=np.asarray(value))
+
+
+def _read(group) -> dict:
+    out = {key: value for key, value in group.attrs.items() if key != "sequence"}
+    for key, item in group.items():
+        if hasattr(item, "keys"):
+            if "sequence" in item.attrs:
+                out[key] = [_read(item[str(i)]) for i in range(int(item.attrs["sequence"]))]
+            else:
+                out[key] = _read(item)
+        else:
+            value = item[()]
+            out[key] = value.item() if np.ndim(value) == 0 else value
+    return {k: (str(v) if isinstance(v, bytes) else v) for k, v in out.items()}

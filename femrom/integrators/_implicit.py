@@ -1,0 +1,210 @@
+r"""The nonlinear equation of one implicit step, and Newton on the force's own coordinates.
+
+Every implicit scheme of this package reduces a step of
+``M q'' + C q' + K q + f(q, q'; s) = B u`` to
+
+.. math::
+
+    S x + w\, f(q_0 + c_q x,\; v_0 + c_v x;\; s) = b
+
+for one unknown ``x`` (n,): the new acceleration for the Newmark family
+(``S = (1 - alpha_m) M + (1 - alpha_f)(gamma h C + beta h^2 K)``, ``w = 1``),
+the midpoint velocity for the implicit midpoint rule (``S = M + h C / 2 + h^2
+K / 4``, ``w = h / 2``). ``S`` is fixed for a given ``dt``; the state ``s`` of
+a stateful force is frozen during the iterations.
+
+Two ways to solve it (:class:`ImplicitSolve`, chosen by ``Newton.method``):
+
+``"full"``
+    Newton on all n unknowns with the tangent ``S + w (c_q df/dq + c_v
+    df/dv)``, factorised afresh every iteration.
+``"condensed"``
+    For ``f = L^T g(L q, L v; s)`` with ``s_loc`` local coordinates (``L``
+    (s_loc, n), e.g. the dofs of a contact interface or a spring layer).
+    Once per ``dt``, with the one factorisation of ``S``: ``G = L S^{-1} L^T``
+    (s_loc solves, in blocks) and its inverse ``Sigma = G^{-1}``, the Schur
+    complement of the linear step onto the force's coordinates. Each step: one
+    solve ``x_lin = S^{-1} b``, then Newton on ``xi = L x`` alone,
+
+    .. math::
+
+        R(\xi) = \Sigma (\xi - L x_{lin}) + w\, g(L q_0 + c_q \xi, L v_0 + c_v \xi; s) = 0,
+        \qquad \big(\Sigma + w (c_q\, \partial g/\partial x + c_v\, \partial g / \partial \dot x)\big)\,
+        \delta\xi = -R,
+
+    an (s_loc, s_loc) dense system, and finally ``x = x_lin - w S^{-1} L^T
+    g(xi)`` (a stored ``Z = S^{-1} L^T`` when it fits the memory budget, else
+    one more solve). This is exact, not an approximation: ``L x = xi`` and ``S
+    x + w L^T g = b`` hold to the solver's accuracy. The linear part is
+    never refactorised.
+
+``"auto"`` condenses when the force has a local map with at most
+``Newton.condense_max`` coordinates and at most ``Newton.condense_fraction``
+of the dofs, and runs the full Newton otherwise (a force on every dof, such
+as the sine-Gordon chain's, gains nothing from condensation).
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import scipy.linalg as sl
+
+from femrom.integrators._newton import ConvergenceError, Newton, TangentMatrix, solve_newton
+
+
+def condensable(system, newton: Newton) -> bool:
+    """Whether ``newton`` asks for (``"condensed"``) or allows (``"auto"``) condensation of ``system``."""
+    force = system.nonlinear
+    L = getattr(force, "local_map", None)
+    if newton.method == "full" or L is None:
+        if newton.method == "condensed":
+            raise ValueError(f"Newton(method='condensed') needs a force with a local map; "
+                             f"{type(force).__name__} has none")
+        return False
+    if newton.method == "condensed":
+        return True
+    s, n = L.shape
+    return s <= newton.condense_max and s <= newton.condense_fraction * n
+
+
+class ImplicitSolve:
+    r"""Solver of ``S x + w f(q0 + c_q x, v0 + c_v x; s) = b`` for one scheme and ``dt``.
+
+    Parameters
+    ----------
+    system : SecondOrderSystem
+        With a nonlinear force.
+    effective_matrix : (n, n) sparse
+        ``S``.
+    c_q, c_v, w : float
+    make_solver : callable
+        ``(A, spd=...) -> LinearSolver`` (counted by the driver).
+    newton : Newton
+
+    Attributes
+    ----------
+    method : {"full", "condensed"}
+    details : dict
+        Sizes and set-up times (``condensed_coordinates``, ``condensation_seconds``, ...).
+    """
+
+    def __init__(self, system, effective_matrix, c_q: float, c_v: float, w: float, make_solver,
+                 newton: Newton):
+        self.system, self.c_q, self.c_v, self.w = system, float(c_q), float(c_v), float(w)
+        self.newton, self.make_solver = newton, make_solver
+        self.S = effective_matrix
+        self.details: dict = {}
+        if condensable(system, newton):
+            self.method = "condensed"
+            self._setup_condensed()
+        else:
+            self.method = "full"
+            self.tangent = TangentMatrix(effective_matrix, w * c_q, w * c_v)
+        self.details["newton"] = self.method
+
+    # -- full Newton -------------------------------------------------------------
+    def _full(self, b, q0, v0, state, guess):
+        force, S, w = self.system.nonlinear, self.S, self.w
+
+        def residual(x):
+            f = force.force(q0 + self.c_q * x, v0 + self.c_v * x, state)
+            Sx = S @ x
+            return Sx - b + w * f, float(np.linalg.norm(Sx) + np.linalg.norm(b) + w * np.linalg.norm(f))
+
+        def jacobian(x):
+            return self.tangent(*force.tangent(q0 + self.c_q * x, v0 + self.c_v * x, state))
+
+        return solve_newton(residual, jacobian, guess, self.make_solver, self.newton)
+
+    # -- condensed Newton ------------------------------------------------------------
+    def _setup_condensed(self):
+        tic = time.perf_counter()
+        force = self.system.nonlinear
+        L = force.local_map.tocsr()
+        n_local, n = L.shape
+        self.linear = self.make_solver(self.S, spd=True)
+        LT = L.T.tocsc()
+        keep = n_local * n * 8 <= self.newton.condense_memory
+        block = max(1, min(n_local, 256, int(2**28 // (8 * n))))   # <= 256 MiB of right-hand sides
+        G = np.empty((n_local, n_local))
+        Z = np.empty((n, n_local)) if keep else None
+        for start in range(0, n_local, block):
+            stop = min(start + block, n_local)
+            columns = self.linear.solve(LT[:, start:stop].toarray())
+            columns = columns.reshape(n, stop - start)
+            G[:, start:stop] = np.asarray(L @ columns)
+            if keep:
+                Z[:, start:stop] = columns
+        G = 0.5 * (G + G.T)
+        try:
+            factor = sl.cho_factor(G)
+        except np.linalg.LinAlgError:
+            raise ValueError(f"the {n_local} local coordinates of {force.name!r} are linearly dependent "
+                             "(L S^-1 L^T is singular): condensation needs a full-rank local map; "
+                             "use Newton(method='full')") from None
+        self.L, self.Z, self.force = L, Z, force
+        self.schur = sl.cho_solve(factor, np.eye(n_local))
+        self.schur = 0.5 * (self.schur + self.schur.T)
+        self.details.update(condensed_coordinates=n_local, condensation_seconds=time.perf_counter() - tic,
+                            influence_stored=keep)
+
+    def _condensed(self, b, q0, v0, state, guess):
+        force, w, c_q, c_v = self.force, self.w, self.c_q, self.c_v
+        options = self.newton
+        x_lin = self.linear.solve(b, x0=guess)
+        L = self.L
+        xi_lin = L @ x_lin
+        y0, z0 = L @ q0, L @ v0
+        Sigma = self.schur
+        rhs = Sigma @ xi_lin
+        xi = L @ guess if guess is not None else xi_lin.copy()
+        eps = np.finfo(float).eps
+
+        def local(xi):
+            return y0 + c_q * xi, z0 + c_v * xi
+
+        iterations = 0
+        for iteration in range(options.max_iterations + 1):
+            x_loc, v_loc = local(xi)
+            g = force.local_force(x_loc, v_loc, state)
+            Sxi = Sigma @ xi
+            R = Sxi - rhs + w * g
+            norm = float(np.linalg.norm(R))
+            if not np.isfinite(norm):
+                raise ConvergenceError(f"condensed Newton residual is not finite at iteration {iteration}")
+            scale = float(np.linalg.norm(Sxi) + np.linalg.norm(rhs) + w * np.linalg.norm(g))
+            if norm <= options.atol + options.rtol * scale:
+                break
+            if iteration == options.max_iterations:
+                raise ConvergenceError(
+                    f"condensed Newton did not converge in {options.max_iterations} iterations: "
+                    f"residual {norm:.3g} > tolerance {options.atol + options.rtol * scale:.3g}")
+            dq, dv = force.local_tangent(x_loc, v_loc, state)
+            J = Sigma.copy()
+            for c, D in ((w * c_q, dq), (w * c_v, dv)):
+                if D is None:
+                    continue
+                if np.ndim(D) == 1 and not hasattr(D, "toarray"):
+                    J[np.diag_indices_from(J)] += c * D
+                else:
+                    J += c * (D.toarray() if hasattr(D, "toarray") else np.asarray(D))
+            delta = sl.solve(J, R, check_finite=False)
+            xi = xi - delta
+            iterations = iteration + 1
+            if np.linalg.norm(delta) <= 4.0 * eps * np.linalg.norm(xi):
+                x_loc, v_loc = local(xi)
+                g = force.local_force(x_loc, v_loc, state)
+                break
+        if self.Z is not None:
+            x = x_lin - w * (self.Z @ g)
+        else:
+            x = x_lin - w * self.linear.solve(L.T @ g)
+        return x, iterations
+
+    def __call__(self, b, q0, v0, state, guess):
+        """``(x, newton_iterations)`` for the step's ``b``, ``q0``, ``v0``, frozen ``state`` and a guess."""
+        if self.method == "condensed":
+            return self._condensed(b, q0, v0, state, guess)
+        return self._full(b, q0, v0, state, guess)

@@ -1,0 +1,196 @@
+r"""Discrete-time linear state-space models: what controllers and identification speak.
+
+.. math::
+
+    z_{k+1} = A z_k + B u_k, \qquad y_k = C z_k + D u_k,
+
+on the samples ``u_k = u(t_0 + k dt)``. A linear reduced model exports this
+form (:meth:`SecondOrderROM.to_state_space`), so MPC, observers and ERA
+checks need no glue (python-control's ``StateSpace(A, B, C, D, dt)``,
+:meth:`DiscreteStateSpace.to_control`); identified first-order models (DMDc,
+ERA, OKID) are models of this kind themselves.
+
+A time scheme whose step uses the input at the step's end (Newmark's
+``q_{k+1}`` depends on ``u_{k+1}``) is written in this form through the
+shifted state ``z = x - E u`` (``input_offset = E``): ``x = [q; v]`` is
+recovered as ``z + E u``, and the output has a feedthrough ``D = C_x E``.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from femrom._json import dumps
+
+
+@dataclass(frozen=True, eq=False)
+class DiscreteStateSpace:
+    r"""``z_{k+1} = A z_k + B u_k``, ``y_k = C z_k + D u_k`` with sampling time ``dt``.
+
+    Attributes
+    ----------
+    A : (n_z, n_z) ndarray
+    B : (n_z, m) ndarray
+    C : (p, n_z) ndarray
+    D : (p, m) ndarray
+    dt : float
+    input_offset : (n_z, m) ndarray or None
+        ``E`` with ``z = x - E u`` when the state was shifted from a model
+        state ``x`` (:meth:`initial_state`); ``None`` means ``z = x``.
+    metadata : dict
+        Where the model came from (scheme, state layout, a constant input channel).
+    """
+
+    A: np.ndarray
+    B: np.ndarray
+    C: np.ndarray
+    D: np.ndarray
+    dt: float
+    input_offset: np.ndarray | None = None
+    metadata: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        A = np.atleast_2d(np.asarray(self.A, dtype=float))
+        n = A.shape[0]
+        B = np.asarray(self.B, dtype=float).reshape(n, -1)
+        C = np.asarray(self.C, dtype=float).reshape(-1, n)
+        D = np.asarray(self.D, dtype=float).reshape(C.shape[0], B.shape[1])
+        if A.shape != (n, n):
+            raise ValueError(f"A has shape {A.shape}, expected square")
+        if not self.dt > 0:
+            raise ValueError(f"dt must be positive, got {self.dt}")
+        for name, value in (("A", A), ("B", B), ("C", C), ("D", D)):
+            object.__setattr__(self, name, value)
+        if self.input_offset is not None:
+            E = np.asarray(self.input_offset, dtype=float).reshape(n, B.shape[1])
+            object.__setattr__(self, "input_offset", E)
+
+    # -- sizes ---------------------------------------------------------------------------
+    @property
+    def n_states(self) -> int:
+        return self.A.shape[0]
+
+    @property
+    def n_inputs(self) -> int:
+        return self.B.shape[1]
+
+    @property
+    def n_outputs(self) -> int:
+        return self.C.shape[0]
+
+    def poles(self) -> np.ndarray:
+        """Eigenvalues of ``A`` (inside the unit circle for an asymptotically stable model)."""
+        return np.linalg.eigvals(self.A)
+
+    def initial_state(self, x0: np.ndarray, u0: np.ndarray | None = None) -> np.ndarray:
+        """``z_0 = x_0 - E u_0`` from a model state ``x_0`` and the first input sample."""
+        x0 = np.asarray(x0, dtype=float).ravel()
+        if x0.size != self.n_states:
+            raise ValueError(f"x0 has {x0.size} entries, expected {self.n_states}")
+        if self.input_offset is None or self.n_inputs == 0:
+            return x0
+        return x0 - self.input_offset @ self._input(u0)
+
+    def _input(self, u) -> np.ndarray:
+        m = self.n_inputs
+        if u is None:
+            return np.zeros(m)
+        u = np.atleast_1d(np.asarray(u, dtype=float)).ravel()
+        if u.size != m:
+            raise ValueError(f"input has {u.size} entries, expected {m}")
+        return u
+
+    # -- evaluation ---------------------------------------------------------------------
+    def simulate(self, inputs: np.ndarray | None, z0: np.ndarray, n_steps: int | None = None):
+        """``(Y, Z)``: outputs (p, K) and states (n_z, K) for input samples (m, K).
+
+        Without inputs (``m = 0`` or ``None``) give ``n_steps``: ``K = n_steps + 1``.
+        """
+        m = self.n_inputs
+        if inputs is None:
+            if n_steps is None:
+                raise ValueError("without inputs, give n_steps")
+            U = np.zeros((m, n_steps + 1))
+        else:
+            U = np.atleast_2d(np.asarray(inputs, dtype=float))
+            if U.shape[0] != m:
+                raise ValueError(f"inputs have {U.shape[0]} rows, expected m = {m}")
+        K = U.shape[1]
+        Z = np.empty((self.n_states, K))
+        Z[:, 0] = np.asarray(z0, dtype=float).ravel()
+        BU = self.B @ U
+        for k in range(K - 1):
+            Z[:, k + 1] = self.A @ Z[:, k] + BU[:, k]
+        return self.C @ Z + self.D @ U, Z
+
+    def predict(self, z0: np.ndarray, inputs: np.ndarray | None = None, n_steps: int | None = None):
+        """(p, K) outputs for input samples (m, K) from ``z_0`` (the protocol's ``predict``)."""
+        return self.simulate(inputs, z0, n_steps)[0]
+
+    def stepper(self, z0: np.ndarray, u0: np.ndarray | None = None) -> "StateSpaceStepper":
+        """A :class:`StateSpaceStepper` at ``z_0`` with the input sample ``u_0``."""
+        return StateSpaceStepper(self, z0, u0)
+
+    def to_control(self):
+        """The python-control ``StateSpace(A, B, C, D, dt)`` (needs the ``control`` package)."""
+        import control
+
+        return control.ss(self.A, self.B, self.C, self.D, self.dt)
+
+    # -- storage ------------------------------------------------------------------------
+    def save(self, path) -> None:
+        """Write the matrices, ``dt``, the input offset and the metadata to HDF5."""
+        import h5py
+
+        with h5py.File(path, "w") as f:
+            f.attrs["format"] = "femrom.DiscreteStateSpace"
+            f.attrs["version"] = 1
+            f.attrs["dt"] = self.dt
+            f.attrs["metadata"] = dumps(self.metadata)
+            for name in ("A", "B", "C", "D"):
+                f.create_dataset(name, data=getattr(self, name))
+            if self.input_offset is not None:
+                f.create_dataset("input_offset", data=self.input_offset)
+
+    @classmethod
+    def load(cls, path) -> "DiscreteStateSpace":
+        import h5py
+
+        with h5py.File(path, "r") as f:
+            if f.attrs.get("format") != "femrom.DiscreteStateSpace":
+                raise ValueError(f"{path} is not a femrom DiscreteStateSpace file")
+            arrays = {name: f[name][()] for name in ("A", "B", "C", "D")}
+            offset = f["input_offset"][()] if "input_offset" in f else None
+            return cls(**arrays, dt=float(f.attrs["dt"]), input_offset=offset,
+                       metadata=json.loads(f.attrs["metadata"]))
+
+
+class StateSpaceStepper:
+    """One step at a time: ``y_{k+1} = step(u_{k+1})`` (the input sample at the new time).
+
+    ``z_{k+1} = A z_k + B u_k`` uses the previous sample, the output
+    ``y_{k+1} = C z_{k+1} + D u_{k+1}`` the new one, so a closed loop feeds the
+    input it decides for ``t_{k+1}`` and reads the output there.
+    """
+
+    def __init__(self, model: DiscreteStateSpace, z0, u0=None):
+        self.model = model
+        self.z = np.asarray(z0, dtype=float).ravel().copy()
+        self.u = model._input(u0)
+        self.k = 0
+
+    @property
+    def output(self) -> np.ndarray:
+        """``y_k`` at the current state and input."""
+        return self.model.C @ self.z + self.model.D @ self.u
+
+    def step(self, u=None) -> np.ndarray:
+        """Advance to ``t_{k+1}`` with the input sample ``u_{k+1}``; return ``y_{k+1}``."""
+        m = self.model
+        self.z = m.A @ self.z + m.B @ self.u
+        self.u = m._input(u)
+        self.k += 1
+        return self.output

@@ -1,0 +1,149 @@
+"""Effects: what a scene may list under ``[effects]``, one registered class each.
+
+An effect is one :class:`Effect` subclass in one module of
+:mod:`femrom.scene.effects` (found there by :func:`registered_effects`), or anywhere else
+once decorated with :func:`register_effect`. It declares its TOML options
+with their defaults (and the choices of the enumerated ones), the part of
+the system it provides, and :meth:`Effect.assemble`, which adds exactly that
+part to an :class:`Assembly`. The builder runs the listed effects in order of
+:attr:`Effect.stage` and nothing else, so an effect a scene does not list is
+never assembled.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import importlib
+import pkgutil
+import time
+from dataclasses import dataclass, field
+from typing import Any, ClassVar
+
+import numpy as np
+
+from femrom.scene._errors import SceneError
+
+#: What an effect provides to the system (``mass`` and ``stiffness``: exactly one effect each).
+PROVIDES = ("mass", "stiffness", "damping", "inputs", "load", "nonlinear")
+
+_REGISTRY: dict[str, type["Effect"]] = {}
+_DISCOVERED = False
+
+
+class Effect:
+    """One physical effect of a scene (a term of ``M q'' + C q' + K q + f_nl = B u + f_0``).
+
+    Class attributes
+    ----------------
+    name : str
+        The key under ``[effects]``.
+    options : dict
+        Option names and defaults (the only keys the scene may give).
+    choices : dict
+        For enumerated options, the valid values (checked when the scene is read).
+    provides : str
+        One of :data:`PROVIDES`.
+    stage : int
+        Assembly order: 0 mass, 1 stiffness, 2 what needs them (damping),
+        3 forcing, 4 nonlinear forces.
+    """
+
+    name: ClassVar[str] = ""
+    options: ClassVar[dict[str, Any]] = {}
+    choices: ClassVar[dict[str, tuple]] = {}
+    provides: ClassVar[str] = ""
+    stage: ClassVar[int] = 0
+
+    @classmethod
+    def check(cls, options: dict) -> None:
+        """Raise :class:`SceneError` for a bad option value (called when the scene is read)."""
+        for key, valid in cls.choices.items():
+            if options.get(key) not in valid:
+                raise SceneError(f"[effects.{cls.name}] unknown {key} {options.get(key)!r}; "
+                                 f"valid: {', '.join(map(str, valid))}")
+
+    def assemble(self, build: "Assembly", options: dict) -> None:
+        """Add this effect's part to ``build``."""
+        raise NotImplementedError
+
+
+def register_effect(cls: type[Effect]) -> type[Effect]:
+    """Class decorator: a scene may list ``cls.name`` under ``[effects]``."""
+    if not cls.name:
+        raise ValueError(f"effect class {cls.__name__} has no name")
+    if cls.provides not in PROVIDES:
+        raise ValueError(f"effect {cls.name!r} provides {cls.provides!r}; valid: {', '.join(PROVIDES)}")
+    _REGISTRY[cls.name] = cls
+    return cls
+
+
+def registered_effects() -> dict[str, type[Effect]]:
+    """The registered effects by name, in assembly order (the built-in modules are imported once)."""
+    global _DISCOVERED
+    if not _DISCOVERED:
+        _DISCOVERED = True
+        package = importlib.import_module("femrom.scene.effects")
+        for module in pkgutil.iter_modules(package.__path__):
+            importlib.import_module(f"{package.__name__}.{module.name}")
+    return dict(sorted(_REGISTRY.items(), key=lambda item: (item[1].stage, item[0])))
+
+
+def effect_class(name: str) -> type[Effect]:
+    """The effect registered as ``name``, or a SceneError listing the valid ones."""
+    known = registered_effects()
+    if name not in known:
+        raise SceneError(f"unknown effect {name!r}; valid effects: {', '.join(known)}")
+    return known[name]
+
+
+@dataclass(eq=False)
+class Assembly:
+    """The system under construction: what the effects fill in, on the free dofs.
+
+    Attributes
+    ----------
+    scene : Scene
+    space : LineSpace or SolidSpace
+        Operators, loads and boundary data in the full dof numbering.
+    condensation : Condensation
+        Maps full-numbering matrices and vectors to the free dofs.
+    timings : dict
+        Seconds per stage (filled by :meth:`timed`).
+    mass, stiffness, damping : (n, n) sparse or None
+    input_matrix : (n, m) ndarray or None
+    inputs : callable or None
+    load : (n,) ndarray or None
+    nonlinear_forces : list of NonlinearForce
+    """
+
+    scene: Any
+    space: Any
+    condensation: Any
+    timings: dict = field(default_factory=dict)
+    mass: Any = None
+    stiffness: Any = None
+    damping: Any = None
+    input_matrix: Any = None
+    inputs: Any = None
+    load: np.ndarray | None = None
+    nonlinear_forces: list = field(default_factory=list)
+
+    @property
+    def n_free(self) -> int:
+        return self.condensation.n_free
+
+    @contextlib.contextmanager
+    def timed(self, name: str):
+        """Add the wall time of the block to ``timings[name]``."""
+        tic = time.perf_counter()
+        try:
+            yield
+        finally:
+            self.timings[name] = self.timings.get(name, 0.0) + time.perf_counter() - tic
+
+    def require(self, what: str, by: str):
+        """The already assembled ``mass`` or ``stiffness`` that effect ``by`` needs."""
+        value = getattr(self, what)
+        if value is None:
+            raise SceneError(f"the {by!r} effect needs the {what} (list its effect)")
+        return value

@@ -1,0 +1,1 @@
+"""The built-in effects, one module each; :func:`femrom.scene.effects` finds every module here."""

@@ -1,0 +1,32 @@
+"""``actuation``: the input columns ``B`` and signals ``u(t)`` of the scene's ``[[inputs]]``."""
+
+import numpy as np
+
+from femrom.scene._effects import Effect, register_effect
+
+
+class SignalVector:
+    """``u(t) = [s_1(t), ..., s_m(t)]``."""
+
+    def __init__(self, signals):
+        self.signals = tuple(signals)
+
+    def __call__(self, t):
+        return np.array([float(s(t)) for s in self.signals])
+
+
+@register_effect
+class Actuation(Effect):
+    """``B u(t)``: one column per ``[[inputs]]`` entry, the sum of its load patterns."""
+
+    name = "actuation"
+    provides = "inputs"
+    stage = 3
+
+    def assemble(self, build, options):
+        space, condensation = build.space, build.condensation
+        with build.timed("inputs"):
+            columns = [condensation.vector(sum(space.load_vector(load) for load in i.loads))
+                       for i in build.scene.inputs]
+            build.input_matrix = np.column_stack(columns)
+            build.inputs = SignalVector(i.signal for i in build.scene.inputs)
