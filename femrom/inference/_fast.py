@@ -583,7 +583,12 @@ def _gap_estimate(problem: GramProblem, X: np.ndarray, options: FastOptions, inf
     for b, s, Lam in zip(problem.blocks, problem.slices(), multipliers):
         shift = b.shift if b.structure == "psd" else 0.0
         gap += float(np.sum(Lam * (Xd[:, s] - shift * np.eye(r))))
-    return relative_gap(max(gap, 0.0), problem.objective(X), problem)
+    f = problem.objective(X)
+    if gap < -max(1e-10 * abs(f), np.finfo(float).eps * abs(problem.target)):
+        # f(X) - g(Lambda) >= f(X) - f* >= 0 for an exact dual value: a negative one means
+        # the inner solve for X' was not accurate (a singular G), so nothing is certified
+        return np.inf
+    return relative_gap(max(gap, 0.0), f, problem)
 
 
 def _admm(problem: GramProblem, start, options: FastOptions, info):
