@@ -50,11 +50,15 @@ def load_case(name: str):
 
 def run_scene_file(path: Path, out_dir: Path) -> dict:
     """Build and integrate a scene; write outputs.npz, metrics.json and response.png."""
-    from femrom.integrators import simulate
+    from femrom.integrators import scheme_for, simulate
     from femrom.post import plot_response, write_metrics
-    from femrom.scene import Scene, build
+    from femrom.scene import Scene, SceneError, build
 
     scene = Scene.from_toml(path)
+    try:   # the scheme is checked here, before the mesh and the assembly
+        scheme_for(scene.time)
+    except ValueError as exc:
+        raise SceneError(f"{path}: {exc}") from None
     tic = time.perf_counter()
     model = build(scene)
     build_seconds = time.perf_counter() - tic

@@ -210,3 +210,21 @@ def test_cli_reports_a_bad_scene_in_one_line(tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0 and "unknown effect 'wobble'" in err
     assert not (tmp_path / "out").exists()  # nothing written half-way
+
+
+def test_cli_reports_an_unknown_integrator_before_building(tmp_path, capsys, monkeypatch):
+    import femrom.scene
+
+    def forbidden(*args, **kwargs):
+        raise AssertionError("the scene was built before its integrator was checked")
+
+    monkeypatch.setattr(femrom.scene, "build", forbidden)
+    scene = tmp_path / "rk4.toml"
+    scene.write_text('[structure]\ngeometry = "beam_line"\nelement = "hermite"\n[material]\n'
+                     'youngs_modulus = 1.0\ndensity = 1.0\narea = 1.0\nsecond_moment = 1.0\n'
+                     '[effects]\ninertia = {}\nbending = {}\n[time]\nt_end = 1.0\ndt = 0.1\n'
+                     'integrator = "rk4"\n')
+    assert main(["run", str(scene), "-o", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "rk4.toml: unknown integrator 'rk4' in [time]; valid: central_difference" in err
+    assert not (tmp_path / "out").exists()

@@ -115,21 +115,26 @@ class ProjectedNonlinearForce(ReducedTerm):
 
         A stateful force is evaluated in column order, its state starting
         afresh at each index of ``starts`` (trajectory beginnings) and
-        committed after every column.
+        committed after every later column: column ``k`` sees the state
+        committed at column ``k - 1``, as a step of the integrators does. The
+        columns must be consecutive steps (a state committed at skipped steps
+        cannot be recovered from the kept ones).
         """
         K = Q.shape[1]
         W = self._local
         if not self.stateful and W is not None and getattr(self.force_model, "columns", False):
             return W.T @ self.force_model.local_force(W @ Q, None if Vel is None else W @ Vel, None)
         out = np.empty((self.r, K))
-        starts = set(int(s) for s in starts)
+        starts = set(int(s) for s in starts) | {0}
         state = None
         for k in range(K):
-            if k in starts or k == 0:
-                state = self.initial_state()
             v = None if Vel is None else Vel[:, k]
+            if k in starts:
+                state = self.initial_state()
             out[:, k] = self.force(Q[:, k], v, state)
-            if self.stateful:
+            if self.stateful and k not in starts:
+                # as the integrators do: the state frozen during the step to column k is the
+                # one committed after the step before it (the initial state is not committed)
                 state = self.commit(Q[:, k], v, state)
         return out
 

@@ -1,5 +1,7 @@
 """``nonlinear_potential``: an on-site potential ``int phi(u) dx`` on every node."""
 
+import numpy as np
+
 from femrom import fem
 from femrom.scene._effects import Effect, register_effect
 from femrom.scene._errors import SceneError
@@ -37,7 +39,7 @@ class NonlinearPotential(Effect):
                 weights = 0.0 * lumped
                 weights[dofs] = lumped[dofs] / build.scene.material.density
             weights = options["coefficient"] * condensation.vector(weights)
-            on = (weights != 0.0).nonzero()[0]
+            on = (np.abs(weights) > 1e-12 * np.abs(weights).max()).nonzero()[0]
             placement = {} if on.size == weights.size else {"dofs": on, "n_dofs": weights.size}
             kind = KINDS[options["kind"]]
             if kind == "sine_gordon":
