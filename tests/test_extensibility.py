@@ -9,6 +9,7 @@ import scipy.sparse as sp
 from _constant_load import ConstantLoad
 from femrom.fem import ForceSum, JenkinsForce, LocalPotential
 from femrom.inference import (
+    TERMS,
     LagrangianOpInf,
     ProjectedNonlinearForce,
     SecondOrderOpInf,
@@ -105,13 +106,11 @@ def test_galerkin_refuses_an_effect_no_term_projects():
     ops = galerkin(system, np.eye(8))
     assert [t.name for t in ops.terms] == ["mass", "stiffness"]
     with pytest.raises(ValueError, match="no registered reduced term projects the system's load"):
-        from femrom.inference import _terms  # the registry without the test's term
-
-        saved = _terms._REGISTRY.pop("constant_load")
+        saved = TERMS.remove("constant_load")            # the registry without the test's term
         try:
             galerkin(SecondOrderSystem(mass=M, stiffness=K, load=np.ones(8)), np.eye(8))
         finally:
-            _terms._REGISTRY["constant_load"] = saved
+            TERMS.add("constant_load", saved)
 
 
 def test_learners_are_found_by_name_and_fit_only_named_terms():
@@ -161,10 +160,12 @@ def test_condensed_newton_gives_the_full_newton_trajectory_with_one_factorisatio
     assert condensed.details["newton"] == "condensed" and condensed.details["condensed_coordinates"] == 7
     assert full.n_factorizations == full.newton_iterations > 600      # one per iteration
     assert condensed.n_factorizations == 1                             # the linear step, once
-    # both stop after 1-3 iterations a step (their tests differ: the full residual against
-    # the Schur system's, in force units both); the piecewise-linear slip law costs the extra ones
-    for summary in (full, condensed):
-        assert 600 <= summary.newton_iterations <= 3 * 600
+    # full Newton: 1-3 iterations a step; the condensed one keeps its factorised (7, 7)
+    # tangent while it contracts (measured: one factorisation in 600 steps, 4-5 chord
+    # iterations a step), the same stopping test in force units
+    assert 600 <= full.newton_iterations <= 3 * 600
+    assert 600 <= condensed.newton_iterations <= 8 * 600
+    assert 1 <= condensed.details["local_factorizations"] <= 60
 
 
 def test_auto_condenses_a_force_on_few_dofs_and_not_one_on_every_dof():

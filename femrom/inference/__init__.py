@@ -43,6 +43,7 @@ from femrom.inference._hamiltonian import (
     symmetric_lyapunov_fit,
 )
 from femrom.inference._learner import (
+    LEARNERS,
     Learner,
     Regularization,
     learner_class,
@@ -54,6 +55,7 @@ from femrom.inference._problem import Block, GramProblem
 from femrom.inference._sdp import CONIC_SOLVERS, solve_conic
 from femrom.inference._second_order import SOLVERS, ErrorSplit, SecondOrderLearner
 from femrom.inference._terms import (
+    TERMS,
     VARIABLES,
     LinearTerm,
     ReducedTerm,
@@ -73,8 +75,8 @@ from femrom.inference.terms.projected_force import ProjectedNonlinearForce
 from femrom.inference.terms.stiffness import Stiffness
 
 __all__ = [
-    "CONIC_SOLVERS", "DERIVATIVE_SOURCES", "GRADIENT_DATA", "HAMILTONIAN_DERIVATIVE_SOURCES", "SOLVERS",
-    "VARIABLES", "Block", "CanonicalData", "Damping", "ErrorSplit", "FastOptions", "GalerkinProjection",
+    "CONIC_SOLVERS", "DERIVATIVE_SOURCES", "GRADIENT_DATA", "HAMILTONIAN_DERIVATIVE_SOURCES", "LEARNERS",
+    "SOLVERS", "TERMS", "VARIABLES", "Block", "CanonicalData", "Damping", "ErrorSplit", "FastOptions", "GalerkinProjection",
     "GramProblem", "HamiltonianErrorSplit", "HamiltonianOperators", "HamiltonianOpInf", "Input",
     "LagrangianOpInf", "Learner", "LinearTerm", "Mass", "Output", "ProjectedNonlinearForce",
     "ProjectedPotential", "ReducedForces", "ReducedOperators", "ReducedTerm", "Regularization",

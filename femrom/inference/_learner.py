@@ -15,13 +15,13 @@ built-in ones are the modules of the package ``femrom.inference.learners``
 
 from __future__ import annotations
 
-import importlib
-import pkgutil
 from collections.abc import Mapping
 from typing import Any, ClassVar
 
-_REGISTRY: dict[str, type["Learner"]] = {}
-_DISCOVERED = False
+from femrom._registry import Registry
+
+#: The learners by short name (sorted).
+LEARNERS = Registry("learner", "femrom.inference.learners", order=lambda name, cls: name, valid="registered")
 
 
 class Learner:
@@ -54,30 +54,17 @@ class Learner:
 def register_learner(name: str):
     """Class decorator: the learner is known by ``name`` (``learner_class(name)``)."""
 
-    def decorate(cls):
-        _REGISTRY[name] = cls
-        return cls
-
-    return decorate
+    return LEARNERS.decorator(name)
 
 
 def registered_learners() -> dict[str, type[Learner]]:
     """The registered learners by name (the built-in modules are imported once)."""
-    global _DISCOVERED
-    if not _DISCOVERED:
-        _DISCOVERED = True
-        package = importlib.import_module("femrom.inference.learners")
-        for module in pkgutil.iter_modules(package.__path__):
-            importlib.import_module(f"{package.__name__}.{module.name}")
-    return dict(_REGISTRY)
+    return LEARNERS.items()
 
 
 def learner_class(name: str) -> type[Learner]:
     """The learner registered as ``name``, or a clear error listing the registered ones."""
-    known = registered_learners()
-    if name not in known:
-        raise ValueError(f"unknown learner {name!r}; registered: {', '.join(sorted(known))}")
-    return known[name]
+    return LEARNERS.get(name)
 
 
 class Regularization(Mapping):

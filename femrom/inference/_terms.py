@@ -33,19 +33,20 @@ terms: a new term is one class in one file.
 
 from __future__ import annotations
 
-import importlib
-import pkgutil
 from typing import Any, ClassVar
 
 import numpy as np
+
+from femrom._registry import Registry
 
 #: Data variables a linear term multiplies (``"1"``: a constant).
 VARIABLES = ("q", "v", "a", "u", "1")
 #: Structures a term can declare.
 STRUCTURES = ("spd", "psd", "symmetric", "free", "known", "gradient", "dissipative")
 
-_REGISTRY: dict[str, type["ReducedTerm"]] = {}
-_DISCOVERED = False
+#: The reduced terms by name, in equation order.
+TERMS = Registry("reduced term", "femrom.inference.terms", order=lambda name, cls: (cls.order, name),
+                 valid="registered")
 
 
 class ReducedTerm:
@@ -233,24 +234,15 @@ def register_term(cls: type[ReducedTerm]) -> type[ReducedTerm]:
         raise ValueError(f"term {cls.name!r} has structure {cls.structure!r}; valid: {', '.join(STRUCTURES)}")
     if issubclass(cls, LinearTerm) and cls.variable not in VARIABLES:
         raise ValueError(f"term {cls.name!r} multiplies {cls.variable!r}; valid: {', '.join(VARIABLES)}")
-    _REGISTRY[cls.name] = cls
+    TERMS.add(cls.name, cls)
     return cls
 
 
 def registered_terms() -> dict[str, type[ReducedTerm]]:
     """Every registered term class by name, in equation order (built-ins imported once)."""
-    global _DISCOVERED
-    if not _DISCOVERED:
-        _DISCOVERED = True
-        package = importlib.import_module("femrom.inference.terms")
-        for module in pkgutil.iter_modules(package.__path__):
-            importlib.import_module(f"{package.__name__}.{module.name}")
-    return dict(sorted(_REGISTRY.items(), key=lambda item: (item[1].order, item[0])))
+    return TERMS.items()
 
 
 def term_class(name: str) -> type[ReducedTerm]:
     """The term registered as ``name``, or a clear error listing the registered ones."""
-    known = registered_terms()
-    if name not in known:
-        raise ValueError(f"unknown reduced term {name!r}; registered: {', '.join(known)}")
-    return known[name]
+    return TERMS.get(name)

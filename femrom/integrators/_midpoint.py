@@ -86,7 +86,7 @@ class ImplicitMidpoint:
         else:
             # M (v_m - v) + h/2 [K q_m + C v_m + f(q_m, v_m) - B u] = 0 with q_m = q + h/2 v_m
             cache.nonlinear = ImplicitSolve(system, S, 0.5 * dt, 1.0, 0.5 * dt, make_solver, self.newton)
-            cache.details.update(cache.nonlinear.details)
+            cache.details = cache.nonlinear.details   # the same dict: running totals show in the summary
         return cache
 
     def step(self, system, cache: MidpointCache, t, q, v, a, state):

@@ -59,7 +59,7 @@ class _NewmarkFamily:
         else:
             cache.nonlinear = ImplicitSolve(system, S, (1.0 - af) * self.beta * dt * dt,
                                             (1.0 - af) * self.gamma * dt, 1.0, make_solver, self.newton)
-            cache.details.update(cache.nonlinear.details)
+            cache.details = cache.nonlinear.details   # the same dict: running totals show in the summary
         return cache
 
     def step(self, system, cache: NewmarkCache, t, q, v, a, state):

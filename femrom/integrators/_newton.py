@@ -58,6 +58,11 @@ class Newton:
     condense_memory : float
         Bytes the condensed step may keep for ``Z = S^-1 L^T`` (n x s); above
         it, each step solves once more with ``S`` instead.
+    refactor_ratio : float
+        A condensed step iterates with the (s, s) tangent at rest, factorised
+        once per ``dt``, while every iteration reduces the residual at least
+        by this factor, and refactorises at the current iterate otherwise;
+        ``0`` refactorises at every iteration (plain Newton).
     """
 
     rtol: float = 1e-10
@@ -66,7 +71,8 @@ class Newton:
     method: str = "auto"
     condense_max: int = 4000
     condense_fraction: float = 0.25
-    condense_memory: float = 2.0**30
+    condense_memory: float = 2.0**31
+    refactor_ratio: float = 0.1
 
     def __post_init__(self):
         if self.rtol < 0 or self.atol < 0 or (self.rtol == 0 and self.atol == 0):
@@ -76,9 +82,10 @@ class Newton:
             raise ValueError(f"Newton max_iterations must be >= 1, got {self.max_iterations}")
         if self.method not in NEWTON_METHODS:
             raise ValueError(f"unknown Newton method {self.method!r}; valid: {', '.join(NEWTON_METHODS)}")
-        if not (self.condense_max >= 1 and 0 < self.condense_fraction <= 1 and self.condense_memory >= 0):
+        if not (self.condense_max >= 1 and 0 < self.condense_fraction <= 1 and self.condense_memory >= 0
+                and 0 <= self.refactor_ratio < 1):
             raise ValueError("Newton needs condense_max >= 1, 0 < condense_fraction <= 1, "
-                             "condense_memory >= 0")
+                             "condense_memory >= 0, 0 <= refactor_ratio < 1")
 
 
 def solve_newton(residual: Callable, jacobian: Callable, x0: np.ndarray, make_solver: Callable,

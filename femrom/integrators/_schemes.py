@@ -8,7 +8,10 @@ its options from ``[time]``.
 
 from __future__ import annotations
 
-SCHEMES: dict[str, type] = {}
+from femrom._registry import Registry
+
+#: The full-order schemes by scene name (sorted); the integrators package registers its own.
+SCHEMES = Registry("integrator", order=lambda name, cls: name)
 
 
 def register_scheme(name: str):
@@ -17,7 +20,7 @@ def register_scheme(name: str):
     def decorate(cls):
         if not hasattr(cls, "from_config"):
             raise TypeError(f"scheme {cls.__name__} needs a from_config(time_config) classmethod")
-        SCHEMES[name] = cls
+        SCHEMES.add(name, cls)
         return cls
 
     return decorate
@@ -27,5 +30,5 @@ def scheme_for(time_config):
     """The scheme a scene's ``[time]`` names; one clear error for an unknown name."""
     name = time_config.integrator
     if name not in SCHEMES:
-        raise ValueError(f"unknown integrator {name!r} in [time]; valid: {', '.join(sorted(SCHEMES))}")
-    return SCHEMES[name].from_config(time_config)
+        raise ValueError(f"unknown integrator {name!r} in [time]; valid: {', '.join(SCHEMES.items())}")
+    return SCHEMES.get(name).from_config(time_config)

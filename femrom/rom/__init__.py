@@ -38,6 +38,7 @@ from femrom.rom._hamiltonian import (
 from femrom.rom._hyper import HyperReducedPotential, ecsw_weights, sparse_nnls
 from femrom.rom._model import ReducedSolution, SecondOrderROM
 from femrom.rom._schemes import (
+    REDUCED_SCHEMES,
     LinearParts,
     ReducedNewton,
     ReducedScheme,
@@ -51,7 +52,7 @@ from femrom.rom._steppers import ReducedStepper, run_linear
 from femrom.rom.schemes.verlet import verlet_bound
 
 __all__ = [
-    "HAMILTONIAN_SCHEMES", "DiscreteStateSpace", "HamiltonianROM", "HamiltonianSolution", "HamiltonianStepper",
+    "HAMILTONIAN_SCHEMES", "REDUCED_SCHEMES", "DiscreteStateSpace", "HamiltonianROM", "HamiltonianSolution", "HamiltonianStepper",
     "HyperReducedPotential", "LazyFields", "LinearParts", "ReducedModel", "ReducedNewton", "ReducedScheme",
     "ReducedSolution", "ReducedStepper", "RegularizationScore", "SecondOrderROM", "StateSpaceStepper",
     "ecsw_weights", "hamiltonian_step_matrix", "reduced_scheme", "register_reduced_scheme",

@@ -17,16 +17,16 @@ in one module of the package ``femrom.rom.schemes`` (found by
 
 from __future__ import annotations
 
-import importlib
-import pkgutil
 from dataclasses import dataclass
 from typing import ClassVar
 
 import numpy as np
 import scipy.linalg as sl
 
-_REGISTRY: dict[str, type["ReducedScheme"]] = {}
-_DISCOVERED = False
+from femrom._registry import Registry
+
+#: The reduced schemes by name (sorted).
+REDUCED_SCHEMES = Registry("reduced scheme", "femrom.rom.schemes", order=lambda name, cls: name)
 
 
 @dataclass(frozen=True, eq=False)
@@ -119,24 +119,15 @@ def register_reduced_scheme(cls: type[ReducedScheme]) -> type[ReducedScheme]:
         raise ValueError(f"scheme class {cls.__name__} has no name")
     if cls.input_time not in ("end", "mid"):
         raise ValueError(f"scheme {cls.name!r}: input_time must be 'end' or 'mid'")
-    _REGISTRY[cls.name] = cls
+    REDUCED_SCHEMES.add(cls.name, cls)
     return cls
 
 
 def registered_schemes() -> dict[str, type[ReducedScheme]]:
     """The registered reduced schemes by name (the built-in modules imported once)."""
-    global _DISCOVERED
-    if not _DISCOVERED:
-        _DISCOVERED = True
-        package = importlib.import_module("femrom.rom.schemes")
-        for module in pkgutil.iter_modules(package.__path__):
-            importlib.import_module(f"{package.__name__}.{module.name}")
-    return dict(_REGISTRY)
+    return REDUCED_SCHEMES.items()
 
 
 def reduced_scheme(name: str) -> ReducedScheme:
     """An instance of the scheme registered as ``name``; a clear error otherwise."""
-    known = registered_schemes()
-    if name not in known:
-        raise ValueError(f"unknown reduced scheme {name!r}; valid: {', '.join(sorted(known))}")
-    return known[name]()
+    return REDUCED_SCHEMES.get(name)()

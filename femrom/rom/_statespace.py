@@ -26,6 +26,16 @@ import numpy as np
 from femrom._json import dumps
 
 
+def input_sample(u, m: int) -> np.ndarray:
+    """(m,) ndarray of one input sample (zeros for ``None``); one clear error for a wrong size."""
+    if u is None:
+        return np.zeros(m)
+    u = np.atleast_1d(np.asarray(u, dtype=float)).ravel()
+    if u.size != m:
+        raise ValueError(f"input has {u.size} entries, expected {m}")
+    return u
+
+
 @dataclass(frozen=True, eq=False)
 class DiscreteStateSpace:
     r"""``z_{k+1} = A z_k + B u_k``, ``y_k = C z_k + D u_k`` with sampling time ``dt``.
@@ -95,13 +105,7 @@ class DiscreteStateSpace:
         return x0 - self.input_offset @ self._input(u0)
 
     def _input(self, u) -> np.ndarray:
-        m = self.n_inputs
-        if u is None:
-            return np.zeros(m)
-        u = np.atleast_1d(np.asarray(u, dtype=float)).ravel()
-        if u.size != m:
-            raise ValueError(f"input has {u.size} entries, expected {m}")
-        return u
+        return input_sample(u, self.n_inputs)
 
     # -- evaluation ---------------------------------------------------------------------
     def simulate(self, inputs: np.ndarray | None, z0: np.ndarray, n_steps: int | None = None):

@@ -15,6 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from femrom.rom._schemes import LinearParts, ReducedNewton
+from femrom.rom._statespace import input_sample
 
 
 def run_linear(A: np.ndarray, x0: np.ndarray, n_steps: int, forcing: np.ndarray | None):
@@ -99,13 +100,7 @@ class ReducedStepper:
                 self.a = None
 
     def _input(self, u) -> np.ndarray:
-        m = 0 if self.input_matrix is None else self.input_matrix.shape[1]
-        if u is None:
-            return np.zeros(m)
-        u = np.atleast_1d(np.asarray(u, dtype=float)).ravel()
-        if u.size != m:
-            raise ValueError(f"input has {u.size} entries, the model has {m} inputs")
-        return u
+        return input_sample(u, 0 if self.input_matrix is None else self.input_matrix.shape[1])
 
     def force(self, u) -> np.ndarray:
         """(r,) ``F = B^ u + f^_0``."""

@@ -18,13 +18,13 @@ from femrom.scene._config import (
     StructureConfig,
     TimeConfig,
 )
-from femrom.scene._effects import Assembly, Effect, effect_class, register_effect, registered_effects
+from femrom.scene._effects import EFFECTS, Assembly, Effect, effect_class, register_effect, registered_effects
 from femrom.scene._errors import SceneError
 from femrom.scene._signals import Signal
 from femrom.scene._system import SecondOrderSystem
 
 __all__ = [
-    "Assembly", "BoundaryConfig", "Effect", "EffectConfig", "FullOrderModel", "InitialConfig",
+    "EFFECTS", "Assembly", "BoundaryConfig", "Effect", "EffectConfig", "FullOrderModel", "InitialConfig",
     "InputConfig", "LoadConfig", "MaterialConfig", "OutputConfig", "ProbeConfig", "Scene",
     "SceneError", "SecondOrderSystem", "Signal", "StructureConfig", "TimeConfig", "build",
     "effect_class", "register_effect", "registered_effects",

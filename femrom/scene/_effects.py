@@ -13,21 +13,21 @@ never assembled.
 from __future__ import annotations
 
 import contextlib
-import importlib
-import pkgutil
 import time
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
 import numpy as np
 
+from femrom._registry import Registry
 from femrom.scene._errors import SceneError
 
 #: What an effect provides to the system (``mass`` and ``stiffness``: exactly one effect each).
 PROVIDES = ("mass", "stiffness", "damping", "inputs", "load", "nonlinear")
 
-_REGISTRY: dict[str, type["Effect"]] = {}
-_DISCOVERED = False
+#: The effects by name, in assembly order (stage, then name).
+EFFECTS = Registry("effect", "femrom.scene.effects", order=lambda name, cls: (cls.stage, name),
+                   valid="valid effects")
 
 
 class Effect:
@@ -73,27 +73,21 @@ def register_effect(cls: type[Effect]) -> type[Effect]:
         raise ValueError(f"effect class {cls.__name__} has no name")
     if cls.provides not in PROVIDES:
         raise ValueError(f"effect {cls.name!r} provides {cls.provides!r}; valid: {', '.join(PROVIDES)}")
-    _REGISTRY[cls.name] = cls
+    EFFECTS.add(cls.name, cls)
     return cls
 
 
 def registered_effects() -> dict[str, type[Effect]]:
     """The registered effects by name, in assembly order (the built-in modules are imported once)."""
-    global _DISCOVERED
-    if not _DISCOVERED:
-        _DISCOVERED = True
-        package = importlib.import_module("femrom.scene.effects")
-        for module in pkgutil.iter_modules(package.__path__):
-            importlib.import_module(f"{package.__name__}.{module.name}")
-    return dict(sorted(_REGISTRY.items(), key=lambda item: (item[1].stage, item[0])))
+    return EFFECTS.items()
 
 
 def effect_class(name: str) -> type[Effect]:
     """The effect registered as ``name``, or a SceneError listing the valid ones."""
-    known = registered_effects()
-    if name not in known:
-        raise SceneError(f"unknown effect {name!r}; valid effects: {', '.join(known)}")
-    return known[name]
+    try:
+        return EFFECTS.get(name)
+    except ValueError as exc:
+        raise SceneError(str(exc)) from None
 
 
 @dataclass(eq=False)
