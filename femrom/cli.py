@@ -2,8 +2,11 @@
 
     femrom cases                      list the case scripts in cases/
     femrom run beam [case options]    run a named case (cases/beam.py)
-    femrom run my_scene.toml -o out/  run any scene file: outputs, energy, plot
+    femrom run my_scene.toml -o out/  run any scene file: outputs, energy, plot; with a
+                                      [rom] section the whole reduced-model study and report
     femrom info my_scene.toml         build the scene and print its sizes and effects
+    femrom sweep my_scene.toml -o out/ [--scheduler tcp://host:port] [--workers 2]
+                                      the scene's [sweep] runs as Dask tasks, into out/sweep.h5
 """
 
 from __future__ import annotations
@@ -49,16 +52,25 @@ def load_case(name: str):
 
 
 def run_scene_file(path: Path, out_dir: Path) -> dict:
-    """Build and integrate a scene; write outputs.npz, metrics.json and response.png."""
+    """Build and integrate a scene; write outputs.npz, metrics.json and response.png
+    (with a ``[rom]`` section: :func:`femrom.study.run_study`, the whole report)."""
     from femrom.integrators import scheme_for, simulate
     from femrom.post import plot_response, write_metrics
     from femrom.scene import Scene, SceneError, build
 
     scene = Scene.from_toml(path)
-    try:   # the scheme is checked here, before the mesh and the assembly
+    try:   # the scheme and the learners are checked here, before the mesh and the assembly
         scheme_for(scene.time)
     except ValueError as exc:
         raise SceneError(f"{path}: {exc}") from None
+    if scene.rom is not None:
+        from femrom.study import check_rom_config, run_study
+
+        try:
+            check_rom_config(scene.rom)
+        except SceneError as exc:
+            raise SceneError(f"{path}: {exc}") from None
+        return run_study(scene, out_dir, progress=lambda message: print(f"femrom: {message}", file=sys.stderr))
     tic = time.perf_counter()
     model = build(scene)
     build_seconds = time.perf_counter() - tic
@@ -79,6 +91,38 @@ def run_scene_file(path: Path, out_dir: Path) -> dict:
     return metrics
 
 
+def _sweep(args) -> int:
+    from femrom.scene import Scene, SceneError
+    from femrom.study import run_sweep
+
+    try:
+        scene = Scene.from_toml(args.scene)
+        if scene.sweep is None:
+            raise SceneError(f"{args.scene}: no [sweep] section (docs/scenes.md)")
+    except SceneError as exc:
+        print(f"femrom: {exc}", file=sys.stderr)
+        return 2
+    if args.workers < 1:
+        print(f"femrom: --workers must be >= 1, got {args.workers}", file=sys.stderr)
+        return 2
+    out = args.out or Path("results") / f"{args.scene.stem}_sweep"
+    summary = run_sweep(scene, out, scheduler=args.scheduler, n_workers=args.workers, keep_parts=args.keep_parts,
+                        progress=lambda message: print(f"femrom: {message}", file=sys.stderr))
+    print(f"{summary['scene']}: {summary['n_runs']} runs in {summary['wall_seconds']:.1f} s on "
+          f"{summary['scheduler']}; store {out / 'sweep.h5'}")
+    return 0
+
+
+def _study_line(metrics: dict) -> str:
+    """One line of a study's result: the first learned model's error at the largest r."""
+    r = max(metrics["ranks"])
+    rows = [x for x in metrics["roms"] if x["r"] == r]
+    row = next((x for x in rows if x["method"] != "galerkin"), rows[0])
+    return (f"{metrics['scene']}: {metrics['n_dofs']} dofs; {row['learner']} r={r} on the unseen "
+            f"{metrics['test'][0]}: output error {row['test_output_error']:.2e}, "
+            f"speedup {row['speedup']:.3g}x")
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     parser = argparse.ArgumentParser(prog="femrom", description=__doc__.split("\n")[0])
@@ -88,6 +132,12 @@ def main(argv: list[str] | None = None) -> int:
     run.add_argument("target", nargs="?")
     info = sub.add_parser("info", help="build a scene and print its size and effects")
     info.add_argument("scene", type=Path)
+    sweep = sub.add_parser("sweep", help="run a scene's [sweep] as Dask tasks into one snapshot store")
+    sweep.add_argument("scene", type=Path)
+    sweep.add_argument("-o", "--out", type=Path, help="output folder (default results/<scene>_sweep)")
+    sweep.add_argument("--scheduler", help="address of a running Dask scheduler (default: a LocalCluster)")
+    sweep.add_argument("--workers", type=int, default=2, help="LocalCluster worker processes (default 2)")
+    sweep.add_argument("--keep-parts", action="store_true", help="keep the per-run store files")
 
     if argv[:1] == ["run"]:
         args, rest = parser.parse_known_args(argv)
@@ -106,6 +156,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{model.scene.name}: {s.n_dofs} free dofs of {s.condensation.n_total}, "
               f"effects {', '.join(model.scene.effect_names)}; inputs {s.n_inputs}, outputs {s.n_outputs}")
         return 0
+    if args.command == "sweep":
+        return _sweep(args)
     # run
     if args.target is None or args.target in ("-h", "--help"):
         print("usage: femrom run CASE [case options] | femrom run SCENE.toml [-o OUT]")
@@ -123,8 +175,11 @@ def main(argv: list[str] | None = None) -> int:
         except SceneError as exc:
             print(f"femrom: {exc}", file=sys.stderr)
             return 2
-        print(f"{metrics['scene']}: {metrics['n_dofs']} dofs, {metrics['n_steps']} steps in "
-              f"{metrics['stepping_seconds']:.2f} s; results in {o.out}")
+        if "roms" in metrics:
+            print(_study_line(metrics) + f"; report in {o.out / 'report.md'}")
+        else:
+            print(f"{metrics['scene']}: {metrics['n_dofs']} dofs, {metrics['n_steps']} steps in "
+                  f"{metrics['stepping_seconds']:.2f} s; results in {o.out}")
         return 0
     module = load_case(args.target)
     return int(module.main(rest) or 0)

@@ -8,6 +8,8 @@ velocities; ``OutputRecorder`` holds ``p`` numbers per kept step, not ``n``).
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 
 _FIELDS = ("q", "v", "a")
@@ -175,3 +177,30 @@ class EnergyRecorder:
     @property
     def total(self) -> np.ndarray:
         return self.kinetic + self.potential
+
+
+class StepClock:
+    """Wall time of each step, the consumers' work excluded.
+
+    :func:`~femrom.integrators.simulate` (``clock=``) hands :attr:`arrival` the
+    step before any other consumer and :attr:`departure` after all of them, so
+    step ``k + 1`` took ``arrival[k + 1] - departure[k]``: the scheme's work only,
+    not recording outputs and energy or streaming fields to a store.
+    """
+
+    def __init__(self):
+        self._arrivals: list[float] = []
+        self._departures: list[float] = []
+
+    def arrival(self, result) -> None:
+        self._arrivals.append(time.perf_counter())
+
+    def departure(self, result) -> None:
+        self._departures.append(time.perf_counter())
+
+    @property
+    def step_seconds(self) -> np.ndarray:
+        """(n_steps,) ndarray: the wall time of steps 1, 2, ..."""
+        a, d = np.asarray(self._arrivals), np.asarray(self._departures)
+        n = min(a.size - 1, d.size)
+        return a[1:n + 1] - d[:n]

@@ -27,7 +27,7 @@ class SimulationResult:
 
 
 def simulate(model, *, dt: float | None = None, t_end: float | None = None, consumers=(),
-             progress: bool | None = None, solver=None) -> SimulationResult:
+             progress: bool | None = None, solver=None, clock=None) -> SimulationResult:
     """Integrate a :class:`~femrom.scene.FullOrderModel` over its time window.
 
     Only what ``[outputs]`` lists is recorded: probe/average outputs, the
@@ -36,7 +36,8 @@ def simulate(model, *, dt: float | None = None, t_end: float | None = None, cons
     ``solver`` is a factory ``solver(A, spd=...) -> LinearSolver`` in place of
     :func:`~femrom.fem.make_solver` with the scene's strategy, e.g. a
     :class:`~femrom.fem.SolverCache` shared by several runs so that they
-    factorise their common effective matrix once.
+    factorise their common effective matrix once. ``clock``, a
+    :class:`~femrom.integrators.StepClock`, times every step without the consumers.
     """
     scene, system = model.scene, model.system
     dt = scene.time.dt if dt is None else float(dt)
@@ -60,7 +61,8 @@ def simulate(model, *, dt: float | None = None, t_end: float | None = None, cons
     if solver is None:
         solver = functools.partial(make_solver, strategy=scene.time.solver, near_nullspace=near_nullspace)
     summary = integrate(system, scheme_for(scene.time), model.initial_displacement, model.initial_velocity,
-                        dt, n_steps, consumers=(*kept, *consumers), solver=solver, progress=progress)
+                        dt, n_steps,
+                        consumers=_clocked((*kept, *consumers), clock), solver=solver, progress=progress)
     times = dt * np.arange(0, n_steps + 1, every)
     fields = {}
     if trajectory is not None:
@@ -73,3 +75,7 @@ def simulate(model, *, dt: float | None = None, t_end: float | None = None, cons
         fields=fields,
         summary=asdict(summary),
     )
+
+
+def _clocked(consumers: tuple, clock) -> tuple:
+    return consumers if clock is None else (clock.arrival, *consumers, clock.departure)

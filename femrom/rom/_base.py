@@ -61,11 +61,16 @@ class ReducedModel:
 class LazyFields:
     """Full fields ``V x(t_k)`` of a reduced solution, rebuilt only on request.
 
-    For dataclasses with ``t`` (k,), ``basis`` (n, r) or ``None`` and the (r, k)
-    coordinate arrays named in ``FIELDS``.
+    For dataclasses with ``t`` (k,) (also :attr:`times`), ``basis`` (n, r) or
+    ``None`` and the (r, k) coordinate arrays named in ``FIELDS``.
     """
 
     FIELDS: tuple[str, ...] = ("q",)
+
+    @property
+    def times(self) -> np.ndarray:
+        """(k,) ndarray, the solution's times (``t``): the name full-order results use too."""
+        return self.t
 
     def _coordinates(self, which: str) -> np.ndarray:
         if self.basis is None:

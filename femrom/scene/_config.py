@@ -36,12 +36,14 @@ Example (``cases/beam.toml``)::
 from __future__ import annotations
 
 import tomllib
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 from femrom.scene._effects import effect_class
 from femrom.scene._errors import SceneError
+from femrom.scene._rom import RomConfig
+from femrom.scene._sweep import SweepConfig, with_parameters
 from femrom.scene._signals import Signal
 
 ELEMENTS = ("hermite", "p1", "p2")
@@ -308,7 +310,9 @@ class OutputConfig:
 
 @dataclass(frozen=True)
 class Scene:
-    """A complete scene: what to build, what to simulate, what to keep."""
+    """A complete scene: what to build, what to simulate, what to keep, and (``rom``, the
+    optional ``[rom]`` section, :class:`~femrom.scene.RomConfig`) which reduced models to learn,
+    and (``sweep``, :class:`~femrom.scene.SweepConfig`) which runs to sweep."""
 
     name: str
     structure: StructureConfig
@@ -320,10 +324,12 @@ class Scene:
     initial_conditions: InitialConfig = InitialConfig()
     outputs: OutputConfig = OutputConfig()
     description: str = ""
+    rom: RomConfig | None = None
+    sweep: SweepConfig | None = None
     source_text: str = field(default="", repr=False, compare=False)
 
     SECTIONS = ("name", "description", "structure", "material", "effects", "boundary",
-                "inputs", "initial_conditions", "time", "outputs")
+                "inputs", "initial_conditions", "time", "outputs", "rom", "sweep")
 
     @classmethod
     def from_dict(cls, data: dict, source_text: str = "") -> "Scene":
@@ -351,12 +357,18 @@ class Scene:
             initial_conditions=InitialConfig.from_dict(data.get("initial_conditions")),
             time=TimeConfig.from_dict(data["time"]),
             outputs=OutputConfig.from_dict(data.get("outputs")),
+            rom=None if data.get("rom") is None else RomConfig.from_dict(data["rom"], len(inputs)),
+            sweep=None if data.get("sweep") is None else SweepConfig.from_dict(data["sweep"], data),
             source_text=source_text,
         )
 
     @classmethod
     def from_toml(cls, path) -> "Scene":
-        """Load a scene file; errors name the file and the offending key."""
+        """Load a scene file; errors name the file and the offending key.
+
+        A geometry given as a relative ``.geo`` path is looked for next to the
+        scene file first (then in the working directory and ``meshes/``).
+        """
         path = Path(path)
         try:
             text = path.read_text()
@@ -367,13 +379,23 @@ class Scene:
         except tomllib.TOMLDecodeError as exc:
             raise SceneError(f"{path}: invalid TOML: {exc}") from None
         try:
-            return cls.from_dict(data, source_text=text)
+            scene = cls.from_dict(data, source_text=text)
         except SceneError as exc:
             raise SceneError(f"{path}: {exc}") from None
+        # a geometry file named relative to the scene file (a user's .geo next to the scene)
+        beside = path.parent / scene.structure.geometry
+        if scene.structure.geometry.endswith(".geo") and not Path(scene.structure.geometry).is_absolute() \
+                and beside.is_file():
+            scene = replace(scene, structure=replace(scene.structure, geometry=str(beside.resolve())))
+        return scene
 
     @property
     def effect_names(self) -> tuple[str, ...]:
         return tuple(e.name for e in self.effects)
+
+    def with_parameters(self, values) -> "Scene":
+        """The scene with a sweep point's ``(path, value)`` pairs set (:class:`SweepConfig`)."""
+        return with_parameters(self, values)
 
     def effect(self, name: str) -> EffectConfig | None:
         return next((e for e in self.effects if e.name == name), None)

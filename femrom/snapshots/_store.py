@@ -231,6 +231,61 @@ class SnapshotStore:
         return SnapshotWriter(self, trajectory, chunk_steps=chunk_steps, every=every,
                               n_steps=n_steps, dt=dt, scheme=scheme, fsync=fsync)
 
+    def import_trajectory(self, source, trajectory, name=None, *, attrs: dict | None = None,
+                          fsync: bool = False) -> str:
+        """Copy one complete trajectory of another store (same dofs and fields) into this one.
+
+        The copy is one layout change under the undo journal (:mod:`._journal`):
+        a kill leaves this store with the trajectory or without it, never with a
+        part. What :mod:`femrom.study`'s sweeps do with the stores their workers
+        wrote, one per run.
+
+        Parameters
+        ----------
+        source : str, Path or SnapshotStore
+        trajectory : str or int
+            The trajectory in ``source``.
+        name : str, optional
+            Its name here (default: the same).
+        attrs : dict, optional
+            Extra attributes of the copied trajectory (e.g. a sweep's parameters),
+            values str, int, float or bool.
+
+        Returns
+        -------
+        str
+            The new trajectory's name.
+        """
+        other = source if isinstance(source, SnapshotStore) else SnapshotStore.open(source)
+        try:
+            name = trajectory_name(trajectory if name is None else name)
+            if other.n_dofs != self.n_dofs or other.fields != self.fields:
+                raise SnapshotStoreError(f"{other.path}: {other.n_dofs} dofs and fields {other.fields} do not "
+                                         f"match {self.path}'s {self.n_dofs} and {self.fields}")
+            if not other.is_complete(trajectory):
+                raise SnapshotStoreError(f"{other.path}: trajectory {trajectory_name(trajectory)!r} is not complete")
+            source_path = other.path
+        finally:
+            if other is not source:
+                other.close()
+
+        def change_layout(f) -> None:
+            trajectories = f["trajectories"]
+            if name in trajectories:
+                raise SnapshotStoreError(f"{self.path}: trajectory {name!r} exists")
+            src, _ = _open_for_reading(source_path)
+            with src:
+                f.copy(src["trajectories"][trajectory_name(trajectory)], trajectories, name=name)
+            for key, value in (attrs or {}).items():
+                trajectories[name].attrs[key] = value
+
+        class _Import:  # this store's writer while the layout changes
+            trajectory = name
+
+        self._open_for_writing(_Import, change_layout, fsync=fsync)
+        self._writer_closed()
+        return name
+
     def _open_for_writing(self, writer, change_layout, *, fsync: bool = False) -> h5py.File:
         """Make ``writer`` this store's writer and return the file, open in SWMR write mode.
 

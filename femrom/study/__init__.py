@@ -1,0 +1,55 @@
+"""Reduced-model studies: FOM runs -> snapshot store -> basis -> learned and Galerkin ROMs -> errors, costs, report.
+
+What the case scripts share, for any scene (``femrom run scene.toml`` with a
+``[rom]`` section calls :func:`run_study`):
+
+- runs: :func:`run_fom` (one model, any input signals, fields streamed to a
+  store, each step timed without the consumers), :class:`FOMRun`,
+  :func:`solver_factory` (one factorisation for all runs of one ``dt``);
+- the study's steps: :func:`fom_runs`, :func:`pod_basis`, :func:`reduce_runs`,
+  :func:`training_data`, :func:`fit_rom`, :func:`evaluate`, :func:`rom_costs`,
+  :func:`study_rows`;
+- metrics: :func:`relative_error`, :func:`mass_norm`, :class:`Projection`
+  (exact field errors at every r from one pass), :func:`energy_ratio`;
+- costs: :class:`Cost` (median and quartiles of timed blocks),
+  :func:`blocked_cost`, :func:`repeated_costs` (interleaved);
+- the FOM's accuracy against its cost: :func:`time_step_ladder`;
+- sweeps: :func:`run_sweep` (a scene's ``[sweep]`` as Dask tasks, one store file
+  per run, merged into one store; a killed worker's run reruns elsewhere);
+- figures and report: :func:`plot_outputs`, :func:`plot_errors`,
+  :func:`plot_energy`, :func:`plot_accuracy_cost`, :func:`render_fields`,
+  :func:`write_report`.
+"""
+
+from femrom.study._figures import plot_accuracy_cost, plot_energy, plot_errors, plot_outputs, render_fields
+from femrom.study._ladders import time_step_ladder
+from femrom.study._metrics import Projection, energy_ratio, mass_norm, relative_error
+from femrom.study._pipeline import ROW_COLUMNS, StudyState, peak_rss_gb, public_rows, run_study, write_report
+from femrom.study._runs import FOMRun, SignalInputs, run_fom, solver_factory
+from femrom.study._study import (
+    Evaluation,
+    check_rom_config,
+    evaluate,
+    fit_rom,
+    fom_runs,
+    operator_checks,
+    pod_basis,
+    product_matrix,
+    reduce_runs,
+    rom_cost,
+    rom_costs,
+    study_learners,
+    study_rows,
+    training_data,
+)
+from femrom.study._sweep import SweepRun, run_sweep, run_sweep_point, sweep_runs
+from femrom.study._timing import Cost, blocked_cost, repeated_cost, repeated_costs
+
+__all__ = [
+    "ROW_COLUMNS", "SweepRun", "Cost", "Evaluation", "FOMRun", "Projection", "StudyState", "SignalInputs", "blocked_cost", "check_rom_config",
+    "energy_ratio", "evaluate", "fit_rom", "fom_runs", "mass_norm", "operator_checks", "peak_rss_gb",
+    "plot_accuracy_cost", "plot_energy", "plot_errors", "plot_outputs", "pod_basis", "product_matrix",
+    "public_rows", "reduce_runs", "relative_error", "render_fields", "repeated_cost", "repeated_costs", "rom_cost", "rom_costs", "run_fom",
+    "run_study", "run_sweep", "run_sweep_point", "solver_factory", "sweep_runs", "study_learners", "study_rows", "time_step_ladder", "training_data",
+    "write_report",
+]

@@ -1,0 +1,272 @@
+r"""A reduced-model study of one built model: FOM runs -> store -> POD -> fitted ROMs -> tests.
+
+The steps, each a function usable on its own:
+
+1. :func:`fom_runs`: every training and test run of a :class:`~femrom.scene.RomConfig`,
+   fields streamed into one snapshot store (one factorisation for all runs of one ``dt``);
+2. :func:`pod_basis`: a POD basis of the training displacements, orthonormal in the mass
+   (or Euclidean) product, by the out-of-core randomized SVD reading the store;
+3. :func:`reduce_runs`: one pass per run over the store: the training data in the
+   largest basis, every run's :class:`Projection` (for exact field errors at every r);
+4. :func:`fit_rom`: the ROM of one learner at one r (``galerkin``: the intrusive
+   projection; any registered second-order learner: from reduced data only);
+5. :func:`evaluate`: output error, field error, energy over an extended window, and
+   :func:`rom_costs`: the ROMs' seconds per step by interleaved repetition.
+
+:func:`study_rows` runs 4 and 5 over ranks and learners; every row has
+``r``, ``learner`` (the label), ``fit_seconds``, per run ``errors[run]``, and the
+first training and test run's errors flattened as ``train_*`` / ``test_*``.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from femrom.basis import POD
+from femrom.inference import SecondOrderLearner, concatenate, learner_class, project_columns, \
+    reduce_snapshots, registered_learners
+from femrom.linalg import store_source
+from femrom.rom import SecondOrderROM
+from femrom.scene import RomConfig, SceneError
+from femrom.study._metrics import Projection, energy_ratio, relative_error
+from femrom.study._runs import FOMRun, run_fom, solver_factory
+from femrom.study._timing import Cost, repeated_costs
+
+GALERKIN = "galerkin"
+
+
+def study_learners() -> tuple[str, ...]:
+    """The names a ``[rom]`` section may use: ``galerkin`` and every registered second-order learner."""
+    return (GALERKIN, *(name for name, cls in registered_learners().items()
+                        if name != GALERKIN and issubclass(cls, SecondOrderLearner)))
+
+
+def check_rom_config(config: RomConfig) -> None:
+    """Learner names against the registry (one SceneError naming the culprit), before anything is built."""
+    valid = study_learners()
+    for i, spec in enumerate(config.learners):
+        if spec.learner in valid:
+            continue
+        known = registered_learners()
+        if spec.learner in known:
+            raise SceneError(f"[rom.learners[{i}]] {spec.learner!r} fits {known[spec.learner].model} models, "
+                             f"not second-order ones; the [rom] pipeline takes: {', '.join(valid)}")
+        raise SceneError(f"[rom.learners[{i}]] unknown learner {spec.learner!r}; valid: {', '.join(valid)}")
+
+
+def product_matrix(system, config: RomConfig):
+    """``W`` of the basis: the mass matrix, or ``None`` (Euclidean)."""
+    return system.mass if config.basis.product == "mass" else None
+
+
+def fom_runs(model, config: RomConfig, store, *, progress=None) -> dict[str, FOMRun]:
+    """Every run of ``config`` (training first), fields streamed into ``store``.
+
+    Runs with the scene's ``dt`` share one factorisation of the effective matrix;
+    the factor is freed at the end.
+    """
+    solver = solver_factory(model)
+    runs = {}
+    specs = (*config.train, *config.test)
+    for k, spec in enumerate(specs):
+        if progress:
+            progress(f"FOM run {k + 1}/{len(specs)}: {spec.name}")
+        runs[spec.name] = run_fom(model, spec.signals, name=spec.name, store=store, t_end=spec.t_end,
+                                  solver=solver, min_block_seconds=config.timing.min_block_seconds)
+    runs_cache = {"hits": solver.cache.hits, "misses": solver.cache.misses}
+    solver.cache.clear()  # free the factor before the SVD
+    for run in runs.values():
+        run.summary["solver_cache"] = runs_cache
+    return runs
+
+
+def pod_basis(store, trajectories, product, config: RomConfig) -> POD:
+    """POD of the displacements of ``trajectories``, ``max(ranks)`` columns, read from the store.
+
+    ``randomized``: ``power_iterations + 2`` passes over the store (with 2 the
+    leading singular values of fast-decaying spectra are exact to about 1e-11,
+    docs/benchmarks_snapshots.md); ``svd``: the columns in memory, exact.
+    """
+    spec = config.basis
+    rank = max(spec.ranks)
+    source = store_source(store, "q", list(trajectories))
+    if spec.method == "svd":
+        Q = np.hstack([block for block in source.blocks()])
+        if rank > min(Q.shape):
+            raise ValueError(f"[rom.basis] rank {rank} exceeds the {min(Q.shape)} snapshots' rank bound")
+        return POD(rank=rank, product=product, method="svd").fit(Q)
+    return POD(rank=rank, product=product, method="randomized", power_iterations=spec.power_iterations).fit(source)
+
+
+def reduce_runs(store, runs: dict[str, FOMRun], train: tuple[str, ...], basis: np.ndarray, product,
+                *, stored_derivatives: bool):
+    """The training data in the largest basis, and every run's :class:`Projection` (one pass each).
+
+    Training data carry the run's stored integrator derivatives when the store has
+    them (``stored_derivatives``), else 4th-order finite differences (a learner may
+    ask for another order: :func:`training_data`).
+    """
+    data, projections = {}, {}
+    for name, run in runs.items():
+        q = store_source(store, "q", [name])
+        if name in train:
+            d = reduce_snapshots(
+                basis, q, run.dt, product=product,
+                velocities=store_source(store, "v", [name]) if stored_derivatives else None,
+                accelerations=store_source(store, "a", [name]) if stored_derivatives else None,
+                derivatives="stored" if stored_derivatives else "finite_difference",
+                inputs=run.U, outputs=run.outputs, t0=float(run.times[0]))
+            data[name] = d
+            projections[name] = Projection(d.states, d.diagnostics["projection_residual"],
+                                           d.diagnostics["state_norm"])
+        else:
+            projections[name] = Projection(*project_columns(basis, q, product))
+    return data, projections
+
+
+def training_data(data: dict, r: int, derivatives):
+    """The first ``r`` coordinates of every training run's data, with the learner's derivatives, concatenated."""
+    parts = []
+    for d in data.values():
+        d = d.truncated(r)
+        if derivatives.kind == "finite_differences" and (
+                d.diagnostics.get("derivative_source") != "finite_difference"
+                or d.diagnostics.get("order") != derivatives.order):
+            d = d.with_finite_differences(derivatives.order)
+        parts.append(d)
+    return concatenate(parts)
+
+
+def fit_rom(system, basis: np.ndarray, product, r: int, spec, data: dict) -> SecondOrderROM:
+    """The ROM of ``spec`` (a :class:`~femrom.scene.LearnerSpec`) in the first ``r`` basis columns.
+
+    ``galerkin`` projects the FOM's operators (intrusive). A learner sees only the
+    reduced data; its terms are those of the system's effects
+    (:meth:`~femrom.inference.SecondOrderLearner.for_system`).
+    """
+    V = basis[:, :r]
+    if spec.learner == GALERKIN:
+        return SecondOrderROM.galerkin(system, V, product=product, mass_orthonormal=product is system.mass)
+    learner = learner_class(spec.learner).for_system(system, basis=V, regularization=spec.regularization)
+    return SecondOrderROM(basis=V, product=product, learner=learner).fit(training_data(data, r, spec.derivatives))
+
+
+@dataclass(frozen=True, eq=False)
+class Evaluation:
+    """A ROM on one run: errors, its solution on the run's grid, its energy over the extended window."""
+
+    output_error: float
+    field_error: float
+    energy_ratio: float
+    energy_final_ratio: float
+    solution: object
+    long_times: np.ndarray
+    long_energy: np.ndarray
+
+    def errors(self) -> dict:
+        return {"output_error": self.output_error, "field_error": self.field_error,
+                "energy_ratio": self.energy_ratio, "energy_final_ratio": self.energy_final_ratio}
+
+
+def evaluate(rom, run: FOMRun, projection: Projection, *, extension: float) -> Evaluation:
+    """Errors of ``rom`` on ``run`` and its reduced energy over ``extension`` times the run's window.
+
+    A ROM that blows up (plain OpInf can) gets infinite errors; the overflow on the
+    way is expected and not reported as a warning.
+    """
+    times = run.times
+    long_times = times[0] + run.dt * np.arange(int(round(extension * (times.size - 1))) + 1)
+    with np.errstate(all="ignore"):
+        solution = rom.predict(run.q0, times, v0=run.v0, inputs=run.inputs.sampled(times))
+        long = rom.predict(run.q0, long_times, v0=run.v0, inputs=run.inputs.sampled(long_times))
+        output_error = float("nan") if run.outputs is None else relative_error(run.outputs, solution.outputs)
+        ratio, final = energy_ratio(long.energy, run.energy)
+        return Evaluation(output_error, projection.field_error(solution.q), ratio, final, solution,
+                          long_times, long.energy)
+
+
+def rom_costs(roms: dict, run: FOMRun, *, repeats: int = 5, min_block_seconds: float = 0.1) -> dict:
+    """Seconds per reduced step of every ROM of ``roms`` on ``run``'s input, by interleaved repetition
+    (:func:`~femrom.study.repeated_costs`).
+
+    Each block integrates a ROM over ``N`` steps of the run's ``dt`` (``N`` at least
+    the run's, more when a block would last less than ``min_block_seconds``) and
+    counts only its stepping time (not the set-up of the step map or the inputs).
+    """
+    def block_of(rom):
+        def block(n: int) -> float:
+            times = run.times[0] + run.dt * np.arange(n + 1)
+            with np.errstate(all="ignore"):
+                solution = rom.predict(run.q0, times, v0=run.v0, inputs=run.inputs.sampled(times))
+            return solution.info["stepping_seconds"]
+        return block
+
+    return repeated_costs({key: block_of(rom) for key, rom in roms.items()}, run.times.size - 1,
+                          repeats=repeats, min_block_seconds=min_block_seconds)
+
+
+def rom_cost(rom, run: FOMRun, **options) -> Cost:
+    """:func:`rom_costs` of one ROM."""
+    return rom_costs({0: rom}, run, **options)[0]
+
+
+def operator_checks(rom) -> dict:
+    """Structure of a learned model: symmetry and smallest eigenvalues of ``K^`` and ``C^``."""
+    ops = rom.operators_
+    K = ops.stiffness
+    out = {"stiffness_min_eig": float(np.min(np.linalg.eigvalsh(0.5 * (K + K.T)))),
+           "stiffness_symmetric": bool(np.array_equal(K, K.T))}
+    if ops.damping is not None:
+        C = ops.damping
+        out["damping_min_eig"] = float(np.min(np.linalg.eigvalsh(0.5 * (C + C.T))))
+    return out
+
+
+def study_rows(system, basis: np.ndarray, product, data: dict, projections: dict, runs: dict[str, FOMRun],
+               config: RomConfig, *, learners=None, progress=None) -> tuple[list[dict], dict]:
+    """One row per (r, learner): fit on the training data, evaluate on every run, cost on the first test
+    (all models timed together, interleaved: :func:`rom_costs`).
+
+    Returns the rows and the evaluations by ``(r, label, run)``. ``learners``
+    (specs) defaults to the config's. Speedups are the first training run's FOM
+    cost over the ROM's, both medians measured in this process.
+    """
+    learners = config.learners if learners is None else learners
+    train = [s.name for s in config.train if s.name in data]
+    test = [s.name for s in config.test]
+    fom_cost = runs[train[0]].cost
+    rows, evaluations = [], {}
+    for r in config.basis.ranks:
+        for spec in learners:
+            if progress:
+                progress(f"r = {r}: {spec.label}")
+            tic = time.perf_counter()
+            rom = fit_rom(system, basis, product, r, spec, data)
+            row = {"r": r, "learner": spec.label, "method": spec.learner,
+                   "derivatives": spec.derivatives.tag if spec.learner != GALERKIN else "-",
+                   "train": train[0], "fit_seconds": time.perf_counter() - tic, "errors": {}}
+            for name, run in runs.items():
+                ev = evaluate(rom, run, projections[name], extension=config.extension)
+                evaluations[(r, spec.label, name)] = ev
+                row["errors"][name] = ev.errors()
+            for role, names in (("train", train), ("test", test)):
+                if names:
+                    for key, value in row["errors"][names[0]].items():
+                        row[f"{role}_{key}"] = value
+            if spec.learner != GALERKIN:
+                row.update(operator_checks(rom))
+            row["_rom"] = rom
+            rows.append(row)
+    if progress:
+        progress(f"timing {len(rows)} reduced models ({config.timing.repeats} interleaved rounds)")
+    costs = rom_costs({i: row["_rom"] for i, row in enumerate(rows)}, runs[test[0]],
+                      repeats=config.timing.repeats, min_block_seconds=config.timing.min_block_seconds)
+    for i, row in enumerate(rows):
+        cost = costs[i]
+        row.update(seconds_per_step=cost.median, cost=cost.to_dict(),
+                   speedup=fom_cost.median / max(cost.median, 1e-15),
+                   speedup_range=[fom_cost.q25 / max(cost.q75, 1e-15), fom_cost.q75 / max(cost.q25, 1e-15)])
+    return rows, evaluations
