@@ -56,6 +56,15 @@ class Signal:
                 raise SceneError(f"{where}: {positive} must be positive, got {params[positive]}")
         return cls(kind, tuple(sorted(params.items())))
 
+    def scaled(self, factor: float) -> "Signal":
+        """The same signal times ``factor`` (its amplitude, or an array's values)."""
+        p = dict(self.parameters)
+        if self.kind == "array":
+            p["values"] = tuple(float(factor) * v for v in p["values"])
+        else:
+            p["amplitude"] = float(factor) * p["amplitude"]
+        return Signal(self.kind, tuple(sorted(p.items())))
+
     def __call__(self, t):
         p = dict(self.parameters)
         t = np.asarray(t, dtype=float)
