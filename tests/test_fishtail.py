@@ -21,10 +21,10 @@ from femrom.solvers import make_solver
 from femrom.fem import _vector_ops
 from femrom.mesh import build_mesh
 from femrom.basis import POD
-from femrom.inference import project_columns, reduce_snapshots
+from femrom.inference import reduce_snapshots
 from femrom.rom import SecondOrderROM
 from femrom.scene import InputConfig, MaterialConfig, SceneError, build
-from femrom.study import Projection, SignalInputs, mass_norm
+from femrom.study import SignalInputs, mass_norm, project_run
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "cases"))
@@ -194,7 +194,7 @@ def test_field_errors_from_reduced_coordinates_equal_the_full_fields(pipeline):
     pod = POD(rank=4, product=M, method="svd").fit(Q["sigmoid"])
     V = pod.basis_
     data = reduce_snapshots(V, Q["sigmoid"], scene.time.dt, product=M)
-    projection = Projection(*project_columns(V, Q["step"], M))
+    projection = project_run(V, Q["step"], M)
     rng = np.random.default_rng(4)
     X = projection.coordinates
     q_rom = X + 1e-3 * rng.standard_normal(X.shape) * np.abs(X).max()

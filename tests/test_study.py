@@ -19,7 +19,7 @@ import scipy.sparse as sp
 from femrom.integrators import StepClock
 from femrom.post import render_available
 from femrom.scene import Scene, SceneError
-from femrom.study import Cost, Projection, blocked_cost, check_rom_config, repeated_costs
+from femrom.study import Cost, blocked_cost, check_rom_config, project_run, repeated_costs
 
 DATA = Path(__file__).parent / "data"
 BRACKET = DATA / "bracket.toml"
@@ -102,13 +102,15 @@ def test_field_errors_are_bounded_below_by_the_projection(bracket):
 
 def test_costs_are_medians_of_timed_blocks_with_their_spread(bracket):
     metrics, _, _ = bracket
-    fom = metrics["fom"]["sigmoid"]["cost"]
-    assert fom["q25"] <= fom["median"] <= fom["q75"] and fom["blocks"] >= 3
+    fom = metrics["fom_cost"]
+    assert fom["minimum"] <= fom["q25"] <= fom["median"] <= fom["q75"] and fom["blocks"] >= 3
+    assert metrics["fom_seconds_per_step"] == fom["minimum"]
     for row in metrics["roms"]:
         c = row["cost"]
         assert c["blocks"] == 3 and c["minimum"] <= c["q25"] <= c["median"] <= c["q75"] <= c["maximum"]
         assert c["steps_per_block"] >= 300   # at least the test window of 300 steps
-        assert row["speedup"] == pytest.approx(fom["median"] / c["median"])
+        assert row["seconds_per_step"] == c["minimum"]
+        assert row["speedup"] == pytest.approx(fom["minimum"] / c["minimum"])
         lo, hi = row["speedup_range"]
         assert lo <= row["speedup"] <= hi
 
@@ -211,16 +213,20 @@ def test_projection_field_error_is_exact():
     np.testing.assert_allclose(V.T @ M @ V, np.eye(R), atol=1e-12)
     Q = rng.standard_normal((n, k))
     X = V.T @ (M @ Q)
-    E = Q - V @ X
-    projection = Projection(X, float(np.sqrt(np.sum(E * (M @ E)))), float(np.sqrt(np.sum(Q * (M @ Q)))))
+    projection = project_run(V, iter([Q[:, :12], Q[:, 12:]]), M)     # two blocks, one pass
+    np.testing.assert_allclose(projection.coordinates, X, rtol=1e-12)
     q_rom = X[:r] + 0.1 * rng.standard_normal((r, k))
     D = Q - V[:, :r] @ q_rom
-    direct = np.sqrt(np.sum(D * (M @ D)) / np.sum(Q * (M @ Q)))
-    assert projection.field_error(q_rom) == pytest.approx(direct, rel=1e-12)
     P = Q - V[:, :r] @ X[:r]
-    assert projection.projection_error(r) == pytest.approx(np.sqrt(np.sum(P * (M @ P)) / np.sum(Q * (M @ Q))),
-                                                           rel=1e-12)
-    assert projection.field_error(q_rom) > projection.projection_error(r)
+    for columns in (slice(None), slice(17, None)):    # all columns, and a scored window
+        def m2(A):
+            return np.sum(A[:, columns] * (M @ A[:, columns]))
+        assert projection.field_error(q_rom, columns) == pytest.approx(np.sqrt(m2(D) / m2(Q)), rel=1e-12)
+        assert projection.projection_error(r, columns) == pytest.approx(np.sqrt(m2(P) / m2(Q)), rel=1e-12)
+        assert projection.field_error(q_rom, columns) > projection.projection_error(r, columns)
+    np.testing.assert_allclose(projection.column_errors(q_rom), np.sqrt(np.sum(D * (M @ D), axis=0)), rtol=1e-10)
+    np.testing.assert_allclose(projection.column_projection_errors(r), np.sqrt(np.sum(P * (M @ P), axis=0)),
+                               rtol=1e-10)
     assert projection.field_error(np.full((r, k), np.inf)) == np.inf
 
 
@@ -238,7 +244,7 @@ def test_blocked_cost_groups_steps_into_blocks_of_the_asked_length():
         blocked_cost(np.array([]), 0.1)
 
 
-def test_repeated_costs_interleave_and_size_blocks_to_the_minimum_length():
+def test_repeated_costs_interleave_slices_and_size_blocks_to_the_minimum_length():
     calls = []
 
     def block_of(key, per_step):
@@ -247,12 +253,38 @@ def test_repeated_costs_interleave_and_size_blocks_to_the_minimum_length():
             return per_step * n
         return block
 
-    costs = repeated_costs({"a": block_of("a", 1e-6), "b": block_of("b", 1e-4)}, 100, repeats=4,
+    costs = repeated_costs({"a": block_of("a", 1e-6), "b": block_of("b", 1e-4)}, 100, repeats=3, slices=4,
                            min_block_seconds=0.05)
+    # a block: 4 slices of 12,500 (a) or 125 (b) steps, 0.05 s in all
     assert costs["a"].steps_per_block == 50_000 and costs["b"].steps_per_block == 500
-    assert costs["a"].median == pytest.approx(1e-6) and costs["b"].median == pytest.approx(1e-4)
-    # two calibrations, then a, b, a, b, ...: a drift of the machine falls on both alike
-    assert [k for k, _ in calls] == ["a", "b"] + ["a", "b"] * 4
+    assert costs["a"].seconds == pytest.approx(1e-6) and costs["b"].seconds == pytest.approx(1e-4)
+    assert costs["a"].blocks == costs["b"].blocks == 3
+    # two calibrations, then a, b, a, b, ...: every block samples the machine at 4 moments
+    assert [k for k, _ in calls] == ["a", "b"] + ["a", "b"] * 12
+    assert {n for k, n in calls[2:] if k == "a"} == {12_500}
+
+
+def test_a_disturbance_falls_on_every_entry_alike():
+    """A machine 2x slower for 0.6 s of a 0.6 s round: whole blocks in turn leave one entry
+    with a slow block and the others fast; slices spread over the round share it out."""
+    clock = {"t": 0.0}
+
+    def block_of(per_step):
+        def block(n):
+            slow = 0.25 <= clock["t"] < 0.4        # a disturbance of 0.15 s in the round
+            seconds = per_step * n * (2.0 if slow else 1.0)
+            clock["t"] += seconds
+            return seconds
+        return block
+
+    whole = repeated_costs({k: block_of(1e-6) for k in range(6)}, 10, repeats=1, slices=1,
+                           min_block_seconds=0.1)
+    clock["t"] = 0.0
+    sliced = repeated_costs({k: block_of(1e-6) for k in range(6)}, 10, repeats=1, slices=10,
+                            min_block_seconds=0.1)
+    spread = [max(c.seconds for c in costs.values()) / min(c.seconds for c in costs.values())
+              for costs in (whole, sliced)]
+    assert spread[0] > 1.4 and spread[1] < 1.2, spread
 
 
 def test_step_clock_excludes_the_consumers():
@@ -279,3 +311,39 @@ def test_cost_summary_and_spread():
     cost = Cost.from_blocks(np.array([1.0, 2.0, 3.0, 4.0, 100.0]), 10)
     assert (cost.minimum, cost.q25, cost.median, cost.q75, cost.maximum) == (1.0, 2.0, 3.0, 4.0, 100.0)
     assert cost.relative_spread == pytest.approx(2 / 3)
+
+
+def test_a_failing_reduced_model_is_reported_and_the_study_goes_on(monkeypatch):
+    """A nonlinear ROM whose Newton iteration fails gets 'failed', infinite errors and no cost."""
+    import femrom.study._study as study_module
+    from femrom.study import study_rows
+
+    scene = Scene.from_dict(_bracket_dict(learners=["galerkin", "lopinf"], basis={"ranks": [2, 3]},
+                                          timing={"repeats": 3, "min_block_seconds": 0.01}))
+    from femrom.scene import build
+    from femrom.study import fom_runs, pod_basis, reduce_runs
+    from femrom.snapshots import SnapshotStore
+
+    model = build(scene)
+    with SnapshotStore.create(Path(os.environ.get("TMPDIR", "/tmp")) / f"fail_{os.getpid()}.h5", model,
+                              fields=("q", "v", "a"), overwrite=True) as store:
+        runs = fom_runs(model, scene.rom, store)
+        pod = pod_basis(store, ["sigmoid"], model.system.mass, scene.rom)
+        data, projections = reduce_runs(store, runs, ("sigmoid",), pod.basis_, model.system.mass,
+                                        stored_derivatives=True)
+    store.path.unlink()
+    real = study_module.evaluate
+
+    def flaky(rom, run, projection, **options):
+        if rom.r == 3 and rom.learner is not None:
+            raise RuntimeError("Newton did not converge in 50 iterations")
+        return real(rom, run, projection, **options)
+
+    monkeypatch.setattr(study_module, "evaluate", flaky)
+    rows, evaluations = study_rows(model.system, pod.basis_, model.system.mass, data, projections, runs, scene.rom)
+    failed = [row for row in rows if "failed" in row]
+    assert [(row["r"], row["learner"]) for row in failed] == [(3, "lopinf")]
+    assert "Newton did not converge" in failed[0]["failed"] and failed[0]["test_output_error"] == np.inf
+    assert failed[0]["cost"] is None and np.isnan(failed[0]["speedup"])
+    assert all(row["cost"]["blocks"] == 3 for row in rows if "failed" not in row)
+    assert (3, "lopinf", "step") not in evaluations and (3, "galerkin", "step") in evaluations

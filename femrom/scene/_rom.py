@@ -83,19 +83,24 @@ class Derivatives:
 @dataclass(frozen=True)
 class LearnerSpec:
     """One reduced model of the study: a registered learner (or ``galerkin``), its derivative
-    data and regularisation, under a ``label`` (the row name in the report)."""
+    data and regularisation, under a ``label`` (the row name in the report); ``terms``
+    names terms to learn beyond those of the scene's effects (``"damping"`` for a
+    structure the learner is not told is undamped)."""
 
     label: str
     learner: str
     derivatives: Derivatives
     regularization: float = 0.0
+    terms: tuple[str, ...] = ()
 
     @classmethod
     def from_value(cls, value, where: str, derivatives: Derivatives, regularization: float) -> "LearnerSpec":
         if isinstance(value, str):
             value = {"learner": value}
         d = _table(value, where, {"learner": None, "label": None, "derivatives": None,
-                                  "regularization": None}, ("learner",))
+                                  "regularization": None, "terms": []}, ("learner",))
+        if not isinstance(d["terms"], list) or not all(isinstance(t, str) for t in d["terms"]):
+            raise SceneError(f"[{where}] terms must be an array of term names, got {d['terms']!r}")
         if not isinstance(d["learner"], str):
             raise SceneError(f"[{where}] learner must be a name, got {d['learner']!r}")
         own = derivatives if d["derivatives"] is None else Derivatives.from_value(
@@ -104,21 +109,24 @@ class LearnerSpec:
         if isinstance(reg, bool) or not isinstance(reg, (int, float)) or reg < 0:
             raise SceneError(f"[{where}] regularization must be a number >= 0, got {reg!r}")
         label = d["label"] if d["label"] is not None else d["learner"]
-        return cls(str(label), d["learner"], own, float(reg))
+        return cls(str(label), d["learner"], own, float(reg), tuple(d["terms"]))
 
 
 @dataclass(frozen=True)
 class RunSpec:
     """One full-order run of the study: a name, one signal per input (``None``: the
-    scene's), its window ``t_end`` (``None``: the scene's)."""
+    scene's), its window ``t_end`` (``None``: the scene's), and ``score_after``: errors
+    count only after this time (the end of the training window, for a test of
+    extrapolation in time from the same initial state)."""
 
     name: str
     signals: tuple[Signal, ...] | None = None
     t_end: float | None = None
+    score_after: float | None = None
 
     @classmethod
     def from_dict(cls, data, where: str, n_inputs: int) -> "RunSpec":
-        d = _table(data, where, {"name": None, "signals": None, "t_end": None}, ("name",))
+        d = _table(data, where, {"name": None, "signals": None, "t_end": None, "score_after": None}, ("name",))
         signals = None
         if d["signals"] is not None:
             entries = d["signals"] if isinstance(d["signals"], list) else [d["signals"]]
@@ -126,7 +134,10 @@ class RunSpec:
                 raise SceneError(f"[{where}] signals: the scene has {n_inputs} input(s), got {len(entries)} signal(s)")
             signals = tuple(Signal.from_dict(s, f"{where}.signals[{i}]") for i, s in enumerate(entries))
         t_end = None if d["t_end"] is None else _positive(d["t_end"], f"{where}.t_end")
-        return cls(str(d["name"]), signals, t_end)
+        score_after = None if d["score_after"] is None else _positive(d["score_after"], f"{where}.score_after")
+        if score_after is not None and t_end is not None and score_after >= t_end:
+            raise SceneError(f"[{where}] score_after must lie inside the run's window, got {score_after} >= t_end {t_end}")
+        return cls(str(d["name"]), signals, t_end, score_after)
 
 
 @dataclass(frozen=True)
@@ -226,8 +237,6 @@ class RomConfig:
     @classmethod
     def from_dict(cls, data, n_inputs: int) -> "RomConfig":
         d = _table(data, "rom", {k: None for k in cls.KEYS})
-        if n_inputs == 0:
-            raise SceneError("[rom] learns input-driven models: the scene needs [[inputs]] and 'actuation'")
         runs = {}
         for kind in ("train", "test"):
             entries = d[kind]
@@ -237,6 +246,9 @@ class RomConfig:
                 raise SceneError(f"[rom] needs at least one [[rom.{kind}]] run")
             runs[kind] = tuple(RunSpec.from_dict(e, f"rom.{kind}[{i}]", n_inputs) for i, e in enumerate(entries))
         names = [r.name for r in (*runs["train"], *runs["test"])]
+        if n_inputs == 0 and len({(r.t_end, r.score_after) for r in (*runs["train"], *runs["test"])}) < len(names):
+            raise SceneError("[rom] without inputs every run starts from the scene's initial state: runs differ "
+                             "only by t_end and score_after, and these must differ between runs")
         if len(set(names)) != len(names):
             raise SceneError(f"[rom] run names must be unique across train and test, got {names}")
         derivatives = Derivatives.from_value(d["derivatives"] or "stored", "rom.derivatives")

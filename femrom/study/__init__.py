@@ -9,21 +9,28 @@ What the case scripts share, for any scene (``femrom run scene.toml`` with a
 - the study's steps: :func:`fom_runs`, :func:`pod_basis`, :func:`reduce_runs`,
   :func:`training_data`, :func:`fit_rom`, :func:`evaluate`, :func:`rom_costs`,
   :func:`study_rows`;
-- metrics: :func:`relative_error`, :func:`mass_norm`, :class:`Projection`
+- metrics: :func:`relative_error`, :func:`mass_norm`, :class:`Projection` / :func:`project_run`
   (exact field errors at every r from one pass), :func:`energy_ratio`;
-- costs: :class:`Cost` (median and quartiles of timed blocks),
+- costs: :class:`Cost` (the fastest of several timed blocks, and their quartiles),
   :func:`blocked_cost`, :func:`repeated_costs` (interleaved);
-- the FOM's accuracy against its cost: :func:`time_step_ladder`;
+- the FOM's accuracy against its cost: :func:`time_step_ladder`, :func:`frequency_ladder`;
 - sweeps: :func:`run_sweep` (a scene's ``[sweep]`` as Dask tasks, one store file
   per run, merged into one store; a killed worker's run reruns elsewhere);
-- figures and report: :func:`plot_outputs`, :func:`plot_errors`,
+- figures and report: :func:`plot_outputs`, :func:`plot_errors`, :func:`plot_error_history`,
   :func:`plot_energy`, :func:`plot_accuracy_cost`, :func:`render_fields`,
   :func:`write_report`.
 """
 
-from femrom.study._figures import plot_accuracy_cost, plot_energy, plot_errors, plot_outputs, render_fields
-from femrom.study._ladders import time_step_ladder
-from femrom.study._metrics import Projection, energy_ratio, mass_norm, relative_error
+from femrom.study._figures import (
+    plot_accuracy_cost,
+    plot_energy,
+    plot_error_history,
+    plot_errors,
+    plot_outputs,
+    render_fields,
+)
+from femrom.study._ladders import frequency_ladder, time_step_ladder
+from femrom.study._metrics import Projection, energy_ratio, mass_norm, project_run, relative_error
 from femrom.study._pipeline import ROW_COLUMNS, StudyState, peak_rss_gb, public_rows, run_study, write_report
 from femrom.study._runs import FOMRun, SignalInputs, run_fom, solver_factory
 from femrom.study._study import (
@@ -38,6 +45,7 @@ from femrom.study._study import (
     reduce_runs,
     rom_cost,
     rom_costs,
+    scored_columns,
     study_learners,
     study_rows,
     training_data,
@@ -46,10 +54,11 @@ from femrom.study._sweep import SweepRun, run_sweep, run_sweep_point, sweep_runs
 from femrom.study._timing import Cost, blocked_cost, repeated_cost, repeated_costs
 
 __all__ = [
-    "ROW_COLUMNS", "SweepRun", "Cost", "Evaluation", "FOMRun", "Projection", "StudyState", "SignalInputs", "blocked_cost", "check_rom_config",
-    "energy_ratio", "evaluate", "fit_rom", "fom_runs", "mass_norm", "operator_checks", "peak_rss_gb",
-    "plot_accuracy_cost", "plot_energy", "plot_errors", "plot_outputs", "pod_basis", "product_matrix",
-    "public_rows", "reduce_runs", "relative_error", "render_fields", "repeated_cost", "repeated_costs", "rom_cost", "rom_costs", "run_fom",
-    "run_study", "run_sweep", "run_sweep_point", "solver_factory", "sweep_runs", "study_learners", "study_rows", "time_step_ladder", "training_data",
-    "write_report",
+    "ROW_COLUMNS", "Cost", "Evaluation", "FOMRun", "Projection", "SignalInputs", "StudyState", "SweepRun",
+    "blocked_cost", "check_rom_config", "energy_ratio", "evaluate", "fit_rom", "fom_runs", "frequency_ladder", "mass_norm",
+    "operator_checks", "peak_rss_gb", "plot_accuracy_cost", "plot_energy", "plot_error_history", "plot_errors", "plot_outputs",
+    "pod_basis", "product_matrix", "project_run", "public_rows", "reduce_runs", "relative_error",
+    "render_fields", "repeated_cost", "repeated_costs", "rom_cost", "rom_costs", "run_fom", "run_study",
+    "run_sweep", "run_sweep_point", "scored_columns", "solver_factory", "study_learners", "study_rows",
+    "sweep_runs", "time_step_ladder", "training_data", "write_report",
 ]

@@ -96,8 +96,23 @@ def plot_energy(path, evaluations: dict, r: int, labels, run, title: str) -> Pat
     return save_figure(fig, path, dpi=110)
 
 
+def plot_error_history(path, run, projection, evaluations: dict, r: int, labels, *, shade=None, title: str = "",
+                       envelope: int | None = 400) -> Path:
+    """Field error over time, ``||q(t) - V q^(t)||_W / max_t ||q(t)||_W``, of each learner's ROM at
+    rank ``r`` on ``run``, and the basis's projection error (the floor); ``shade``: the training
+    window; ``envelope``: the maximum per bin of that many bins (oscillating errors stay readable)."""
+    from femrom.post import plot_time_series
+
+    scale = float(np.sqrt(np.max(projection.norm2)))
+    series = {f"{label} (r={r})": projection.column_errors(evaluations[(r, label, run.name)].solution.q) / scale
+              for label in labels if (r, label, run.name) in evaluations}
+    series[f"projection (r={r})"] = projection.column_projection_errors(r) / scale
+    return plot_time_series(path, run.times, series, logy=True, shade=shade, envelope=envelope, ymax=10.0,
+                            ylabel="||q - V q^||_W / max ||q||_W" + (" (bin max)" if envelope else ""), title=title)
+
+
 def plot_accuracy_cost(path, rows: list[dict], fom_cost: dict, title: str, *, error: str = "test_output_error") -> Path:
-    """Error against seconds per step (median, bars: quartiles over the timed blocks), one line
+    """Error against seconds per step (minimum of the timed blocks, bars up to their upper quartile), one line
     per learner, points annotated with r; the FOM's cost as a vertical band."""
     plt = pyplot()
     fig, ax = plt.subplots(figsize=(6.6, 4.3))
@@ -105,18 +120,18 @@ def plot_accuracy_cost(path, rows: list[dict], fom_cost: dict, title: str, *, er
         sel = [row for row in rows if row["learner"] == label and np.isfinite(row[error]) and row[error] > 0]
         if not sel:
             continue
-        x = np.array([row["cost"]["median"] for row in sel])
-        lo = x - np.array([row["cost"]["q25"] for row in sel])
+        x = np.array([row["cost"]["minimum"] for row in sel])
+        lo = np.zeros_like(x)
         hi = np.array([row["cost"]["q75"] for row in sel]) - x
         y = [row[error] for row in sel]
         ax.errorbar(x, y, xerr=[lo, hi], fmt=marker + "-", capsize=2, label=label)
         for row, xi, yi in zip(sel, x, y):
             ax.annotate(f"r={row['r']}", (xi, yi), textcoords="offset points", xytext=(3, 3), fontsize=7)
-    ax.axvspan(fom_cost["q25"], fom_cost["q75"], color="grey", alpha=0.3)
-    ax.axvline(fom_cost["median"], color="k", lw=1, label="FOM step")
+    ax.axvspan(fom_cost["minimum"], fom_cost["q75"], color="grey", alpha=0.3)
+    ax.axvline(fom_cost["minimum"], color="k", lw=1, label="FOM step")
     ax.set_xscale("log")
     ax.set_yscale("log")
-    ax.set_xlabel("seconds per step (median of timed blocks; bars: quartiles)")
+    ax.set_xlabel("seconds per step (fastest timed block; bars: to the upper quartile)")
     ax.set_ylabel(error.replace("_", " "))
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=8)

@@ -1,42 +1,77 @@
-"""The FOM's accuracy against its cost: coarser time steps against the scene's."""
+"""The FOM's accuracy against its cost: coarser time steps, finer meshes."""
 
 from __future__ import annotations
+
+import dataclasses
+import time
 
 import numpy as np
 
 from femrom.study._metrics import relative_error
 from femrom.study._runs import FOMRun, run_fom
 
+ERRORS = ("frobenius", "max")
 
-def time_step_ladder(model, reference: FOMRun, factors=(10, 5, 2), *, min_block_seconds: float = 0.1) -> list[dict]:
-    """Output error of runs at ``factor * dt`` against ``reference`` (a run at the scene's ``dt``),
-    their stepping time and per-step cost, and the observed order of convergence.
 
-    The runs use the reference's signals and window; every coarse step must divide
-    the window (all are compared on the coarsest grid, at the same final time).
+def time_step_ladder(model, reference: FOMRun | None = None, factors=(10, 5, 2), *, reference_divisor: int = 1,
+                     error: str = "frobenius", outputs=None, min_block_seconds: float = 0.1) -> list[dict]:
+    """Output error of runs at ``factor * dt`` against a reference run, with their stepping time and
+    per-step cost, and the observed order of convergence (slope of log error against log dt).
+
+    Parameters
+    ----------
+    model : FullOrderModel
+    reference : FOMRun, optional
+        A run at the scene's ``dt`` (its signals and window are the ladder's); ``None``:
+        the scene's signals and window, run here at ``dt / reference_divisor``.
+    factors : sequence of int
+        Steps of the ladder, ``factor * dt``; all runs are compared on the coarsest
+        step's grid inside the window (each run covers ``round(t_end / dt)`` steps).
+    error : {"frobenius", "max"}
+        ``||Y - Y_ref||_F / ||Y_ref||_F``, or ``max |Y - Y_ref| / max |Y_ref|``.
+    outputs : sequence of int, optional
+        Which outputs count (all by default).
+
+    Returns
+    -------
+    list of dict
+        One row per factor (coarsest first), then the reference itself when it is a
+        given run at the scene's ``dt`` (error 0).
     """
-    dt0, t_end = reference.dt, float(reference.times[-1])
+    if error not in ERRORS:
+        raise ValueError(f"unknown error {error!r}; valid: {', '.join(ERRORS)}")
+    signals = None if reference is None else reference.inputs.signals
+    dt0 = model.scene.time.dt if reference is None else reference.dt
+    t_end = model.scene.time.t_end if reference is None else float(reference.times[-1])
     factors = tuple(sorted(factors, reverse=True))
-    for factor in factors:
-        steps = t_end / (factor * dt0)
-        if abs(steps - round(steps)) > 1e-9 * steps:
-            raise ValueError(f"time step {factor * dt0:g} does not divide the window {t_end:g} s")
+    given = reference is not None
+    if not given:
+        reference = run_fom(model, signals, name="reference", dt=dt0 / reference_divisor, t_end=t_end,
+                            min_block_seconds=min_block_seconds)
     coarse = factors[0] * dt0
-    t_common = coarse * np.arange(int(round(t_end / coarse)) + 1)
+    t_common = coarse * np.arange(int(np.floor(t_end / coarse + 1e-9)) + 1)
+    pick = slice(None) if outputs is None else list(outputs)
 
     def on_grid(run):
-        return np.vstack([np.interp(t_common, run.times, y) for y in run.outputs])
+        return np.vstack([np.interp(t_common, run.times, y) for y in run.outputs[pick]])
 
     ref = on_grid(reference)
+
+    def distance(Y):
+        if error == "max":
+            return float(np.max(np.abs(Y - ref)) / np.max(np.abs(ref)))
+        return relative_error(ref, Y)
+
     rows = []
     for factor in factors:
-        run = run_fom(model, reference.inputs.signals, name=f"dt/{factor}", dt=factor * dt0, t_end=t_end,
+        run = run_fom(model, signals, name=f"dt/{factor}", dt=factor * dt0, t_end=t_end,
                       min_block_seconds=min_block_seconds)
-        rows.append(_row(run, relative_error(ref, on_grid(run))))
-    rows.append(_row(reference, 0.0))
-    if len(factors) >= 2:
-        order = float(np.polyfit(np.log([r["dt"] for r in rows[:-1]]),
-                                 np.log([r["output_error"] for r in rows[:-1]]), 1)[0])
+        rows.append(_row(run, distance(on_grid(run))))
+    if given:
+        rows.append(_row(reference, 0.0))
+    fitted = [r for r in rows if r["output_error"] > 0]
+    if len(fitted) >= 2:
+        order = float(np.polyfit(np.log([r["dt"] for r in fitted]), np.log([r["output_error"] for r in fitted]), 1)[0])
         for r in rows:
             r["observed_order"] = order
     return rows
@@ -45,4 +80,31 @@ def time_step_ladder(model, reference: FOMRun, factors=(10, 5, 2), *, min_block_
 def _row(run: FOMRun, error: float) -> dict:
     s = run.summary
     return {"dt": run.dt, "steps": s["n_steps"], "output_error": error, "stepping_seconds": s["stepping_seconds"],
-            "seconds_per_step": run.cost.median, "cost": run.cost.to_dict()}
+            "seconds_per_step": run.cost.seconds, "cost": run.cost.to_dict()}
+
+
+def frequency_ladder(scene, values, *, parameter: str = "mesh_size", count: int = 4, exact=None) -> list[dict]:
+    r"""The first ``count`` natural frequencies (``K phi = omega^2 M phi``, shift-invert Lanczos) per
+    value of a geometry parameter, with the build + eigensolve time.
+
+    ``frequency_error`` is ``max_k |omega_k / omega_k^* - 1|`` against ``exact`` (rad/s, e.g.
+    analytic) or, without it, against the last value of the ladder (the finest mesh).
+    """
+    from scipy.sparse.linalg import eigsh
+
+    from femrom.scene import build
+
+    rows = []
+    for value in values:
+        params = dict(scene.structure.parameters) | {parameter: float(value)}
+        structure = dataclasses.replace(scene.structure, parameters=tuple(sorted(params.items())))
+        tic = time.perf_counter()
+        model = build(dataclasses.replace(scene, structure=structure))
+        s = model.system
+        omega = np.sqrt(np.sort(eigsh(s.stiffness.tocsc(), k=count, M=s.mass.tocsc(), sigma=0.0, which="LM")[0]))
+        rows.append({parameter: float(value), "dofs": s.n_dofs, "omega": omega, "f1_hz": float(omega[0] / (2 * np.pi)),
+                     "seconds": time.perf_counter() - tic})
+    reference = np.asarray(exact, dtype=float)[:count] if exact is not None else rows[-1]["omega"]
+    for row in rows:
+        row["frequency_error"] = float(np.max(np.abs(row["omega"] / reference - 1)))
+    return rows

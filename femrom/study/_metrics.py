@@ -22,39 +22,79 @@ def mass_norm(M, X) -> float:
 
 @dataclass(frozen=True, eq=False)
 class Projection:
-    r"""A run's displacements in a nested basis: what exact field errors need.
+    r"""A run's displacements in a nested basis, column by column: what exact field errors need.
 
     Attributes
     ----------
     coordinates : (R, k) ndarray
         ``X^ = V^T W Q`` in the largest basis ``V`` (R columns).
-    residual : float
-        ``||Q - V X^||_W`` (Frobenius, exact: computed in the projection pass).
-    norm : float
-        ``||Q||_W``.
+    residual2 : (k,) ndarray
+        ``||q_j - V x^_j||_W^2`` of every column (exact: computed in the projection pass).
+    norm2 : (k,) ndarray
+        ``||q_j||_W^2``.
+
+    Errors over a window of columns (``columns``, a slice; all by default) are
+    Frobenius norms over those columns, relative to ``||Q||_W`` over them.
     """
 
     coordinates: np.ndarray
-    residual: float
-    norm: float
+    residual2: np.ndarray
+    norm2: np.ndarray
 
-    def field_error(self, q_rom: np.ndarray) -> float:
-        r"""Relative error ``||Q - V_r Q^_rom||_W / ||Q||_W`` of a ROM trajectory (r, k), exactly.
-
-        With ``V`` orthonormal in ``W`` and ``V_r`` its first r columns,
-        ``||Q - V_r Q^||_W^2 = ||Q - V X^||_W^2 + ||X^_{r:}||^2 + ||X^_{:r} - Q^||^2``:
-        the largest basis's residual, the coordinates the r-basis drops, and the
-        ROM's own error; no pass over the full fields.
-        """
+    def _rom_error2(self, q_rom: np.ndarray) -> np.ndarray:
+        r"""(k,) ndarray ``||q_j - V_r q^_j||_W^2`` by the split of :meth:`field_error`."""
         X = self.coordinates
         r = q_rom.shape[0]
         with np.errstate(over="ignore", invalid="ignore"):
-            err2 = self.residual**2 + np.sum(X[r:] ** 2) + np.sum((X[:r] - q_rom) ** 2)
-        return float(np.sqrt(err2) / self.norm) if np.isfinite(err2) else float("inf")
+            return self.residual2 + np.sum(X[r:] ** 2, axis=0) + np.sum((X[:r] - q_rom) ** 2, axis=0)
 
-    def projection_error(self, r: int) -> float:
+    def field_error(self, q_rom: np.ndarray, columns: slice = slice(None)) -> float:
+        r"""Relative error ``||Q - V_r Q^_rom||_W / ||Q||_W`` of a ROM trajectory (r, k), exactly.
+
+        With ``V`` orthonormal in ``W`` and ``V_r`` its first r columns,
+        ``||q - V_r q^||_W^2 = ||q - V x^||_W^2 + ||x^_{r:}||^2 + ||x^_{:r} - q^||^2``:
+        the largest basis's residual, the coordinates the r-basis drops, and the
+        ROM's own error; no pass over the full fields.
+        """
+        err2 = float(np.sum(self._rom_error2(q_rom)[columns]))
+        return float(np.sqrt(err2 / np.sum(self.norm2[columns]))) if np.isfinite(err2) else float("inf")
+
+    def column_errors(self, q_rom: np.ndarray) -> np.ndarray:
+        """(k,) ndarray ``||q_j - V_r q^_j||_W`` (absolute; ``inf`` where the ROM is not finite)."""
+        err2 = self._rom_error2(q_rom)
+        return np.where(np.isfinite(err2), np.sqrt(np.maximum(err2, 0.0)), np.inf)
+
+    def projection_error(self, r: int, columns: slice = slice(None)) -> float:
         """The best any r-dimensional model in this basis can do: ``||Q - V_r V_r^T W Q||_W / ||Q||_W``."""
-        return float(np.sqrt(self.residual**2 + np.sum(self.coordinates[r:] ** 2)) / self.norm)
+        err2 = self.residual2[columns] + np.sum(self.coordinates[r:, columns] ** 2, axis=0)
+        return float(np.sqrt(np.sum(err2) / np.sum(self.norm2[columns])))
+
+    def column_projection_errors(self, r: int) -> np.ndarray:
+        """(k,) ndarray ``||q_j - V_r V_r^T W q_j||_W``."""
+        return np.sqrt(np.maximum(self.residual2 + np.sum(self.coordinates[r:] ** 2, axis=0), 0.0))
+
+    def norm(self, columns: slice = slice(None)) -> float:
+        """``||Q||_W`` over ``columns``."""
+        return float(np.sqrt(np.sum(self.norm2[columns])))
+
+
+def project_run(basis: np.ndarray, X, product=None) -> Projection:
+    """One pass over the columns of ``X`` (an array or block source): its :class:`Projection` in ``basis``."""
+    from femrom.linalg import as_block_source
+
+    V = np.asarray(basis, dtype=float)
+    WV = V if product is None else np.asarray(product @ V)
+    coords, residual2, norm2 = [], [], []
+    for block in as_block_source(X).blocks():
+        WX = block if product is None else np.asarray(product @ block)
+        c = V.T @ WX
+        E = block - V @ c
+        coords.append(c)
+        residual2.append(np.maximum(np.sum(E * (WX - WV @ c), axis=0), 0.0))   # W E = W X - (W V) c
+        norm2.append(np.maximum(np.sum(block * WX, axis=0), 0.0))
+    if not coords:
+        raise ValueError("no snapshot columns to project")
+    return Projection(np.hstack(coords), np.concatenate(residual2), np.concatenate(norm2))
 
 
 def energy_ratio(rom_energy: np.ndarray, fom_energy: np.ndarray | None) -> tuple[float, float]:

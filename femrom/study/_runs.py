@@ -22,9 +22,11 @@ class SignalInputs:
     def __call__(self, t) -> np.ndarray:
         return np.array([float(s(t)) for s in self.signals])
 
-    def sampled(self, times) -> np.ndarray:
-        """(m, k) ndarray of ``u`` on ``times``."""
+    def sampled(self, times) -> np.ndarray | None:
+        """(m, k) ndarray of ``u`` on ``times`` (``None`` without inputs)."""
         times = np.asarray(times, dtype=float)
+        if not self.signals:
+            return None
         return np.vstack([np.broadcast_to(np.asarray(s(times), dtype=float), times.shape)
                           for s in self.signals])
 
@@ -61,7 +63,8 @@ class FOMRun:
     cost: Cost
 
     @property
-    def U(self) -> np.ndarray:
+    def U(self) -> np.ndarray | None:
+        """(m, k) ndarray of the inputs on :attr:`times` (``None`` without inputs)."""
         return self.inputs.sampled(self.times)
 
     @property
@@ -69,20 +72,28 @@ class FOMRun:
         return float(self.times[1] - self.times[0])
 
 
+#: from this many dofs on, the mass is solved by Jacobi-CG instead of a direct factor
+MASS_CG_DOFS = 2000
+
+
 def solver_factory(model):
     """A solver factory for the runs of one model: one cached setup of the effective
-    matrix, shared by every run with the same ``dt``, and Jacobi-CG for the mass.
+    matrix, shared by every run with the same ``dt``, and for the mass, from
+    :data:`MASS_CG_DOFS` dofs on, Jacobi-CG.
 
     The consistent mass is solved once per run (the initial acceleration); Jacobi-CG
     does it in a few dozen iterations at any mesh size (Wathen 1987) without a second
-    direct factor next to the effective matrix's. ``factory.cache.clear()`` frees the factor.
+    direct factor next to the effective matrix's (GBs at 1e6 dofs). Below that size a
+    direct solve costs nothing and is exact. ``factory.cache.clear()`` frees the factor.
     """
     cache = SolverCache(model.scene.time.solver)
     mass = model.system.mass
 
     def factory(A, spd=True):
         if A is mass:
-            return make_solver(A, "jacobi-cg", rtol=1e-12)
+            if A.shape[0] >= MASS_CG_DOFS:
+                return make_solver(A, "jacobi-cg", rtol=1e-12)
+            return make_solver(A, model.scene.time.solver)
         return cache(A, spd=spd)
 
     factory.cache = cache
@@ -102,7 +113,7 @@ def run_fom(model, signals: tuple[Signal, ...] | None = None, *, name: str = "ru
     if len(signals) != model.system.n_inputs:
         raise ValueError(f"run {name!r}: {len(signals)} signal(s) for {model.system.n_inputs} input(s)")
     u = SignalInputs(signals)
-    system = dataclasses.replace(model.system, inputs=u)
+    system = dataclasses.replace(model.system, inputs=u) if signals else model.system
     outputs = dataclasses.replace(model.scene.outputs, fields=())
     model = dataclasses.replace(model, system=system, scene=dataclasses.replace(model.scene, outputs=outputs))
     clock = StepClock()

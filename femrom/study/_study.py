@@ -26,16 +26,18 @@ from dataclasses import dataclass
 import numpy as np
 
 from femrom.basis import POD
-from femrom.inference import SecondOrderLearner, concatenate, learner_class, project_columns, \
-    reduce_snapshots, registered_learners
+from femrom.inference import SecondOrderLearner, concatenate, learner_class, reduce_snapshots, \
+    registered_learners
 from femrom.linalg import store_source
 from femrom.rom import SecondOrderROM
 from femrom.scene import RomConfig, SceneError
-from femrom.study._metrics import Projection, energy_ratio, relative_error
+from femrom.study._metrics import Projection, energy_ratio, project_run, relative_error
 from femrom.study._runs import FOMRun, run_fom, solver_factory
 from femrom.study._timing import Cost, repeated_costs
 
 GALERKIN = "galerkin"
+#: a ROM has blown up once its energy exceeds this multiple of its initial energy
+BLOWUP = 1e6
 
 
 def study_learners() -> tuple[str, ...]:
@@ -102,28 +104,25 @@ def pod_basis(store, trajectories, product, config: RomConfig) -> POD:
 
 
 def reduce_runs(store, runs: dict[str, FOMRun], train: tuple[str, ...], basis: np.ndarray, product,
-                *, stored_derivatives: bool):
-    """The training data in the largest basis, and every run's :class:`Projection` (one pass each).
+                *, stored_derivatives: bool, order: int = 4):
+    """The training data in the largest basis, and every run's :class:`Projection` (one pass each,
+    and one more over a training run for its data).
 
     Training data carry the run's stored integrator derivatives when the store has
-    them (``stored_derivatives``), else 4th-order finite differences (a learner may
-    ask for another order: :func:`training_data`).
+    them (``stored_derivatives``), else finite differences of ``order`` (a learner
+    may ask for another order: :func:`training_data`).
     """
     data, projections = {}, {}
     for name, run in runs.items():
         q = store_source(store, "q", [name])
+        projections[name] = project_run(basis, q, product)
         if name in train:
-            d = reduce_snapshots(
+            data[name] = reduce_snapshots(
                 basis, q, run.dt, product=product,
                 velocities=store_source(store, "v", [name]) if stored_derivatives else None,
                 accelerations=store_source(store, "a", [name]) if stored_derivatives else None,
-                derivatives="stored" if stored_derivatives else "finite_difference",
+                derivatives="stored" if stored_derivatives else "finite_difference", order=order,
                 inputs=run.U, outputs=run.outputs, t0=float(run.times[0]))
-            data[name] = d
-            projections[name] = Projection(d.states, d.diagnostics["projection_residual"],
-                                           d.diagnostics["state_norm"])
-        else:
-            projections[name] = Projection(*project_columns(basis, q, product))
     return data, projections
 
 
@@ -145,12 +144,17 @@ def fit_rom(system, basis: np.ndarray, product, r: int, spec, data: dict) -> Sec
 
     ``galerkin`` projects the FOM's operators (intrusive). A learner sees only the
     reduced data; its terms are those of the system's effects
-    (:meth:`~femrom.inference.SecondOrderLearner.for_system`).
+    (:meth:`~femrom.inference.SecondOrderLearner.for_system`) and the spec's ``terms``.
     """
     V = basis[:, :r]
     if spec.learner == GALERKIN:
         return SecondOrderROM.galerkin(system, V, product=product, mass_orthonormal=product is system.mass)
-    learner = learner_class(spec.learner).for_system(system, basis=V, regularization=spec.regularization)
+    cls = learner_class(spec.learner)
+    learner = cls.for_system(system, basis=V, regularization=spec.regularization)
+    if spec.terms:   # terms the structure does not have, learned all the same (e.g. damping of an undamped beam)
+        known = [t.name for t in (*learner.learned_terms, *learner.known_terms)]
+        learner = cls([*learner.learned_terms, *learner.known_terms, *(t for t in spec.terms if t not in known)],
+                      regularization=spec.regularization)
     return SecondOrderROM(basis=V, product=product, learner=learner).fit(training_data(data, r, spec.derivatives))
 
 
@@ -160,41 +164,71 @@ class Evaluation:
 
     output_error: float
     field_error: float
+    projection_error: float
     energy_ratio: float
     energy_final_ratio: float
+    energy_growth: float
+    blowup_time: float | None
     solution: object
     long_times: np.ndarray
     long_energy: np.ndarray
 
+    ERRORS = ("output_error", "field_error", "projection_error", "energy_ratio", "energy_final_ratio",
+              "energy_growth", "blowup_time")
+
     def errors(self) -> dict:
         return {"output_error": self.output_error, "field_error": self.field_error,
-                "energy_ratio": self.energy_ratio, "energy_final_ratio": self.energy_final_ratio}
+                "projection_error": self.projection_error, "energy_ratio": self.energy_ratio,
+                "energy_final_ratio": self.energy_final_ratio, "energy_growth": self.energy_growth,
+                "blowup_time": self.blowup_time}
 
 
-def evaluate(rom, run: FOMRun, projection: Projection, *, extension: float) -> Evaluation:
+def scored_columns(run: FOMRun, score_after: float | None) -> slice:
+    """The columns of ``run`` its errors are scored over: all, or the steps after ``score_after``."""
+    if score_after is None:
+        return slice(None)
+    return slice(int(np.searchsorted(run.times, score_after * (1 + 1e-12), side="right")), None)
+
+
+def evaluate(rom, run: FOMRun, projection: Projection, *, extension: float,
+             score_after: float | None = None) -> Evaluation:
     """Errors of ``rom`` on ``run`` and its reduced energy over ``extension`` times the run's window.
 
-    A ROM that blows up (plain OpInf can) gets infinite errors; the overflow on the
-    way is expected and not reported as a warning.
+    The ROM runs over the whole window from the run's initial state; its output and
+    field errors (and the projection error of its basis, the floor of the field error)
+    are scored over the steps after ``score_after`` (all steps by
+    default; a training window's end for a test of extrapolation in time). A ROM
+    that blows up (plain OpInf can) gets infinite errors; the overflow on the way is
+    expected and not reported as a warning. ``energy_growth`` is the ROM's largest
+    energy over its initial one on the run's window, ``blowup_time`` the first time it
+    exceeds :data:`BLOWUP` times that (``None``: never).
     """
     times = run.times
+    columns = scored_columns(run, score_after)
     long_times = times[0] + run.dt * np.arange(int(round(extension * (times.size - 1))) + 1)
     with np.errstate(all="ignore"):
         solution = rom.predict(run.q0, times, v0=run.v0, inputs=run.inputs.sampled(times))
-        long = rom.predict(run.q0, long_times, v0=run.v0, inputs=run.inputs.sampled(long_times))
-        output_error = float("nan") if run.outputs is None else relative_error(run.outputs, solution.outputs)
+        long = solution if extension == 1 else rom.predict(run.q0, long_times, v0=run.v0,
+                                                           inputs=run.inputs.sampled(long_times))
+        output_error = float("nan") if run.outputs is None else relative_error(
+            run.outputs[:, columns], solution.outputs[:, columns])
         ratio, final = energy_ratio(long.energy, run.energy)
-        return Evaluation(output_error, projection.field_error(solution.q), ratio, final, solution,
-                          long_times, long.energy)
+        energy = solution.energy
+        growth = float(np.nanmax(np.abs(energy)) / abs(energy[0])) if energy[0] else float("nan")
+        big = ~np.isfinite(energy) | (np.abs(energy) > BLOWUP * abs(energy[0]))
+        return Evaluation(output_error, projection.field_error(solution.q, columns),
+                          projection.projection_error(rom.r, columns), ratio, final, growth,
+                          float(times[np.argmax(big)]) if big.any() else None, solution, long_times, long.energy)
 
 
 def rom_costs(roms: dict, run: FOMRun, *, repeats: int = 5, min_block_seconds: float = 0.1) -> dict:
     """Seconds per reduced step of every ROM of ``roms`` on ``run``'s input, by interleaved repetition
     (:func:`~femrom.study.repeated_costs`).
 
-    Each block integrates a ROM over ``N`` steps of the run's ``dt`` (``N`` at least
-    the run's, more when a block would last less than ``min_block_seconds``) and
-    counts only its stepping time (not the set-up of the step map or the inputs).
+    Each block integrates a ROM in slices of ``N`` steps of the run's ``dt`` (as many
+    as make ``min_block_seconds`` together), from the run's initial state with its
+    inputs, and counts only the stepping (not the set-up of the step map, the
+    inputs, or the output buffer).
     """
     def block_of(rom):
         def block(n: int) -> float:
@@ -230,14 +264,18 @@ def study_rows(system, basis: np.ndarray, product, data: dict, projections: dict
     """One row per (r, learner): fit on the training data, evaluate on every run, cost on the first test
     (all models timed together, interleaved: :func:`rom_costs`).
 
+    A ROM whose prediction fails (a nonlinear model's Newton iteration) gets a
+    ``failed`` message, infinite errors and no cost, and the study goes on.
     Returns the rows and the evaluations by ``(r, label, run)``. ``learners``
-    (specs) defaults to the config's. Speedups are the first training run's FOM
-    cost over the ROM's, both medians measured in this process.
+    (specs) defaults to the config's. Speedups are the FOM's cost per step (from
+    its longest run, the first of equal ones) over the ROM's, both minima over timed blocks measured
+    in this process.
     """
     learners = config.learners if learners is None else learners
     train = [s.name for s in config.train if s.name in data]
     test = [s.name for s in config.test]
-    fom_cost = runs[train[0]].cost
+    fom_cost = max(runs.values(), key=lambda run: run.times.size).cost   # the most steps: the most blocks
+    score_after = {spec.name: spec.score_after for spec in (*config.train, *config.test)}
     rows, evaluations = [], {}
     for r in config.basis.ranks:
         for spec in learners:
@@ -249,7 +287,13 @@ def study_rows(system, basis: np.ndarray, product, data: dict, projections: dict
                    "derivatives": spec.derivatives.tag if spec.learner != GALERKIN else "-",
                    "train": train[0], "fit_seconds": time.perf_counter() - tic, "errors": {}}
             for name, run in runs.items():
-                ev = evaluate(rom, run, projections[name], extension=config.extension)
+                try:
+                    ev = evaluate(rom, run, projections[name], extension=config.extension,
+                                  score_after=score_after.get(name))
+                except (RuntimeError, np.linalg.LinAlgError) as exc:   # a nonlinear ROM's Newton failed
+                    row["failed"] = f"{name}: {exc}"
+                    row["errors"][name] = dict.fromkeys(Evaluation.ERRORS, float("inf"))
+                    continue
                 evaluations[(r, spec.label, name)] = ev
                 row["errors"][name] = ev.errors()
             for role, names in (("train", train), ("test", test)):
@@ -262,11 +306,15 @@ def study_rows(system, basis: np.ndarray, product, data: dict, projections: dict
             rows.append(row)
     if progress:
         progress(f"timing {len(rows)} reduced models ({config.timing.repeats} interleaved rounds)")
-    costs = rom_costs({i: row["_rom"] for i, row in enumerate(rows)}, runs[test[0]],
-                      repeats=config.timing.repeats, min_block_seconds=config.timing.min_block_seconds)
+    timed = {i: row["_rom"] for i, row in enumerate(rows) if "failed" not in row}
+    costs = rom_costs(timed, runs[test[0]], repeats=config.timing.repeats,
+                      min_block_seconds=config.timing.min_block_seconds)
     for i, row in enumerate(rows):
+        if i not in costs:          # a ROM that fails cannot be timed
+            row.update(seconds_per_step=float("nan"), cost=None, speedup=float("nan"))
+            continue
         cost = costs[i]
-        row.update(seconds_per_step=cost.median, cost=cost.to_dict(),
-                   speedup=fom_cost.median / max(cost.median, 1e-15),
-                   speedup_range=[fom_cost.q25 / max(cost.q75, 1e-15), fom_cost.q75 / max(cost.q25, 1e-15)])
+        row.update(seconds_per_step=cost.seconds, cost=cost.to_dict(),
+                   speedup=fom_cost.seconds / max(cost.seconds, 1e-15),
+                   speedup_range=[fom_cost.minimum / max(cost.q75, 1e-15), fom_cost.q75 / max(cost.minimum, 1e-15)])
     return rows, evaluations

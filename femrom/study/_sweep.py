@@ -84,7 +84,7 @@ def run_sweep_point(scene, run: SweepRun, part: str) -> dict:
     os.replace(partial, part)
     return {"name": run.name, "values": dict(run.values), "n_steps": result.summary["n_steps"],
             "stepping_seconds": result.summary["stepping_seconds"], "seconds": time.perf_counter() - tic,
-            "seconds_per_step": result.cost.median, "host": socket.gethostname(), "pid": os.getpid()}
+            "seconds_per_step": result.cost.seconds, "host": socket.gethostname(), "pid": os.getpid()}
 
 
 def _complete(part: Path, name: str) -> bool:

@@ -1,11 +1,17 @@
-"""Per-step costs that hold on a shared machine: timed blocks, repeated, median and spread.
+"""Per-step costs that hold on a shared machine: timed blocks, repeated, their minimum and spread.
 
 A single timing of a microsecond ROM step is dominated by whatever else the
 machine does at that moment (a default fishtail run once showed the same r = 12
 step at 1.5e-5 s and at 1.5e-6 s). Here every cost is a :class:`Cost`: several
 timed blocks, each long enough (``min_block_seconds``, 0.1 s by default) for the
-clock and the scheduler's noise to average out, summarised by their median and
-quartiles. Speedups are ratios of costs measured in the same run.
+clock's resolution not to matter, made of slices spread over time
+(:func:`repeated_costs`), summarised by their minimum (the cost: the machine
+only ever adds time) with the quartiles and maximum as the spread.
+Measured on this machine (shared, 2 cores): blocks of one beam ROM's 0.1 s
+stepping fall into two groups, about 0.75 and 1.05 us per step, in no order, so
+the median of 5 blocks jumps between them (0.77-1.07 us over six ROMs of equal
+work) while the minimum stays within 0.69-0.79 us. Speedups are ratios of costs
+measured in the same run.
 """
 
 from __future__ import annotations
@@ -20,8 +26,8 @@ import numpy as np
 class Cost:
     """Seconds per step from ``blocks`` timed blocks of ``steps_per_block`` steps each.
 
-    ``median`` is the cost; ``q25``, ``q75`` (quartiles), ``minimum``, ``maximum``
-    its spread over the blocks.
+    :attr:`seconds` (the ``minimum`` over the blocks) is the cost; ``q25``,
+    ``median``, ``q75`` and ``maximum`` its spread.
     """
 
     median: float
@@ -40,6 +46,11 @@ class Cost:
         q25, median, q75 = np.percentile(x, [25, 50, 75])
         return cls(float(median), float(q25), float(q75), float(x.min()), float(x.max()), int(x.size),
                    float(steps_per_block))
+
+    @property
+    def seconds(self) -> float:
+        """The cost per step: the least disturbed block's."""
+        return self.minimum
 
     @property
     def relative_spread(self) -> float:
@@ -63,32 +74,40 @@ def blocked_cost(step_seconds: np.ndarray, min_block_seconds: float = 0.1, *, mi
     return Cost.from_blocks(blocks, per_block)
 
 
-def repeated_costs(blocks: dict, n_steps: int, *, repeats: int = 5, min_block_seconds: float = 0.1,
-                   max_steps: int = 2_000_000) -> dict:
+def repeated_costs(blocks: dict, n_steps: int, *, repeats: int = 5, slices: int = 5,
+                   min_block_seconds: float = 0.1, max_steps: int = 2_000_000) -> dict:
     """Per-step costs of several ``block(n) -> seconds`` (the timed part of ``n`` steps), interleaved.
 
-    One calibration call per entry on ``n_steps`` steps gives its step cost; each
-    timed block then runs ``N >= n_steps`` steps, enough for ``min_block_seconds``
-    (at most ``max_steps``). The blocks go round-robin, entry after entry,
-    ``repeats`` times: the machine's slow drifts (another tenant, the clock
-    frequency), which shift all blocks timed within a second or so alike, then
-    fall on every entry instead of on the ones that happened to be timed then
-    (measured: the same r = 8 ROM at 0.95 and 1.43 us per step a few seconds apart,
-    each with quartiles within 10 %).
+    One calibration call per entry on ``n_steps`` steps gives its step cost. Each
+    timed block of an entry lasts at least ``min_block_seconds`` and is made of
+    ``slices`` equal slices spread over the round: the round visits every entry
+    ``slices`` times, a slice each time. So every block samples the machine at
+    ``slices`` moments a round apart, and a disturbance that lasts seconds (another
+    tenant, a CPU burner) falls on all entries alike instead of on the one timed
+    then; ``repeats`` rounds give ``repeats`` blocks per entry. Measured beside a
+    CPU burner on this 2-core machine with whole 0.1 s blocks in turn: a block took
+    either about 0.7 us per step or 1.3-1.6 us, and the fastest of 5 blocks of
+    equal ROMs ranged over 0.70-1.57 us.
 
     Returns
     -------
     dict of key -> Cost
     """
+    slices = max(int(slices), 1)
     sizes = {}
     for key, block in blocks.items():
         per_step = max(float(block(n_steps)) / max(n_steps, 1), 1e-12)
-        sizes[key] = int(min(max(n_steps, math.ceil(min_block_seconds / per_step - 1e-9)), max_steps))
+        sizes[key] = int(min(math.ceil(min_block_seconds / per_step / slices - 1e-9), max_steps))
+        sizes[key] = max(sizes[key], 1)
     samples = {key: [] for key in blocks}
     for _ in range(repeats):
-        for key, block in blocks.items():
-            samples[key].append(float(block(sizes[key])) / sizes[key])
-    return {key: Cost.from_blocks(np.array(samples[key]), sizes[key]) for key in blocks}
+        spent = dict.fromkeys(blocks, 0.0)
+        for _ in range(slices):
+            for key, block in blocks.items():
+                spent[key] += float(block(sizes[key]))
+        for key in blocks:
+            samples[key].append(spent[key] / (slices * sizes[key]))
+    return {key: Cost.from_blocks(np.array(samples[key]), slices * sizes[key]) for key in blocks}
 
 
 def repeated_cost(block, n_steps: int, **options) -> Cost:
