@@ -8,12 +8,16 @@ on that process had the same material, integrate, stream ``q`` into the point's
 own store file) and end with one merged store:
 
 - ``sequential``: a loop in this process (its BLAS and PARDISO use both cores);
+- ``sequential_1thread``: the same loop in a child process with one BLAS/MKL
+  thread (``MKL_NUM_THREADS=1`` ...), the workers' setting: it separates what
+  the two workers gain by running in parallel from what one process loses to
+  two MKL threads on a shared machine (docs/benchmarks.md, "Noise");
 - ``dask``: :func:`femrom.study.run_sweep` on a ``LocalCluster`` of 2 worker
   processes with one thread each.
 
-The two alternate ``--repeats`` times (sequential first, then dask, then dask,
-sequential, ...), so a change of the machine's load hits both. Reported per
-repeat: wall seconds of each, and their ratio (sequential / dask).
+They alternate ``--repeats`` times (in rotated order), so a change of the
+machine's load hits all. Reported per repeat: wall seconds of each, and the
+ratios sequential / dask.
 
 Run ``PYTHONPATH=. python benchmarks/sweep_dask.py [--repeats 2] [--level small]``;
 it prints a table and writes ``benchmarks/results/sweep_dask.json``.
@@ -69,6 +73,16 @@ def sequential(scene, out: Path) -> float:
     return time.perf_counter() - tic
 
 
+def sequential_1thread(level: str, out: Path) -> float:
+    """:func:`sequential` in a child process with one BLAS/MKL/OpenMP thread."""
+    import subprocess
+
+    env = dict(os.environ, MKL_NUM_THREADS="1", OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1")
+    done = subprocess.run([sys.executable, __file__, "--child", str(out), "--level", level], env=env,
+                          capture_output=True, text=True, check=True)
+    return float(done.stdout.strip().splitlines()[-1])
+
+
 def dask(scene, out: Path, workers: int) -> float:
     from femrom.study import run_sweep
 
@@ -82,40 +96,54 @@ def main(argv=None) -> int:
     parser.add_argument("--repeats", type=int, default=2)
     parser.add_argument("--level", default="small")
     parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--child", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
+    if args.child:        # sequential_1thread's child: print the seconds
+        print(sequential(sweep_scene(args.level), Path(args.child)))
+        return 0
     from femrom.post import machine_description
 
     scene = sweep_scene(args.level)
+    ways = ("sequential", "sequential_1thread", "dask")
     rows = []
     for repeat in range(args.repeats):
-        order = ("sequential", "dask") if repeat % 2 == 0 else ("dask", "sequential")
+        order = ways[repeat % 3:] + ways[:repeat % 3]
         row = {"repeat": repeat, "load_before": os.getloadavg()}
         for way in order:
             work = Path(tempfile.mkdtemp(prefix="femrom_sweep_"))
             try:
-                row[way] = sequential(scene, work) if way == "sequential" else dask(scene, work, args.workers)
+                if way == "sequential":
+                    row[way] = sequential(scene, work)
+                elif way == "sequential_1thread":
+                    row[way] = sequential_1thread(args.level, work)
+                else:
+                    row[way] = dask(scene, work, args.workers)
             finally:
                 shutil.rmtree(work, ignore_errors=True)
             print(f"repeat {repeat}: {way} {row[way]:.1f} s", flush=True)
         row["load_after"] = os.getloadavg()
         row["ratio"] = row["sequential"] / row["dask"]
+        row["ratio_1thread"] = row["sequential_1thread"] / row["dask"]
         rows.append(row)
     result = {
         "benchmark": "sweep_dask", "date": datetime.now(timezone.utc).isoformat(timespec="seconds"),
         "machine": machine_description(), "level": args.level, "n_runs": 8, "workers": args.workers,
         "steps_per_run": scene.time.n_steps, "rows": rows,
         "median_sequential_seconds": statistics.median(r["sequential"] for r in rows),
+        "median_sequential_1thread_seconds": statistics.median(r["sequential_1thread"] for r in rows),
         "median_dask_seconds": statistics.median(r["dask"] for r in rows),
         "median_ratio": statistics.median(r["ratio"] for r in rows),
+        "median_ratio_1thread": statistics.median(r["ratio_1thread"] for r in rows),
     }
     RESULTS.parent.mkdir(parents=True, exist_ok=True)
     RESULTS.write_text(json.dumps(result, indent=2) + "\n")
-    print("| repeat | sequential [s] | dask, 2 workers [s] | sequential / dask | load before |")
-    print("|---|---|---|---|---|")
+    print("| repeat | sequential [s] | sequential, 1 thread [s] | dask, 2 workers [s] | ratios | load before |")
+    print("|---|---|---|---|---|---|")
     for r in rows:
-        print(f"| {r['repeat']} | {r['sequential']:.1f} | {r['dask']:.1f} | {r['ratio']:.2f} | "
-              f"{r['load_before'][0]:.2f} |")
-    print(f"median ratio {result['median_ratio']:.2f}; {RESULTS}")
+        print(f"| {r['repeat']} | {r['sequential']:.1f} | {r['sequential_1thread']:.1f} | {r['dask']:.1f} | "
+              f"{r['ratio']:.2f}, {r['ratio_1thread']:.2f} | {r['load_before'][0]:.2f} |")
+    print(f"median ratios {result['median_ratio']:.2f} (sequential / dask), {result['median_ratio_1thread']:.2f} "
+          f"(sequential, 1 thread / dask); {RESULTS}")
     return 0
 
 

@@ -5,24 +5,29 @@ mass (the symmetric finite-difference discretization of the seed), released
 as the exact breather of frequency 0.8 (``sine_gordon.toml``). The seed
 (``../shared/seeds/000_*.txt``, "Sine-Gordon equation (n = 2000)") trains on
 [0, 5] s and predicts to 25 s (400 % outside the training interval) with
-bounded energy error. Here, for several basis sizes r:
+bounded energy error. On the study layer (:func:`femrom.study.run_study`), for
+several basis sizes r:
 
-- FOM (Newmark average acceleration, Newton) over [0, 25] s; its first 5 s
-  are the training snapshots, the rest the test reference;
+- FOM (Newmark average acceleration, Newton) over [0, 5] s (training) and over
+  [0, 25] s (the test, scored after 5 s), displacements streamed to a store;
 - mass-orthonormal POD of the training snapshots (``V^T M V = I``);
 - L-OpInf: ``min_{K^ = K^^T > 0} ||Q^'' + F^ + K^ Q^||_F`` with the projected
-  forcing data ``F^ = V^T f_nl(Q)`` (the seed's formulation), finite-difference
-  accelerations; online the known force ``V^T f_nl(V q^)`` (O(n) per call);
-- the intrusive Galerkin ROM (reference) and, at the main r, plain OpInf;
-- hyper-reduction: the learned K^ with the reduced potential sampled on a few
-  nodes with non-negative ECSW weights (:mod:`femrom.rom._hyper`), so the
-  reduced force stays the exact gradient of a reduced potential.
+  forcing data ``F^ = V^T f_nl(Q)`` of the stored snapshots (the seed's
+  formulation), finite-difference accelerations; online the known force
+  ``V^T f_nl(V q^)`` (O(n) per call); plain OpInf and the intrusive Galerkin ROM
+  on the same data and basis;
+- what is the case's own: hyper-reduction (the learned K^ with the reduced
+  potential sampled on a few nodes with non-negative ECSW weights,
+  :mod:`femrom.rom._hyper`, so the reduced force stays the exact gradient of a
+  reduced potential), the FOM's ladders against the exact breather, the FOM
+  energy of the reconstructed ROM state, and the profiles q(x).
 
-The case writes ``metrics.json``, ``report.md`` (accuracy-vs-cost table),
-``rom_state_error.png``, ``rom_energy_error.png``, ``rom_outputs.png``,
-``rom_profiles.png`` (q(x) at t = 5, 15, 25 s), ``accuracy_cost_rom.png``,
-``accuracy_cost_fom.png`` (the FOM's time-step and mesh ladders against the exact
-breather, :func:`fom_ladder`) and ``scene.toml``.
+The case writes the study's report (``report.md``, ``metrics.json``,
+``response.png``, ``rom_error.png``, ``energy.png``, ``accuracy_cost.png``)
+with its own sections, ``rom_state_error.png``, ``rom_energy_error.png``,
+``rom_outputs.png``, ``rom_profiles.png`` (q(x) at t = 5, 15, 25 s),
+``accuracy_cost_rom.png``, ``accuracy_cost_fom.png`` (:func:`fom_ladder`) and
+``scene.toml``.
 
 Run ``python -m femrom run sine_gordon [--out DIR] [--quick]``; tests import :func:`run`.
 """
@@ -30,16 +35,20 @@ Run ``python -m femrom run sine_gordon [--out DIR] [--quick]``; tests import :fu
 import argparse
 import dataclasses
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from femrom.post import (accuracy_cost_table, machine_description, plot_accuracy_cost_groups,
-                         plot_time_series, write_metrics)
-from femrom.scene import Scene, build
+from femrom.integrators import Newmark, Trajectory, integrate
+from femrom.post import accuracy_cost_table, plot_accuracy_cost_groups, plot_time_series
+from femrom.rom import HyperReducedPotential, SecondOrderROM, ecsw_weights
+from femrom.scene import BasisSpec, Derivatives, LearnerSpec, ReportSpec, RomConfig, RunSpec, Scene, build
+from femrom.study import evaluate, plot_error_history, repeated_cost, rom_costs, run_study, scored_columns
 
 SCENE = Path(__file__).with_suffix(".toml")
+NAMES = {"galerkin": "intrusive Galerkin", "lopinf": "L-OpInf", "lopinf_hyper": "L-OpInf + hyper-reduction",
+         "plain_opinf": "plain OpInf"}
 
 
 @dataclass(frozen=True)
@@ -104,29 +113,6 @@ def with_nodes(scene: Scene, n: int) -> Scene:
     return dataclasses.replace(scene, structure=structure)
 
 
-def _m_norms(X, M) -> np.ndarray:
-    return np.sqrt(np.maximum(np.sum(X * np.asarray(M @ X), axis=0), 0.0))
-
-
-def fom_energy(system, Q, Vel) -> np.ndarray:
-    """(k,) ndarray ``q'^T M q' / 2 + q^T K q / 2 + U(q)`` of full (n, k) states."""
-    nl = system.nonlinear
-    U = np.sum(nl.weights[:, None] * nl.phi(Q), axis=0)
-    return 0.5 * np.sum(Vel * np.asarray(system.mass @ Vel), axis=0) + \
-        0.5 * np.sum(Q * np.asarray(system.stiffness @ Q), axis=0) + U
-
-
-def _time_calls(fn, q, repeats: int = 200) -> float:
-    """Median over 5 batches of the seconds per call of ``fn(q)``."""
-    batches = []
-    for _ in range(5):
-        tic = time.perf_counter()
-        for _ in range(repeats):
-            fn(q)
-        batches.append((time.perf_counter() - tic) / repeats)
-    return float(np.median(batches))
-
-
 def breather(x, t, w: float = BREATHER_FREQUENCY, centre: float = BREATHER_CENTRE):
     """Exact breather of ``q_tt = q_xx - sin q``:
     ``4 arctan( sqrt(1 - w^2)/w sin(w t) / cosh(sqrt(1 - w^2) (x - centre)) )``."""
@@ -147,8 +133,6 @@ def fom_ladder(scene: Scene, study: SineGordonStudy) -> list[dict]:
 
     Rows carry the run's stepping time; the fitted order goes into every row of its ladder.
     """
-    from femrom.integrators import Newmark, Trajectory, integrate
-
     T = study.train_window
     s = np.sqrt(1.0 - BREATHER_FREQUENCY**2)
 
@@ -191,196 +175,181 @@ def fom_ladder(scene: Scene, study: SineGordonStudy) -> list[dict]:
             r["observed_order"] = sign * slope
     return rows
 
-def run(out_dir, *, quick: bool = False, paper: bool = False, study: SineGordonStudy | None = None,
-        scene_path=SCENE) -> dict:
-    """Run the case; return its metrics (also written to ``out_dir/metrics.json``)."""
-    from femrom.basis import POD
-    from femrom.inference import (
-        LagrangianOpInf,
-        ProjectedNonlinearForce,
-        SecondOrderOpInf,
-        reduce_snapshots,
-    )
-    from femrom.integrators import Trajectory, simulate
-    from femrom.rom import HyperReducedPotential, SecondOrderROM, ecsw_weights
-
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    study = study if study is not None else (QUICK if quick else PAPER if paper else SineGordonStudy())
-    scene = Scene.from_toml(scene_path)
+def study_scene(scene: Scene, study: SineGordonStudy) -> Scene:
+    """The scene at the study's n and dt, with a ``[rom]`` section: train on [0, T], test to t_end scored after T."""
     if study.n is not None:
         scene = with_nodes(scene, study.n)
     dt = scene.time.dt if study.dt is None else study.dt
     scene = dataclasses.replace(scene, time=dataclasses.replace(scene.time, dt=dt, t_end=study.t_end))
-    (out_dir / "scene.toml").write_text(scene.source_text)
+    T = int(round(study.train_window / dt)) * dt
+    data = Derivatives("finite_differences", study.derivative_order)
+    config = RomConfig(
+        train=(RunSpec("train", t_end=T),), test=(RunSpec("extrapolation", t_end=study.t_end, score_after=T),),
+        learners=(LearnerSpec("galerkin", "galerkin", data), LearnerSpec("lopinf", "lopinf", data),
+                  LearnerSpec("plain_opinf", "opinf", data)),
+        basis=BasisSpec(tuple(study.ranks), method="svd"), extension=1.0,
+        report=ReportSpec(render=False, paraview=False))
+    return dataclasses.replace(scene, rom=config)
 
-    tic = time.perf_counter()
-    model = build(scene)
-    build_seconds = time.perf_counter() - tic
-    system = model.system
-    M, nl = system.mass, system.nonlinear
-    # the velocity is needed for the energy of the FOM states; the scene keeps displacements
-    velocities = Trajectory(fields=("v",))
-    tic = time.perf_counter()
-    fom = simulate(model, consumers=[velocities])
-    fom_seconds = time.perf_counter() - tic
-    Q, Qd, times = fom.fields["displacement"], velocities.v, fom.times
-    n_train = int(round(study.train_window / dt))
-    train, test = slice(0, n_train + 1), slice(n_train + 1, None)
-    fom_train_seconds = fom_seconds * n_train / (times.size - 1)
-    E_fom = fom_energy(system, Q, Qd)
-    E0 = E_fom[0]
-    scale = np.max(_m_norms(Q, M))
-    q_norm = {"train": np.linalg.norm(_m_norms(Q[:, train], M)),
-              "test": np.linalg.norm(_m_norms(Q[:, test], M))}
-    F_train = nl.weights[:, None] * nl.dphi(Q[:, train])      # known nonlinear forcing data
-    E_out = system.output_matrix
 
-    rows, curves, hyper_info = [], {}, {}
-    for r in study.ranks:
+def fom_energy(system, Q, Vel) -> np.ndarray:
+    """(k,) ndarray ``q'^T M q' / 2 + q^T K q / 2 + U(q)`` of full (n, k) states."""
+    nl = system.nonlinear
+    U = np.sum(nl.weights[:, None] * nl.phi(Q), axis=0)
+    return 0.5 * np.sum(Vel * (system.mass @ Vel) + Q * (system.stiffness @ Q), axis=0) + U
+
+
+def call_seconds(fn, q) -> float:
+    """Seconds per call of ``fn(q)``: the fastest of 5 timed blocks of at least 0.1 s."""
+    def block(n):
         tic = time.perf_counter()
-        V = POD(r, product=M).fit(Q[:, train]).basis_
-        data = reduce_snapshots(V, Q[:, train], dt, product=M, order=study.derivative_order,
-                                nonlinear_forces=F_train)
-        basis_seconds = time.perf_counter() - tic
-        residual = Q - V @ (V.T @ np.asarray(M @ Q))
-        proj_t = _m_norms(residual, M)
-        projection = float(np.linalg.norm(proj_t[test]) / q_norm["test"])
-        q0 = V.T @ np.asarray(M @ model.initial_displacement)
-        v0 = V.T @ np.asarray(M @ model.initial_velocity)
-        projected = ProjectedNonlinearForce(nl, V)
+        for _ in range(n):
+            fn(q)
+        return time.perf_counter() - tic
+    return repeated_cost(block, 100).seconds
 
-        methods = ["galerkin", "lopinf", "lopinf_hyper"] + (["plain_opinf"] if r == study.main_rank else [])
-        learned = None
-        for method in methods:
-            tic = time.perf_counter()
-            extra = {}
-            if method == "galerkin":
-                rom = SecondOrderROM.galerkin(system, V, product=M, mass_orthonormal=True)
-            elif method in ("lopinf", "plain_opinf"):
-                # the scene's effects: no damping, the known sin(q) force projected
-                learner = (LagrangianOpInf if method == "lopinf" else SecondOrderOpInf).for_system(
-                    system, V)
-                rom = SecondOrderROM(learner=learner, basis=V, product=M).fit(data)
-                if method == "lopinf":
-                    learned = rom
-            else:
-                # the learned K^ with the sampled potential in place of the O(n) projected one
-                nodes, xi, info = ecsw_weights(nl, V, V @ data.states[:, ::study.hyper_stride],
-                                               tolerance=study.hyper_tolerance)
-                hyper = HyperReducedPotential.from_potential(nl, V, nodes, xi)
-                rom = SecondOrderROM(learned.operators_.without("projected_force").with_terms(hyper), V,
-                                     product=M)
-                extra = {"samples": int(nodes.size), "ecsw_residual": info["residual"],
-                         "ecsw_seconds": info["seconds"],
-                         "force_call_seconds": _time_calls(hyper.force, q0),
-                         "tangent_call_seconds": _time_calls(hyper.tangent, q0),
-                         "projected_force_call_seconds": _time_calls(projected.force, q0),
-                         "projected_tangent_call_seconds": _time_calls(projected.tangent, q0)}
-                hyper_info[r] = {"nodes": nodes, "weights": hyper.weights}
-            fit_seconds = time.perf_counter() - tic
-            try:
-                solution = rom.predict(q0, times, v0=v0)
-            except RuntimeError as exc:            # Newton failure or non-finite state
-                rows.append({"method": method, "r": r, "failed": str(exc), "test_error": float("inf"),
-                             "projection_error": projection})
-                continue
-            err_t = _m_norms(Q - V @ solution.q, M)
-            energy = fom_energy(system, V @ solution.q, V @ solution.v)
-            energy_error = np.abs(energy - E0) / E0
-            rom_energy = solution.energy
-            row = {
-                "method": method, "r": r, "samples": extra.get("samples", system.n_dofs),
-                "train_error": float(np.linalg.norm(err_t[train]) / q_norm["train"]),
-                "test_error": float(np.linalg.norm(err_t[test]) / q_norm["test"]),
-                "projection_error": projection,
-                "energy_error_max": float(np.max(energy_error)),
-                "energy_error_test_max": float(np.max(energy_error[test])),
-                "rom_energy_drift": float(np.max(np.abs(rom_energy - rom_energy[0])) / abs(rom_energy[0])),
-                "online_seconds": solution.info["stepping_seconds"],
-                "seconds_per_step": solution.info["seconds_per_step"],
-                "offline_seconds": fom_train_seconds + basis_seconds + fit_seconds,
-                "speedup": fom.summary["stepping_seconds"] / solution.info["stepping_seconds"],
-                **extra,
-            }
-            if method != "galerkin":
-                K = rom.operators_.stiffness
-                row["stiffness_asymmetry"] = float(np.linalg.norm(K - K.T) / np.linalg.norm(K))
-            rows.append(row)
-            if r == study.main_rank:
-                curves[method] = {"state_error": err_t / scale, "energy_error": energy_error,
-                                  "outputs": None if E_out is None else np.asarray(E_out @ (V @ solution.q)),
-                                  "q": solution.q}
+
+def hyper_reduce(state, study: SineGordonStudy) -> dict:
+    """Per r: the learned ROM with its potential sampled by ECSW on every ``hyper_stride``-th
+    training state, evaluated and timed like the study's ROMs (timed with the L-OpInf
+    ROMs, interleaved). Returns rows by r with the ROM and the extra metrics."""
+    nl, V, train_run = state.model.system.nonlinear, state.basis, state.runs["train"]
+    train_states = state.projections["train"].coordinates
+    out = {}
+    for row in state.rows:
+        if row["learner"] != "lopinf":
+            continue
+        r, learned = row["r"], row["_rom"]
+        Vr = V[:, :r]
+        nodes, xi, info = ecsw_weights(nl, Vr, Vr @ train_states[:r, ::study.hyper_stride],
+                                       tolerance=study.hyper_tolerance)
+        hyper = HyperReducedPotential.from_potential(nl, Vr, nodes, xi)
+        rom = SecondOrderROM(learned.operators_.without("projected_force").with_terms(hyper), Vr, product=state.product)
+        projected = learned.operators_.term("projected_force")
+        q0 = Vr.T @ (state.product @ train_run.q0)
+        out[r] = {"rom": rom, "lopinf": learned, "samples": int(nodes.size), "ecsw_residual": info["residual"],
+                  "ecsw_seconds": info["seconds"], "nodes": nodes, "weights": hyper.weights,
+                  "force_call_seconds": call_seconds(hyper.force, q0),
+                  "tangent_call_seconds": call_seconds(hyper.tangent, q0),
+                  "projected_force_call_seconds": call_seconds(projected.force, q0),
+                  "projected_tangent_call_seconds": call_seconds(projected.tangent, q0),
+                  "evaluations": {name: evaluate(rom, run, state.projections[name], extension=1.0,
+                                                 score_after=spec.score_after)
+                                  for spec in (*state.config.train, *state.config.test)
+                                  for name, run in [(spec.name, state.runs[spec.name])]}}
+    costs = rom_costs({(r, m): h[m] for r, h in out.items() for m in ("rom", "lopinf")},
+                      state.runs["extrapolation"], repeats=state.config.timing.repeats)
+    for r, h in out.items():
+        h["cost"], h["lopinf_cost"] = costs[(r, "rom")], costs[(r, "lopinf")]
+    return out
+
+
+def case_rows(state, study: SineGordonStudy, out_dir: Path) -> dict:
+    """The case's table: the study's ROMs and the hyper-reduced ones, with the FOM energy of the
+    reconstructed state, the ROM's own energy drift and the costs; and its plots."""
+    system, V, test = state.model.system, state.basis, state.runs["extrapolation"]
+    times, T = test.times, state.config.test[0].score_after
+    E0, window = test.energy[0], scored_columns(test, T)
+    hyper = hyper_reduce(state, study)
+    fom_step = max(state.runs.values(), key=lambda run: run.times.size).cost.seconds
+    rows, curves = [], {}
+    entries = [(row["learner"], row["r"], row, state.evaluations.get((row["r"], row["learner"], "extrapolation")))
+               for row in state.rows]
+    entries += [("lopinf_hyper", r, h, h["evaluations"]["extrapolation"]) for r, h in hyper.items()]
+    for method, r, src, ev in entries:
+        if ev is None:
+            rows.append({"method": method, "r": r, "failed": src.get("failed"), "test_error": float("inf")})
+            continue
+        hyper_row = method == "lopinf_hyper"
+        train_ev = src["evaluations"]["train"] if hyper_row else state.evaluations[(r, method, "train")]
+        cost = src["cost"].seconds if hyper_row else src["seconds_per_step"]
+        solution = ev.solution
+        energy_error = np.abs(fom_energy(system, V[:, :r] @ solution.q, V[:, :r] @ solution.v) - E0) / E0
+        rom_energy = solution.energy
+        row = {"method": method, "r": r, "samples": src.get("samples", system.n_dofs),
+               "train_error": train_ev.field_error, "test_error": ev.field_error,
+               "projection_error": ev.projection_error, "energy_error_max": float(np.max(energy_error)),
+               "energy_error_test_max": float(np.max(energy_error[window])),
+               "rom_energy_drift": float(np.max(np.abs(rom_energy - rom_energy[0])) / abs(rom_energy[0])),
+               "seconds_per_step": cost, "online_seconds": cost * (times.size - 1), "speedup": fom_step / cost}
+        if hyper_row:
+            row.update({k: src[k] for k in ("ecsw_residual", "ecsw_seconds", "force_call_seconds",
+                                            "tangent_call_seconds", "projected_force_call_seconds",
+                                            "projected_tangent_call_seconds")},
+                       lopinf_seconds_per_step=src["lopinf_cost"].seconds,
+                       speedup_over_lopinf=src["lopinf_cost"].seconds / cost)
+        if method != "galerkin":
+            K = (src["rom"] if hyper_row else src["_rom"]).operators_.stiffness
+            row["stiffness_asymmetry"] = float(np.linalg.norm(K - K.T) / np.linalg.norm(K))
+        rows.append(row)
         if r == study.main_rank:
-            curves["projection"] = {"state_error": proj_t / scale}
-            main_basis = V
-
-    # -- plots -------------------------------------------------------------
-    T = float(times[n_train])
+            curves[method] = {"energy_error": energy_error, "q": solution.q,
+                              "outputs": np.asarray(system.output_matrix @ (V[:, :r] @ solution.q))}
     r0 = study.main_rank
-    names = {"galerkin": "intrusive Galerkin", "lopinf": "L-OpInf", "lopinf_hyper": "L-OpInf + hyper-reduction",
-             "plain_opinf": "plain OpInf", "projection": "projection"}
-    shown = [m for m in ("galerkin", "lopinf", "lopinf_hyper", "plain_opinf", "projection") if m in curves]
-    plot_time_series(out_dir / "rom_state_error.png", times,
-                     {f"{names[m]} (r={r0})": curves[m]["state_error"] for m in shown}, logy=True,
-                     shade=(0.0, T), ylabel="||q - V q^||_M / max ||q||_M", envelope=250,
-                     title=f"sine-Gordon n = {system.n_dofs}: state error, trained on [0, {T:g}] s")
+    evaluations = dict(state.evaluations) | {(r, "lopinf_hyper", "extrapolation"): h["evaluations"]["extrapolation"]
+                                             for r, h in hyper.items()}
+    shown = [m for m in NAMES if m in curves]
+    plot_error_history(out_dir / "rom_state_error.png", test, state.projections["extrapolation"], evaluations, r0,
+                       shown, shade=(0.0, T), envelope=250,
+                       title=f"sine-Gordon n = {system.n_dofs}: state error, trained on [0, {T:g}] s")
     plot_time_series(out_dir / "rom_energy_error.png", times,
-                     {"FOM": np.abs(E_fom - E0) / E0} |
-                     {f"{names[m]} (r={r0})": curves[m]["energy_error"] for m in shown if m != "projection"},
+                     {"FOM": np.abs(test.energy - E0) / E0} | {f"{NAMES[m]} (r={r0})": curves[m]["energy_error"]
+                                                               for m in shown},
                      logy=True, shade=(0.0, T), ylabel="|E - E0| / E0", envelope=250,
                      title="energy error (FOM energy of the reconstructed state)")
-    if E_out is not None:
-        outs = {"FOM": fom.outputs[0]}
-        outs |= {names[m]: curves[m]["outputs"][0] for m in ("lopinf", "lopinf_hyper") if m in curves}
-        plot_time_series(out_dir / "rom_outputs.png", times, outs, shade=(0.0, T),
-                         ylabel=f"q at {system.output_names[0]}",
-                         title=f"output {system.output_names[0]} (r={r0})")
-    _plot_profiles(out_dir / "rom_profiles.png", model, Q, times, main_basis, curves, names,
+    plot_time_series(out_dir / "rom_outputs.png", times,
+                     {"FOM": test.outputs[0]} | {NAMES[m]: curves[m]["outputs"][0] for m in ("lopinf", "lopinf_hyper")
+                                                 if m in curves},
+                     shade=(0.0, T), ylabel=f"q at {system.output_names[0]}",
+                     title=f"output {system.output_names[0]} (r={r0})")
+    Q = state.store.read("extrapolation", "q")
+    _plot_profiles(out_dir / "rom_profiles.png", state.model, Q, times, V[:, :r0], curves, NAMES,
                    [study.train_window, 0.5 * (study.train_window + study.t_end), study.t_end])
     plot_accuracy_cost_groups(out_dir / "accuracy_cost_rom.png", [r for r in rows if "failed" not in r],
                               "online_seconds", "test_error", "r", "method",
                               title="test-window error vs online time (labels: r)")
+    return {"rows": rows, "fom_energy_drift": float(np.max(np.abs(test.energy - E0)) / E0), "energy0": float(E0),
+            "hyper_nodes": {str(r): {"nodes": h["nodes"], "weights": h["weights"]} for r, h in hyper.items()}}
 
-    tic = time.perf_counter()
-    ladder_rows = fom_ladder(scene, study)
-    ladder_seconds = time.perf_counter() - tic
-    plot_accuracy_cost_groups(out_dir / "accuracy_cost_fom.png", ladder_rows, "stepping_seconds", "error",
-                              "label", "ladder",
-                              title=f"FOM error at t = {study.train_window:g} s: time steps at n = {system.n_dofs} "
-                                    f"(vs dt = {study.ladder_fine_dt:g}), meshes vs the exact breather")
 
-    columns = ["method", "r", "samples", "train_error", "test_error", "projection_error",
-               "energy_error_max", "online_seconds", "seconds_per_step", "offline_seconds", "speedup"]
-    metrics = {
-        "case": "sine_gordon", "scene": scene.name, "n_dofs": system.n_dofs, "settings": asdict(study),
-        "dt": dt, "machine": machine_description(), "build_seconds": build_seconds,
-        "boundary_conditions": "q = 0 at both ends (the breather decays as exp(-0.6 |x - 20|))",
-        "fom": {"seconds": fom_seconds, "summary": fom.summary,
-                "energy_drift": float(np.max(np.abs(E_fom - E0)) / E0), "energy0": float(E0)},
-        "rows": rows,
-        "fom_ladder": ladder_rows, "fom_ladder_seconds": ladder_seconds,
-        "hyper_nodes": {str(r): {"nodes": v["nodes"], "weights": v["weights"]} for r, v in hyper_info.items()},
-    }
-    write_metrics(out_dir / "metrics.json", metrics)
-    report = [
-        f"# {scene.description}", "",
-        f"FOM: {system.n_dofs} dofs, {fom.summary['n_steps']} Newmark steps of {dt:g} s with Newton in "
-        f"{fom.summary['stepping_seconds']:.2f} s ({fom.summary['stepping_seconds'] / fom.summary['n_steps'] * 1e3:.2f} "
-        f"ms/step); energy drift {metrics['fom']['energy_drift']:.2e}. Training window [0, {T:g}] s, "
-        f"test window ({T:g}, {study.t_end:g}] s.", "",
-        "Errors in the mass norm over the test window; energy error = FOM energy of the reconstructed ROM "
-        "state against E(0), maximum over [0, t_end]; speedup = FOM stepping time / ROM stepping time over "
-        "the same window; samples = nodes at which the nonlinear potential is evaluated.", "",
-        accuracy_cost_table(rows, columns), "",
-        f"## FOM accuracy against cost (relative error at t = {study.train_window:g} s)", "",
-        accuracy_cost_table(ladder_rows, ["ladder", "n", "dt", "steps", "error", "reference", "stepping_seconds",
-                                          "seconds_per_step", "observed_order"]), "",
-        "Newmark average acceleration and P1 with a lumped mass (symmetric finite differences) are "
-        "both second order.", "",
-    ]
-    (out_dir / "report.md").write_text("\n".join(report))
-    return metrics
+COLUMNS = ["method", "r", "samples", "train_error", "test_error", "projection_error", "energy_error_max",
+           "online_seconds", "seconds_per_step", "speedup"]
+
+
+def run(out_dir, *, quick: bool = False, paper: bool = False, study: SineGordonStudy | None = None,
+        scene_path=SCENE) -> dict:
+    """Run the case; return its metrics (also written to ``out_dir/metrics.json``)."""
+    out_dir = Path(out_dir)
+    study = study if study is not None else (QUICK if quick else PAPER if paper else SineGordonStudy())
+    scene = study_scene(Scene.from_toml(scene_path), study)
+
+    def extend(state):
+        own = case_rows(state, study, out_dir)
+        ladder = fom_ladder(scene, study)
+        plot_accuracy_cost_groups(out_dir / "accuracy_cost_fom.png", ladder, "stepping_seconds", "error",
+                                  "label", "ladder",
+                                  title=f"FOM error at t = {study.train_window:g} s: time steps at n = "
+                                        f"{state.model.system.n_dofs} (vs dt = {study.ladder_fine_dt:g}), meshes vs "
+                                        "the exact breather")
+        summary = state.runs["extrapolation"].summary
+        metrics = {"case": "sine_gordon", "settings": dataclasses.asdict(study), "dt": scene.time.dt,
+                   "boundary_conditions": "q = 0 at both ends (the breather decays as exp(-0.6 |x - 20|))",
+                   "fom": {"seconds": summary["stepping_seconds"], "summary": summary,
+                           "energy_drift": own["fom_energy_drift"], "energy0": own["energy0"]},
+                   "rows": own["rows"], "fom_ladder": ladder, "hyper_nodes": own["hyper_nodes"]}
+        sections = [
+            "## The case's table\n\nErrors in the mass norm over the test window; energy error = FOM energy of the "
+            "reconstructed ROM state against E(0), maximum over [0, t_end]; speedup = FOM step over ROM step (each "
+            "the fastest of timed blocks); samples = nodes at which the nonlinear potential is evaluated.\n\n"
+            + accuracy_cost_table(own["rows"], COLUMNS),
+            f"## FOM accuracy against cost (relative error at t = {study.train_window:g} s)\n\n"
+            + accuracy_cost_table(ladder, ["ladder", "n", "dt", "steps", "error", "reference", "stepping_seconds",
+                                           "seconds_per_step", "observed_order"])
+            + "\n\nNewmark average acceleration and P1 with a lumped mass (symmetric finite differences) are "
+              "both second order."]
+        return metrics, sections
+
+    return run_study(scene, out_dir, extend=extend, progress=None)
 
 
 def _plot_profiles(path, model, Q, times, V, curves, names, at):

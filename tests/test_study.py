@@ -150,6 +150,8 @@ def _bracket_dict(**rom):
     ({"report": {"time_step_factors": [1]}}, "time_step_factors must be distinct integers > 1"),
     ({"extension": 0.5}, "[rom] extension must be >= 1"),
     ({"test": [{"name": "x", "signals": [{"kind": "sine", "omega": 3}]}]}, "unknown key 'omega' for a sine signal"),
+    ({"test": [{"name": "x", "t_end": 0.01, "score_after": 0.02}]}, "score_after must lie inside the run's window"),
+    ({"learners": [{"learner": "lopinf", "terms": "damping"}]}, "terms must be an array of term names"),
 ])
 def test_bad_rom_section_is_one_clear_error(rom, fragment):
     with pytest.raises(SceneError) as info:
@@ -180,6 +182,13 @@ def test_cli_refuses_a_bad_learner_before_building_and_writes_nothing(tmp_path):
     assert len(lines) == 1 and "unknown learner 'dmd'" in lines[0] and str(scene) in lines[0], proc.stderr
     assert not out.exists()
     assert time.perf_counter() - tic < 60   # nothing was meshed or integrated (a sanity bound, not a benchmark)
+
+
+def test_rom_section_needs_outputs():
+    data = _bracket_dict()
+    del data["outputs"]
+    with pytest.raises(SceneError, match=r"\[rom\] compares reduced and full outputs"):
+        Scene.from_dict(data)
 
 
 def test_scene_without_rom_section_has_none():

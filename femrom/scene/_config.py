@@ -346,6 +346,9 @@ class Scene:
             raise SceneError("the scene lists [[inputs]] but not the 'actuation' effect")
         if "actuation" in names and not inputs:
             raise SceneError("the 'actuation' effect needs at least one [[inputs]] entry")
+        if data.get("rom") is not None and not (data.get("outputs") or {}).get("probes") \
+                and not (data.get("outputs") or {}).get("averages"):
+            raise SceneError("[rom] compares reduced and full outputs: list probes or averages in [outputs]")
         return cls(
             name=str(data.get("name", "scene")),
             description=str(data.get("description", "")),

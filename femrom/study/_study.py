@@ -21,7 +21,7 @@ first training and test run's errors flattened as ``train_*`` / ``test_*``.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -103,26 +103,45 @@ def pod_basis(store, trajectories, product, config: RomConfig) -> POD:
     return POD(rank=rank, product=product, method="randomized", power_iterations=spec.power_iterations).fit(source)
 
 
+def projected_forces(nonlinear, basis: np.ndarray, source) -> np.ndarray:
+    """(R, K) ndarray ``V^T f_nl(q_j)`` of every stored displacement ``q_j`` (one pass, block by block).
+
+    The learning target of a known stateless force from the full snapshots (the
+    seed's formulation), not from their projection ``V^T f(V q^)``.
+    """
+    from femrom.linalg import as_block_source
+
+    parts = [basis.T @ np.column_stack([nonlinear.force(q) for q in block.T])
+             for block in as_block_source(source).blocks()]
+    return np.hstack(parts)
+
+
 def reduce_runs(store, runs: dict[str, FOMRun], train: tuple[str, ...], basis: np.ndarray, product,
-                *, stored_derivatives: bool, order: int = 4):
+                *, stored_derivatives: bool, order: int = 4, nonlinear=None):
     """The training data in the largest basis, and every run's :class:`Projection` (one pass each,
     and one more over a training run for its data).
 
     Training data carry the run's stored integrator derivatives when the store has
     them (``stored_derivatives``), else finite differences of ``order`` (a learner
-    may ask for another order: :func:`training_data`).
+    may ask for another order: :func:`training_data`). With a stateless known
+    ``nonlinear`` force, the training data carry its projection at the stored
+    displacements (:func:`projected_forces`; a stateful force is evaluated by its
+    reduced term along each trajectory instead).
     """
     data, projections = {}, {}
     for name, run in runs.items():
         q = store_source(store, "q", [name])
         projections[name] = project_run(basis, q, product)
         if name in train:
-            data[name] = reduce_snapshots(
+            d = reduce_snapshots(
                 basis, q, run.dt, product=product,
                 velocities=store_source(store, "v", [name]) if stored_derivatives else None,
                 accelerations=store_source(store, "a", [name]) if stored_derivatives else None,
                 derivatives="stored" if stored_derivatives else "finite_difference", order=order,
                 inputs=run.U, outputs=run.outputs, t0=float(run.times[0]))
+            if nonlinear is not None and not nonlinear.stateful:
+                d = replace(d, nonlinear_forces=projected_forces(nonlinear, basis, q))
+            data[name] = d
     return data, projections
 
 
@@ -238,7 +257,8 @@ def rom_costs(roms: dict, run: FOMRun, *, repeats: int = 5, min_block_seconds: f
             return solution.info["stepping_seconds"]
         return block
 
-    return repeated_costs({key: block_of(rom) for key, rom in roms.items()}, run.times.size - 1,
+    # the calibration (sizing the blocks) needs a rough step cost only: at most 1000 steps
+    return repeated_costs({key: block_of(rom) for key, rom in roms.items()}, min(run.times.size - 1, 1000),
                           repeats=repeats, min_block_seconds=min_block_seconds)
 
 
