@@ -23,8 +23,8 @@ from femrom.mesh import build_mesh
 from femrom.basis import POD
 from femrom.inference import reduce_snapshots
 from femrom.rom import SecondOrderROM
-from femrom.scene import InputConfig, MaterialConfig, SceneError, build
-from femrom.study import SignalInputs, mass_norm, project_run
+from femrom.scene import InputConfig, MaterialConfig, SceneError, SignalVector, build
+from femrom.study import mass_norm, project_run
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "cases"))
@@ -73,9 +73,9 @@ def test_two_input_option_gives_one_column_per_chamber(tiny_model):
     B = np.asarray(model.system.input_matrix)
     np.testing.assert_allclose(B[:, 0] - B[:, 1], np.asarray(tiny_model.system.input_matrix)[:, 0],
                                atol=1e-15 * np.abs(B).max())
-    u = SignalInputs(fishtail.pressure_signals(scene, "step"))
+    u = SignalVector(fishtail.pressure_signals(scene, "step"))
     assert np.allclose(u(1.0), [2.0e4, -2.0e4])
-    assert np.allclose(SignalInputs(s.signal for s in scene.inputs)(1.0), [2.0e4, -2.0e4])   # the scene's own
+    assert np.allclose(SignalVector(s.signal for s in scene.inputs)(1.0), [2.0e4, -2.0e4])   # the scene's own
 
 
 def test_step_input_is_seen_at_the_same_steps_by_the_fom_clock_and_the_rom_grid():
@@ -211,7 +211,7 @@ def test_field_errors_from_reduced_coordinates_equal_the_full_fields(pipeline):
         # the case's Galerkin error from the randomized basis, recomputed here from the LAPACK basis
         # and full fields: equal to 1e-3 relative (the bases agree to ~1e-9, the ROM amplifies little)
         rom = SecondOrderROM.galerkin(model.system, V[:, :r], product=M, mass_orthonormal=True)
-        u = SignalInputs(fishtail.pressure_signals(scene, "step"))
+        u = SignalVector(fishtail.pressure_signals(scene, "step"))
         times = scene.time.dt * np.arange(Q["step"].shape[1])
         solution = rom.predict(np.zeros(r), times, inputs=u)
         slow = mass_norm(M, Q["step"] - V[:, :r] @ solution.q) / mass_norm(M, Q["step"])

@@ -21,7 +21,7 @@ from femrom.scene._config import (
 from femrom.scene._effects import EFFECTS, Assembly, Effect, effect_class, register_effect, registered_effects
 from femrom.scene._errors import SceneError
 from femrom.scene._rom import BasisSpec, Derivatives, LearnerSpec, ReportSpec, RomConfig, RunSpec, TimingSpec
-from femrom.scene._signals import Signal
+from femrom.scene._signals import Signal, SignalVector
 from femrom.scene._sweep import SweepConfig
 from femrom.scene._system import SecondOrderSystem
 
@@ -29,6 +29,6 @@ __all__ = [
     "EFFECTS", "Assembly", "BasisSpec", "BoundaryConfig", "Derivatives", "LearnerSpec", "ReportSpec",
     "RomConfig", "RunSpec", "TimingSpec", "Effect", "EffectConfig", "FullOrderModel", "InitialConfig",
     "InputConfig", "LoadConfig", "MaterialConfig", "OutputConfig", "ProbeConfig", "Scene",
-    "SceneError", "SecondOrderSystem", "Signal", "SweepConfig", "StructureConfig", "TimeConfig", "build",
+    "SceneError", "SecondOrderSystem", "Signal", "SignalVector", "SweepConfig", "StructureConfig", "TimeConfig", "build",
     "effect_class", "register_effect", "registered_effects",
 ]

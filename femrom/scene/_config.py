@@ -42,6 +42,7 @@ from typing import Any
 
 from femrom.scene._effects import effect_class
 from femrom.scene._errors import SceneError
+from femrom.scene._errors import take_table as _take
 from femrom.scene._rom import RomConfig
 from femrom.scene._sweep import SweepConfig, with_parameters
 from femrom.scene._signals import Signal
@@ -50,21 +51,6 @@ ELEMENTS = ("hermite", "p1", "p2")
 FIELDS = ("displacement", "velocity", "acceleration")
 LOAD_KINDS = ("point_load", "surface_traction", "surface_pressure")
 INITIAL_KINDS = ("zero", "static_load", "mode", "expression")
-
-
-def _take(data: Any, section: str, allowed: dict[str, Any], required: tuple[str, ...] = ()) -> dict:
-    """Defaults updated by ``data``; unknown or missing keys raise a SceneError."""
-    if data is None:
-        data = {}
-    if not isinstance(data, dict):
-        raise SceneError(f"[{section}] must be a table, got {type(data).__name__}")
-    unknown = sorted(set(data) - set(allowed))
-    if unknown:
-        raise SceneError(f"unknown key {unknown[0]!r} in [{section}]; valid keys: {', '.join(allowed)}")
-    missing = [k for k in required if data.get(k) is None]
-    if missing:
-        raise SceneError(f"missing key {missing[0]!r} in [{section}]")
-    return {**allowed, **data}
 
 
 def _choice(value, valid, what):

@@ -27,26 +27,13 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from femrom.scene._errors import SceneError
+from femrom.scene._errors import take_table as _table
 from femrom.scene._signals import Signal
 
 PRODUCTS = ("mass", "euclidean")
 SVD_METHODS = ("randomized", "svd")
 DERIVATIVE_KINDS = ("stored", "finite_differences")
 FD_ORDERS = (2, 4, 6)
-
-
-def _table(data, where: str, allowed: dict, required: tuple = ()) -> dict:
-    if data is None:
-        data = {}
-    if not isinstance(data, dict):
-        raise SceneError(f"[{where}] must be a table, got {type(data).__name__}")
-    unknown = sorted(set(data) - set(allowed))
-    if unknown:
-        raise SceneError(f"unknown key {unknown[0]!r} in [{where}]; valid keys: {', '.join(allowed)}")
-    missing = [k for k in required if data.get(k) is None]
-    if missing:
-        raise SceneError(f"missing key {missing[0]!r} in [{where}]")
-    return {**allowed, **data}
 
 
 def _positive(value, where: str, *, integer: bool = False):

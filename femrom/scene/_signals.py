@@ -82,6 +82,24 @@ class Signal:
         return np.interp(t, times, values, left=0.0, right=0.0)
 
 
+class SignalVector:
+    """``u(t) = [s_1(t), ..., s_m(t)]``: a scene's inputs, callable at one time or sampled on a grid."""
+
+    def __init__(self, signals):
+        self.signals = tuple(signals)
+
+    def __call__(self, t) -> np.ndarray:
+        return np.array([float(s(t)) for s in self.signals])
+
+    def sampled(self, times) -> np.ndarray | None:
+        """(m, k) ndarray of ``u`` on ``times`` (``None`` without inputs)."""
+        times = np.asarray(times, dtype=float)
+        if not self.signals:
+            return None
+        return np.vstack([np.broadcast_to(np.asarray(s(times), dtype=float), times.shape)
+                          for s in self.signals])
+
+
 def _array_parameters(params, where):
     if params["file"] is not None:
         path = Path(params["file"])

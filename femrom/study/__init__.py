@@ -32,7 +32,7 @@ from femrom.study._figures import (
 from femrom.study._ladders import frequency_ladder, time_step_ladder
 from femrom.study._metrics import Projection, energy_ratio, mass_norm, project_run, relative_error
 from femrom.study._pipeline import ROW_COLUMNS, StudyState, peak_rss_gb, public_rows, run_study, write_report
-from femrom.study._runs import FOMRun, SignalInputs, run_fom, solver_factory
+from femrom.study._runs import FOMRun, run_fom, solver_factory
 from femrom.study._study import (
     Evaluation,
     check_rom_config,
@@ -55,7 +55,7 @@ from femrom.study._sweep import SweepRun, run_sweep, run_sweep_point, sweep_runs
 from femrom.study._timing import Cost, blocked_cost, repeated_cost, repeated_costs
 
 __all__ = [
-    "ROW_COLUMNS", "Cost", "Evaluation", "FOMRun", "Projection", "SignalInputs", "StudyState", "SweepRun",
+    "ROW_COLUMNS", "Cost", "Evaluation", "FOMRun", "Projection", "StudyState", "SweepRun",
     "blocked_cost", "check_rom_config", "energy_ratio", "evaluate", "fit_rom", "fom_runs", "frequency_ladder", "mass_norm",
     "operator_checks", "peak_rss_gb", "plot_accuracy_cost", "plot_energy", "plot_error_history", "plot_errors", "plot_outputs",
     "pod_basis", "product_matrix", "project_run", "projected_forces", "public_rows", "reduce_runs", "relative_error",

@@ -8,27 +8,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from femrom.integrators import StepClock, simulate
-from femrom.scene import Signal
+from femrom.scene import Signal, SignalVector
 from femrom.solvers import SolverCache, make_solver
 from femrom.study._timing import Cost, blocked_cost
-
-
-class SignalInputs:
-    """``u(t) = [s_1(t), ..., s_m(t)]`` of a run, callable at one time or sampled on a grid."""
-
-    def __init__(self, signals):
-        self.signals = tuple(signals)
-
-    def __call__(self, t) -> np.ndarray:
-        return np.array([float(s(t)) for s in self.signals])
-
-    def sampled(self, times) -> np.ndarray | None:
-        """(m, k) ndarray of ``u`` on ``times`` (``None`` without inputs)."""
-        times = np.asarray(times, dtype=float)
-        if not self.signals:
-            return None
-        return np.vstack([np.broadcast_to(np.asarray(s(times), dtype=float), times.shape)
-                          for s in self.signals])
 
 
 @dataclass(frozen=True, eq=False)
@@ -42,7 +24,7 @@ class FOMRun:
     times : (k,) ndarray
     outputs : (p, k) ndarray or None
     energy : (k,) ndarray or None
-    inputs : SignalInputs
+    inputs : SignalVector
         ``u(t)``; ``inputs.sampled(times)`` the (m, k) samples.
     q0, v0 : (n,) ndarray
         The initial state (a reduced model starts from its projection).
@@ -56,7 +38,7 @@ class FOMRun:
     times: np.ndarray
     outputs: np.ndarray | None
     energy: np.ndarray | None
-    inputs: SignalInputs
+    inputs: SignalVector
     q0: np.ndarray
     v0: np.ndarray
     summary: dict
@@ -112,7 +94,7 @@ def run_fom(model, signals: tuple[Signal, ...] | None = None, *, name: str = "ru
     signals = tuple(i.signal for i in model.scene.inputs) if signals is None else tuple(signals)
     if len(signals) != model.system.n_inputs:
         raise ValueError(f"run {name!r}: {len(signals)} signal(s) for {model.system.n_inputs} input(s)")
-    u = SignalInputs(signals)
+    u = SignalVector(signals)
     system = dataclasses.replace(model.system, inputs=u) if signals else model.system
     outputs = dataclasses.replace(model.scene.outputs, fields=())
     model = dataclasses.replace(model, system=system, scene=dataclasses.replace(model.scene, outputs=outputs))

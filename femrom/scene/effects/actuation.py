@@ -3,16 +3,7 @@
 import numpy as np
 
 from femrom.scene._effects import Effect, register_effect
-
-
-class SignalVector:
-    """``u(t) = [s_1(t), ..., s_m(t)]``."""
-
-    def __init__(self, signals):
-        self.signals = tuple(signals)
-
-    def __call__(self, t):
-        return np.array([float(s(t)) for s in self.signals])
+from femrom.scene._signals import SignalVector
 
 
 @register_effect
