@@ -12,6 +12,8 @@ from femrom.post import mesh_arrays, pyplot, render_available, render_grid, save
     write_vtu_series
 
 STYLES = ("--", "-", ":", "-.", (0, (3, 1, 1, 1)), (0, (5, 2)))
+#: relative errors are drawn at most this large: above it a model has diverged
+DIVERGED = 10.0
 MARKERS = ("s", "o", "^", "x", "v", "D", "P")
 
 
@@ -113,7 +115,8 @@ def plot_error_history(path, run, projection, evaluations: dict, r: int, labels,
 
 def plot_accuracy_cost(path, rows: list[dict], fom_cost: dict, title: str, *, error: str = "test_output_error") -> Path:
     """Error against seconds per step (minimum of the timed blocks, bars up to their upper quartile), one line
-    per learner, points annotated with r; the FOM's cost as a vertical band."""
+    per learner, points annotated with r; the FOM's cost as a vertical band; errors above
+    :data:`DIVERGED` (models that blew up) on that ceiling (dotted)."""
     plt = pyplot()
     fig, ax = plt.subplots(figsize=(6.6, 4.3))
     for label, marker in zip(dict.fromkeys(row["learner"] for row in rows), MARKERS * 3):
@@ -123,12 +126,13 @@ def plot_accuracy_cost(path, rows: list[dict], fom_cost: dict, title: str, *, er
         x = np.array([row["cost"]["minimum"] for row in sel])
         lo = np.zeros_like(x)
         hi = np.array([row["cost"]["q75"] for row in sel]) - x
-        y = [row[error] for row in sel]
+        y = [min(row[error], DIVERGED) for row in sel]      # a model that blew up sits on the ceiling
         ax.errorbar(x, y, xerr=[lo, hi], fmt=marker + "-", capsize=2, label=label)
         for row, xi, yi in zip(sel, x, y):
             ax.annotate(f"r={row['r']}", (xi, yi), textcoords="offset points", xytext=(3, 3), fontsize=7)
     ax.axvspan(fom_cost["minimum"], fom_cost["q75"], color="grey", alpha=0.3)
     ax.axvline(fom_cost["minimum"], color="k", lw=1, label="FOM step")
+    ax.axhline(DIVERGED, color="r", lw=0.6, ls=":")
     ax.set_xscale("log")
     ax.set_yscale("log")
     ax.set_xlabel("seconds per step (fastest timed block; bars: to the upper quartile)")
