@@ -106,8 +106,14 @@ def _sweep(args) -> int:
         print(f"femrom: --workers must be >= 1, got {args.workers}", file=sys.stderr)
         return 2
     out = args.out or Path("results") / f"{args.scene.stem}_sweep"
-    summary = run_sweep(scene, out, scheduler=args.scheduler, n_workers=args.workers, keep_parts=args.keep_parts,
-                        progress=lambda message: print(f"femrom: {message}", file=sys.stderr))
+    try:
+        summary = run_sweep(scene, out, scheduler=args.scheduler, n_workers=args.workers,
+                            keep_parts=args.keep_parts,
+                            progress=lambda message: print(f"femrom: {message}", file=sys.stderr))
+    except (OSError, TimeoutError) as exc:     # no scheduler at that address, or it went away
+        where = args.scheduler or "the LocalCluster"
+        print(f"femrom: Dask scheduler {where}: {type(exc).__name__}: {exc}", file=sys.stderr)
+        return 2
     print(f"{summary['scene']}: {summary['n_runs']} runs in {summary['wall_seconds']:.1f} s on "
           f"{summary['scheduler']}; store {out / 'sweep.h5'}")
     return 0

@@ -155,5 +155,12 @@ def test_cli_sweep_and_its_errors(tmp_path):
                            str(tmp_path / "out"), "--workers", "2"], capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr[-2000:]
     assert "2/2 runs done" in done.stderr and "2 runs in" in done.stdout
+    nowhere = subprocess.run([sys.executable, "-m", "femrom", "sweep", str(tmp_path / "sweep.toml"), "-o",
+                              str(tmp_path / "nowhere"), "--scheduler", "tcp://127.0.0.1:9"],
+                             capture_output=True, text=True, timeout=300,   # Dask waits 30 s by default
+                             env=dict(os.environ, DASK_DISTRIBUTED__COMM__TIMEOUTS__CONNECT="3s"))
+    lines = nowhere.stderr.strip().splitlines()
+    assert nowhere.returncode == 2 and len(lines) == 1 and "Dask scheduler tcp://127.0.0.1:9" in lines[0]
+    assert not (tmp_path / "nowhere").exists()
     with SnapshotStore.open(tmp_path / "out" / "sweep.h5") as store:
         assert store.trajectories == ("p000", "p001")

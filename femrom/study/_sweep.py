@@ -128,7 +128,6 @@ def run_sweep(scene, out_dir, *, scheduler: str | None = None, n_workers: int = 
     say = progress or (lambda message: None)
     out_dir = Path(out_dir)
     parts = out_dir / "sweep_parts"
-    parts.mkdir(parents=True, exist_ok=True)
     runs = sweep_runs(scene)
     todo = [run for run in runs if not _complete(parts / f"{run.name}.h5", run.name)]
     if len(todo) < len(runs):
@@ -145,6 +144,7 @@ def run_sweep(scene, out_dir, *, scheduler: str | None = None, n_workers: int = 
     active = client or own_client
     results = {}
     try:
+        parts.mkdir(parents=True, exist_ok=True)     # only once a scheduler answers
         futures = {active.submit(run_sweep_point, scene, run, str(parts / f"{run.name}.h5"), pure=False,
                                  key=f"femrom-sweep-{run.name}-{os.getpid()}-{time.time_ns()}"): run
                    for run in todo}
