@@ -62,7 +62,9 @@ class SecondOrderData:
         (relative, when known), ``derivative_source``, ``order``, ``dt``,
         ``n_trajectories``; from :func:`reduce_snapshots` also
         ``projection_residual`` ``||Q - V Q^||_W`` and ``state_norm``
-        ``||Q||_W`` (Frobenius), which :meth:`truncated` updates;
+        ``||Q||_W`` (Frobenius), and per column ``column_residual2``
+        ``||q_j - V q^_j||_W^2`` and ``column_norm2`` ``||q_j||_W^2`` ((K,)
+        ndarrays), which :meth:`truncated` and :meth:`without_boundary` update;
         ``trimmed_columns`` after :meth:`without_boundary`.
     """
 
@@ -115,6 +117,9 @@ class SecondOrderData:
         keep = slice(count, self.n_samples - count)
         pick = lambda A: None if A is None else A[..., keep]  # noqa: E731
         diagnostics = dict(self.diagnostics, trimmed_columns=self.diagnostics.get("trimmed_columns", 0) + count)
+        for key in ("column_residual2", "column_norm2"):
+            if diagnostics.get(key) is not None:
+                diagnostics[key] = diagnostics[key][keep]
         return replace(self, states=pick(self.states), velocities=pick(self.velocities),
                        accelerations=pick(self.accelerations), inputs=pick(self.inputs),
                        nonlinear_forces=pick(self.nonlinear_forces), outputs=pick(self.outputs),
@@ -144,6 +149,8 @@ class SecondOrderData:
             d["projection_error"] = d["projection_residual"] / norm
         else:
             d.pop("projection_error", None)
+        if d.get("column_residual2") is not None:
+            d["column_residual2"] = d["column_residual2"] + np.sum(self.states[r:] ** 2, axis=0)
         return replace(self, states=rows(self.states), velocities=rows(self.velocities),
                        accelerations=rows(self.accelerations),
                        nonlinear_forces=rows(self.nonlinear_forces), diagnostics=d)
@@ -216,7 +223,7 @@ def reduced_coordinates(basis: np.ndarray, X, product=None) -> np.ndarray:
     return project_columns(basis, X, product)[0]
 
 
-def project_columns(basis: np.ndarray, X, product=None) -> tuple[np.ndarray, float, float]:
+def project_columns(basis: np.ndarray, X, product=None, *, per_column: bool = False) -> tuple:
     r"""One pass over the columns of ``X``: ``(V^T W X, ||X - V V^T W X||_W, ||X||_W)``.
 
     Parameters
@@ -229,26 +236,34 @@ def project_columns(basis: np.ndarray, X, product=None) -> tuple[np.ndarray, flo
     product : (n, n) sparse or ndarray, optional
         ``W``; ``W @`` is applied once per block, and ``W V`` once in all.
 
+    per_column : bool
+        Return, instead of the two norms, the squared norms of every column:
+        ``residual2`` and ``norm2``, (K,) ndarrays (errors over any window of columns).
+
     Returns
     -------
     coordinates : (r, K) ndarray
     residual, norm : float
-        Frobenius norms in ``W`` of the projection residual and of ``X``.
+        Frobenius norms in ``W`` of the projection residual and of ``X``
+        (``residual2, norm2`` (K,) ndarrays with ``per_column``).
     """
     V = np.asarray(basis, dtype=float)
     WV = V if product is None else np.asarray(product @ V)
-    parts, residual2, norm2 = [], 0.0, 0.0
+    parts, residual2, norm2 = [], [], []
     for block in as_block_source(X).blocks():
         WX = block if product is None else np.asarray(product @ block)
         coords = V.T @ WX
         parts.append(coords)
         # E = X - V c, and W E = W X - (W V) c: no second product with W
         E = block - V @ coords
-        residual2 += float(np.sum(E * (WX - WV @ coords)))
-        norm2 += float(np.sum(block * WX))
+        residual2.append(np.maximum(np.sum(E * (WX - WV @ coords), axis=0), 0.0))
+        norm2.append(np.maximum(np.sum(block * WX, axis=0), 0.0))
     if not parts:
         raise ValueError("no snapshot columns to project")
-    return np.hstack(parts), float(np.sqrt(max(residual2, 0.0))), float(np.sqrt(max(norm2, 0.0)))
+    residual2, norm2 = np.concatenate(residual2), np.concatenate(norm2)
+    if per_column:
+        return np.hstack(parts), residual2, norm2
+    return np.hstack(parts), float(np.sqrt(np.sum(residual2))), float(np.sqrt(np.sum(norm2)))
 
 
 def _relative_norm(E: np.ndarray, X: np.ndarray, product=None) -> float:
@@ -306,9 +321,11 @@ def reduce_snapshots(basis: np.ndarray, states: np.ndarray, dt: float, *, produc
     if source.n_rows is not None and source.n_rows != V.shape[0]:
         raise ValueError(f"basis {V.shape} and states with {source.n_rows} rows do not match: "
                          "expected (n, r), (n, K)")
-    Qh, residual, norm = project_columns(V, source, product)
+    Qh, residual2, norm2 = project_columns(V, source, product, per_column=True)
+    residual, norm = float(np.sqrt(np.sum(residual2))), float(np.sqrt(np.sum(norm2)))
     diagnostics = {"projection_error": residual / norm if norm > 0 else 0.0,
                    "projection_residual": residual, "state_norm": norm,
+                   "column_residual2": residual2, "column_norm2": norm2,
                    "derivative_source": derivatives, "order": order, "dt": float(dt),
                    "n_trajectories": 1}
     stored_v = None if velocities is None else reduced_coordinates(V, velocities, product)

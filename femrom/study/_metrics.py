@@ -80,21 +80,9 @@ class Projection:
 
 def project_run(basis: np.ndarray, X, product=None) -> Projection:
     """One pass over the columns of ``X`` (an array or block source): its :class:`Projection` in ``basis``."""
-    from femrom.linalg import as_block_source
+    from femrom.inference import project_columns
 
-    V = np.asarray(basis, dtype=float)
-    WV = V if product is None else np.asarray(product @ V)
-    coords, residual2, norm2 = [], [], []
-    for block in as_block_source(X).blocks():
-        WX = block if product is None else np.asarray(product @ block)
-        c = V.T @ WX
-        E = block - V @ c
-        coords.append(c)
-        residual2.append(np.maximum(np.sum(E * (WX - WV @ c), axis=0), 0.0))   # W E = W X - (W V) c
-        norm2.append(np.maximum(np.sum(block * WX, axis=0), 0.0))
-    if not coords:
-        raise ValueError("no snapshot columns to project")
-    return Projection(np.hstack(coords), np.concatenate(residual2), np.concatenate(norm2))
+    return Projection(*project_columns(basis, X, product, per_column=True))
 
 
 def energy_ratio(rom_energy: np.ndarray, fom_energy: np.ndarray | None) -> tuple[float, float]:

@@ -118,8 +118,8 @@ def projected_forces(nonlinear, basis: np.ndarray, source) -> np.ndarray:
 
 def reduce_runs(store, runs: dict[str, FOMRun], train: tuple[str, ...], basis: np.ndarray, product,
                 *, stored_derivatives: bool, order: int = 4, nonlinear=None):
-    """The training data in the largest basis, and every run's :class:`Projection` (one pass each,
-    and one more over a training run for its data).
+    """The training data in the largest basis, and every run's :class:`Projection` (one pass each;
+    a training run's comes with its data).
 
     Training data carry the run's stored integrator derivatives when the store has
     them (``stored_derivatives``), else finite differences of ``order`` (a learner
@@ -131,8 +131,9 @@ def reduce_runs(store, runs: dict[str, FOMRun], train: tuple[str, ...], basis: n
     data, projections = {}, {}
     for name, run in runs.items():
         q = store_source(store, "q", [name])
-        projections[name] = project_run(basis, q, product)
-        if name in train:
+        if name not in train:
+            projections[name] = project_run(basis, q, product)
+        else:
             d = reduce_snapshots(
                 basis, q, run.dt, product=product,
                 velocities=store_source(store, "v", [name]) if stored_derivatives else None,
@@ -142,6 +143,8 @@ def reduce_runs(store, runs: dict[str, FOMRun], train: tuple[str, ...], basis: n
             if nonlinear is not None and not nonlinear.stateful:
                 d = replace(d, nonlinear_forces=projected_forces(nonlinear, basis, q))
             data[name] = d
+            projections[name] = Projection(d.states, d.diagnostics["column_residual2"],
+                                           d.diagnostics["column_norm2"])
     return data, projections
 
 
