@@ -29,7 +29,7 @@ from femrom.study._figures import (
     plot_outputs,
     render_fields,
 )
-from femrom.study._ladders import frequency_ladder, time_step_ladder
+from femrom.study._ladders import frequency_ladder, natural_frequencies, time_step_ladder
 from femrom.study._metrics import Projection, energy_ratio, mass_norm, project_run, relative_error
 from femrom.study._pipeline import ROW_COLUMNS, StudyState, peak_rss_gb, public_rows, run_study, write_report
 from femrom.study._runs import FOMRun, run_fom, solver_factory
@@ -55,11 +55,12 @@ from femrom.study._sweep import SweepRun, run_sweep, run_sweep_point, sweep_runs
 from femrom.study._timing import Cost, blocked_cost, repeated_cost, repeated_costs
 
 __all__ = [
-    "ROW_COLUMNS", "Cost", "Evaluation", "FOMRun", "Projection", "StudyState", "SweepRun",
-    "blocked_cost", "check_rom_config", "energy_ratio", "evaluate", "fit_rom", "fom_runs", "frequency_ladder", "mass_norm",
-    "operator_checks", "peak_rss_gb", "plot_accuracy_cost", "plot_energy", "plot_error_history", "plot_errors", "plot_outputs",
-    "pod_basis", "product_matrix", "project_run", "projected_forces", "public_rows", "reduce_runs", "relative_error",
-    "render_fields", "repeated_cost", "repeated_costs", "rom_cost", "rom_costs", "run_fom", "run_study",
-    "run_sweep", "run_sweep_point", "scored_columns", "solver_factory", "study_learners", "study_rows",
-    "sweep_runs", "time_step_ladder", "training_data", "write_report",
+    "ROW_COLUMNS", "Cost", "Evaluation", "FOMRun", "Projection", "StudyState", "SweepRun", "blocked_cost",
+    "check_rom_config", "energy_ratio", "evaluate", "fit_rom", "fom_runs", "frequency_ladder", "mass_norm",
+    "natural_frequencies", "operator_checks", "peak_rss_gb", "plot_accuracy_cost", "plot_energy",
+    "plot_error_history", "plot_errors", "plot_outputs", "pod_basis", "product_matrix", "project_run",
+    "projected_forces", "public_rows", "reduce_runs", "relative_error", "render_fields", "repeated_cost",
+    "repeated_costs", "rom_cost", "rom_costs", "run_fom", "run_study", "run_sweep", "run_sweep_point",
+    "scored_columns", "solver_factory", "study_learners", "study_rows", "sweep_runs", "time_step_ladder",
+    "training_data", "write_report",
 ]

@@ -83,6 +83,14 @@ def _row(run: FOMRun, error: float) -> dict:
             "seconds_per_step": run.cost.seconds, "cost": run.cost.to_dict()}
 
 
+def natural_frequencies(system, count: int = 4) -> np.ndarray:
+    """(count,) ndarray: the lowest ``omega`` of ``K phi = omega^2 M phi`` [rad/s] (shift-invert Lanczos)."""
+    from scipy.sparse.linalg import eigsh
+
+    return np.sqrt(np.sort(eigsh(system.stiffness.tocsc(), k=count, M=system.mass.tocsc(), sigma=0.0,
+                                 which="LM")[0]))
+
+
 def frequency_ladder(scene, values, *, parameter: str = "mesh_size", count: int = 4, exact=None) -> list[dict]:
     r"""The first ``count`` natural frequencies (``K phi = omega^2 M phi``, shift-invert Lanczos) per
     value of a geometry parameter, with the build + eigensolve time.
@@ -90,8 +98,6 @@ def frequency_ladder(scene, values, *, parameter: str = "mesh_size", count: int 
     ``frequency_error`` is ``max_k |omega_k / omega_k^* - 1|`` against ``exact`` (rad/s, e.g.
     analytic) or, without it, against the last value of the ladder (the finest mesh).
     """
-    from scipy.sparse.linalg import eigsh
-
     from femrom.scene import build
 
     rows = []
@@ -100,9 +106,8 @@ def frequency_ladder(scene, values, *, parameter: str = "mesh_size", count: int 
         structure = dataclasses.replace(scene.structure, parameters=tuple(sorted(params.items())))
         tic = time.perf_counter()
         model = build(dataclasses.replace(scene, structure=structure))
-        s = model.system
-        omega = np.sqrt(np.sort(eigsh(s.stiffness.tocsc(), k=count, M=s.mass.tocsc(), sigma=0.0, which="LM")[0]))
-        rows.append({parameter: float(value), "dofs": s.n_dofs, "omega": omega, "f1_hz": float(omega[0] / (2 * np.pi)),
+        omega = natural_frequencies(model.system, count)
+        rows.append({parameter: float(value), "dofs": model.system.n_dofs, "omega": omega, "f1_hz": float(omega[0] / (2 * np.pi)),
                      "seconds": time.perf_counter() - tic})
     reference = np.asarray(exact, dtype=float)[:count] if exact is not None else rows[-1]["omega"]
     for row in rows:
