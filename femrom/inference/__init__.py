@@ -35,9 +35,11 @@ from femrom.inference._hamiltonian import (
     GRADIENT_DATA,
     HAMILTONIAN_DERIVATIVE_SOURCES,
     CanonicalData,
+    ForcePotential,
     HamiltonianErrorSplit,
     HamiltonianOperators,
     ProjectedPotential,
+    canonical_from_second_order,
     project_potential_gradient,
     reduce_canonical_snapshots,
     symmetric_lyapunov_fit,
@@ -76,7 +78,8 @@ from femrom.inference.terms.stiffness import Stiffness
 
 __all__ = [
     "CONIC_SOLVERS", "DERIVATIVE_SOURCES", "GRADIENT_DATA", "HAMILTONIAN_DERIVATIVE_SOURCES", "LEARNERS",
-    "SOLVERS", "TERMS", "VARIABLES", "Block", "CanonicalData", "Damping", "ErrorSplit", "FastOptions", "GalerkinProjection",
+    "SOLVERS", "TERMS", "VARIABLES", "Block", "CanonicalData", "Damping", "ErrorSplit", "FastOptions", "ForcePotential",
+    "GalerkinProjection", "canonical_from_second_order",
     "GramProblem", "HamiltonianErrorSplit", "HamiltonianOperators", "HamiltonianOpInf", "Input",
     "LagrangianOpInf", "Learner", "LinearTerm", "Mass", "Output", "ProjectedNonlinearForce",
     "ProjectedPotential", "ReducedForces", "ReducedOperators", "ReducedTerm", "Regularization",

@@ -129,12 +129,88 @@ class ProjectedPotential:
         V = self.basis
         blocks = []
         for h in self.potential.hessian(V @ q, V @ p):
-            if isinstance(h, np.ndarray) and h.ndim == 1:      # pointwise potential: Phi^T diag(h) Phi
+            if h is None:                                       # a block the potential does not have
+                blocks.append(np.zeros((V.shape[1], V.shape[1])))
+            elif isinstance(h, np.ndarray) and h.ndim == 1:    # pointwise potential: Phi^T diag(h) Phi
                 blocks.append(V.T @ (h[:, None] * V))
-            else:
-                h = h.toarray() if hasattr(h, "toarray") else np.asarray(h)
-                blocks.append(V.T @ h @ V)
+            else:                                               # sparse or dense (n, n): never densified
+                blocks.append(V.T @ np.asarray(h @ V))
         return tuple(blocks)
+
+
+class ForcePotential:
+    r"""The potential ``U(q)`` of a conservative, stateless second-order force as a canonical ``H_nl(q, p) = U(q)``.
+
+    A conservative force ``f(q) = grad U(q)`` of ``M q'' + K q + f(q) = 0`` is, in
+    the canonical variables ``(q, p = M q')``, the Hamiltonian term ``H_nl = U(q)``:
+    ``dH_nl/dq = f(q)``, ``dH_nl/dp = 0``. This wraps any such
+    :class:`~femrom.fem.NonlinearForce` (``force``, ``tangent``, ``potential``)
+    in the ``value`` / ``gradient`` / ``hessian`` interface of :class:`ProjectedPotential`.
+
+    Parameters
+    ----------
+    force : NonlinearForce
+        ``conservative`` and not ``stateful`` (else ValueError).
+    """
+
+    def __init__(self, force):
+        if getattr(force, "stateful", False) or not getattr(force, "conservative", False):
+            raise ValueError(f"{force!r} is not a conservative stateless force: it has no potential U(q)")
+        self.force = force
+
+    def value(self, q: np.ndarray, p: np.ndarray):
+        """``U(q)``: a float for (n,), (k,) for (n, k) columns."""
+        q = np.asarray(q, dtype=float)
+        if q.ndim == 1:
+            return self.force.potential(q)
+        return np.array([self.force.potential(column) for column in q.T])
+
+    def gradient(self, q: np.ndarray, p: np.ndarray):
+        """``(f(q), 0)``, each shaped like ``q``."""
+        q = np.asarray(q, dtype=float)
+        fq = self.force.force(q) if q.ndim == 1 else np.column_stack([self.force.force(c) for c in q.T])
+        return fq, np.zeros_like(q)
+
+    def hessian(self, q: np.ndarray, p: np.ndarray):
+        """``(df/dq, None, None)``: the (n, n) sparse tangent; the ``qp`` and ``pp`` blocks vanish."""
+        return self.force.tangent(np.asarray(q, dtype=float))[0], None, None
+
+    def __repr__(self) -> str:
+        return f"ForcePotential({self.force!r})"
+
+
+def canonical_from_second_order(data) -> CanonicalData:
+    r"""The canonical view ``(q^, p^ = q^')`` of reduced second-order data of a conservative system.
+
+    In a basis with ``V^T M V = I`` the reduced Lagrangian of ``M q'' + K q + f(q) = 0`` is
+    ``|q^'|^2 / 2 - q^T K~ q^ / 2 - U(V q^)``, so the reduced momentum is ``p^ = q^'``
+    (``= V^T p`` of the full momentum ``p = M q'``) and
+
+    .. math::
+
+        \dot{\hat q} = \hat D_p \hat p, \qquad \dot{\hat p} = -\hat D_q \hat q - \hat F,
+
+    with ``D~_p = I``, ``D~_q = K~`` for the intrusive model. The data are therefore
+    ``Q^`` (states_q), ``Q^'`` (states_p and ddt_q), ``Q^''`` (ddt_p) and the projected
+    force ``F^`` (forces_p) of a :class:`~femrom.inference.SecondOrderData`.
+
+    Parameters
+    ----------
+    data : SecondOrderData
+        Without inputs (a canonical Hamiltonian ROM has none).
+
+    Returns
+    -------
+    CanonicalData
+    """
+    if data.inputs is not None and np.size(data.inputs) and np.any(data.inputs != 0):
+        raise ValueError("the data carry nonzero inputs: a canonical Hamiltonian ROM has none")
+    diagnostics = {key: data.diagnostics[key] for key in ("projection_error", "derivative_source", "order", "dt")
+                   if key in data.diagnostics}
+    forces_p = None if data.nonlinear_forces is None else np.asarray(data.nonlinear_forces, dtype=float)
+    forces_q = None if forces_p is None else np.zeros_like(forces_p)
+    return CanonicalData(data.states, data.velocities, data.velocities, data.accelerations, forces_q, forces_p,
+                         data.outputs, diagnostics)
 
 
 def project_potential_gradient(basis: np.ndarray, potential, Q: np.ndarray,

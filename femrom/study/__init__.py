@@ -9,6 +9,9 @@ What the case scripts share, for any scene (``femrom run scene.toml`` with a
 - the study's steps: :func:`fom_runs`, :func:`pod_basis`, :func:`reduce_runs`,
   :func:`training_data`, :func:`fit_rom`, :func:`evaluate`, :func:`rom_costs`,
   :func:`study_rows`;
+- canonical learners (``hopinf``) on conservative scenes: :func:`check_canonical_learners`,
+  :func:`fit_canonical_rom`, :class:`SceneHamiltonianROM` (a Hamiltonian ROM on the
+  mass-orthonormal basis, called like a second-order one);
 - metrics: :func:`relative_error`, :func:`mass_norm`, :class:`Projection` / :func:`project_run`
   (exact field errors at every r from one pass), :func:`energy_ratio`;
 - costs: :class:`Cost` (the fastest of several timed blocks, and their quartiles),
@@ -51,12 +54,13 @@ from femrom.study._study import (
     study_rows,
     training_data,
 )
+from femrom.study._canonical import SceneHamiltonianROM, check_canonical_learners, fit_canonical_rom
 from femrom.study._sweep import SweepRun, run_sweep, run_sweep_point, sweep_runs
 from femrom.study._timing import Cost, blocked_cost, repeated_cost, repeated_costs
 
 __all__ = [
-    "ROW_COLUMNS", "Cost", "Evaluation", "FOMRun", "Projection", "StudyState", "SweepRun", "blocked_cost",
-    "check_rom_config", "energy_ratio", "evaluate", "fit_rom", "fom_runs", "frequency_ladder", "mass_norm",
+    "ROW_COLUMNS", "Cost", "Evaluation", "FOMRun", "Projection", "SceneHamiltonianROM", "StudyState", "SweepRun",
+    "blocked_cost", "check_canonical_learners", "check_rom_config", "energy_ratio", "evaluate", "fit_canonical_rom", "fit_rom", "fom_runs", "frequency_ladder", "mass_norm",
     "natural_frequencies", "operator_checks", "peak_rss_gb", "plot_accuracy_cost", "plot_energy",
     "plot_error_history", "plot_errors", "plot_outputs", "pod_basis", "product_matrix", "project_run",
     "projected_forces", "public_rows", "reduce_runs", "relative_error", "render_fields", "repeated_cost",

@@ -15,6 +15,7 @@ from femrom.scene import Scene, build
 from femrom.snapshots import SnapshotStore
 from femrom.study._figures import plot_accuracy_cost, plot_energy, plot_errors, plot_outputs, render_fields
 from femrom.study._ladders import time_step_ladder
+from femrom.study._canonical import check_canonical_learners
 from femrom.study._study import check_rom_config, fom_runs, pod_basis, product_matrix, reduce_runs, study_rows
 
 ROW_COLUMNS = ["r", "learner", "derivatives", "train_output_error", "test_output_error", "test_field_error",
@@ -76,6 +77,7 @@ def run_study(scene: Scene, out_dir, *, model=None, store_path=None, extend=None
     model = build(scene) if model is None else model
     timings["build_seconds"] = time.perf_counter() - tic
     system = model.system
+    check_canonical_learners(system, config)
     W = product_matrix(system, config)
     stored = config.needs_stored_derivatives
     store_path = out_dir / "snapshots.h5" if store_path is None else Path(store_path)

@@ -9,7 +9,8 @@ The steps, each a function usable on its own:
 3. :func:`reduce_runs`: one pass per run over the store: the training data in the
    largest basis, every run's :class:`Projection` (for exact field errors at every r);
 4. :func:`fit_rom`: the ROM of one learner at one r (``galerkin``: the intrusive
-   projection; any registered second-order learner: from reduced data only);
+   projection; any registered second-order learner, or canonical one on a conservative
+   scene (:mod:`femrom.study._canonical`): from reduced data only);
 5. :func:`evaluate`: output error, field error, energy over an extended window, and
    :func:`rom_costs`: the ROMs' seconds per step by interleaved repetition.
 
@@ -26,11 +27,12 @@ from dataclasses import dataclass, fields, replace
 import numpy as np
 
 from femrom.basis import POD
-from femrom.inference import SecondOrderLearner, concatenate, learner_class, reduce_snapshots, \
-    registered_learners
+from femrom.inference import HamiltonianOperators, SecondOrderLearner, concatenate, learner_class, \
+    reduce_snapshots, registered_learners
 from femrom.linalg import store_source
 from femrom.rom import SecondOrderROM
 from femrom.scene import RomConfig, SceneError
+from femrom.study._canonical import canonical_operator_checks, fit_canonical_rom, is_canonical
 from femrom.study._metrics import Projection, energy_ratio, project_run, relative_error
 from femrom.study._runs import FOMRun, run_fom, solver_factory
 from femrom.study._timing import Cost, repeated_costs
@@ -41,9 +43,10 @@ BLOWUP = 1e6
 
 
 def study_learners() -> tuple[str, ...]:
-    """The names a ``[rom]`` section may use: ``galerkin`` and every registered second-order learner."""
+    """The names a ``[rom]`` section may use: ``galerkin``, every registered second-order learner and
+    every canonical one (``hopinf``: conservative scenes without inputs, :mod:`femrom.study._canonical`)."""
     return (GALERKIN, *(name for name, cls in registered_learners().items()
-                        if name != GALERKIN and issubclass(cls, SecondOrderLearner)))
+                        if name != GALERKIN and (issubclass(cls, SecondOrderLearner) or is_canonical(name))))
 
 
 def check_rom_config(config: RomConfig) -> None:
@@ -55,7 +58,7 @@ def check_rom_config(config: RomConfig) -> None:
         known = registered_learners()
         if spec.learner in known:
             raise SceneError(f"[rom.learners[{i}]] {spec.learner!r} fits {known[spec.learner].model} models, "
-                             f"not second-order ones; the [rom] pipeline takes: {', '.join(valid)}")
+                             f"not second-order or canonical ones; the [rom] pipeline takes: {', '.join(valid)}")
         raise SceneError(f"[rom.learners[{i}]] unknown learner {spec.learner!r}; valid: {', '.join(valid)}")
 
 
@@ -169,6 +172,8 @@ def fit_rom(system, basis: np.ndarray, product, r: int, spec, data: dict) -> Sec
     (:meth:`~femrom.inference.SecondOrderLearner.for_system`) and the spec's ``terms``.
     """
     V = basis[:, :r]
+    if is_canonical(spec.learner):
+        return fit_canonical_rom(system, basis, product, r, spec, training_data(data, r, spec.derivatives))
     if spec.learner == GALERKIN:
         return SecondOrderROM.galerkin(system, V, product=product, mass_orthonormal=product is system.mass)
     cls = learner_class(spec.learner)
@@ -280,8 +285,11 @@ def rom_cost(rom, run: FOMRun, **options) -> Cost:
 
 
 def operator_checks(rom) -> dict:
-    """Structure of a learned model: symmetry and smallest eigenvalues of ``K^`` and ``C^``."""
+    """Structure of a learned model: symmetry and smallest eigenvalues of ``K^`` and ``C^`` (of a
+    canonical one: ``D^_q`` and the distance of ``D^_p`` from ``I``)."""
     ops = rom.operators_
+    if isinstance(ops, HamiltonianOperators):
+        return canonical_operator_checks(ops)
     K = ops.stiffness
     out = {"stiffness_min_eig": float(np.min(np.linalg.eigvalsh(0.5 * (K + K.T)))),
            "stiffness_symmetric": bool(np.array_equal(K, K.T))}

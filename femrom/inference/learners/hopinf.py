@@ -30,6 +30,10 @@ class HamiltonianOpInf(Learner):
         Relative Tikhonov weight: ``lambda = rho * trace(X X^T) / r``.
     shared : bool
         Fit one symmetric ``D^ = D^_q = D^_p`` to both residuals.
+    outputs_of : {"state", "position"}
+        What the output map ``E^`` acts on: ``[q^; p^]`` (2r columns), or ``q^`` alone
+        (``E^ = [E^_q, 0]``) for outputs known to be displacements, ``y = E q``: the
+        momentum columns would otherwise fit the training outputs' projection residual.
 
     Attributes
     ----------
@@ -46,11 +50,16 @@ class HamiltonianOpInf(Learner):
     method = "hamiltonian_opinf"
     model = "canonical"
 
-    def __init__(self, regularization: float = 0.0, shared: bool = False):
+    OUTPUTS_OF = ("state", "position")
+
+    def __init__(self, regularization: float = 0.0, shared: bool = False, outputs_of: str = "state"):
         if not regularization >= 0:
             raise ValueError(f"regularization must be >= 0, got {regularization}")
+        if outputs_of not in self.OUTPUTS_OF:
+            raise ValueError(f"outputs_of must be one of {self.OUTPUTS_OF}, got {outputs_of!r}")
         self.regularization = float(regularization)
         self.shared = bool(shared)
+        self.outputs_of = outputs_of
 
     def fit(self, data: CanonicalData) -> "HamiltonianOpInf":
         """Fit from reduced data ``Q^, P^, Q^', P^'`` and the known ``F^_q, F^_p``."""
@@ -79,8 +88,9 @@ class HamiltonianOpInf(Learner):
             momentum_derivative=diag.get("momentum_derivative_error"), optimization=self.residual_)
         self.output_matrix_ = None
         if data.outputs is not None:
-            X = np.vstack([states_q, states_p])
-            self.output_matrix_ = np.linalg.lstsq(X.T, data.outputs.T, rcond=None)[0].T
+            X = states_q if self.outputs_of == "position" else np.vstack([states_q, states_p])
+            E = np.linalg.lstsq(X.T, data.outputs.T, rcond=None)[0].T
+            self.output_matrix_ = np.hstack([E, np.zeros_like(E)]) if self.outputs_of == "position" else E
         self.data_ = {"forces": data.forces_q is not None or data.forces_p is not None,
                       "n_samples": int(data.n_samples),
                       **{k: diag[k] for k in ("derivative_source", "gradient_data", "order", "dt") if k in diag}}
@@ -101,7 +111,7 @@ class HamiltonianOpInf(Learner):
     def describe(self) -> dict:
         """What was fitted how (stored with a saved :class:`~femrom.rom.HamiltonianROM`)."""
         out = {"method": self.method, "regularization": self.regularization,
-               "shared": self.shared}
+               "shared": self.shared, "outputs_of": self.outputs_of}
         if hasattr(self, "error_split_"):
             out["residual"] = self.residual_
             out["error_split"] = {k: getattr(self.error_split_, k)
