@@ -15,7 +15,8 @@ from femrom.basis import CotangentLiftPSD
 from femrom.cli import load_case
 from femrom.inference import CanonicalData, HamiltonianOpInf, ProjectedPotential
 from femrom.integrators import integrate_canonical
-from femrom.rom import HamiltonianROM
+from femrom.rom import FirstOrderROM, HamiltonianROM
+from femrom.study import linear_operator
 
 nls = load_case("nls")
 
@@ -97,6 +98,45 @@ def test_hopinf_with_the_full_basis_recovers_the_fom_operator(rich_data, shared)
     assert learner.residual_ < 1e-10
 
 
+def test_plain_opinf_with_the_full_basis_recovers_the_fom_operator_without_structure(rich_data):
+    """CanonicalOpInf (no structure imposed) on the same consistent data finds the canonical operator
+    [[0, K], [-K, 0]] all the same: a baseline that blows up does so from data, not from a wrong fit."""
+    from femrom.inference import CanonicalOpInf, reduce_canonical_snapshots
+
+    cfg, fom, Q, P, dQ, dP = rich_data
+    V = CotangentLiftPSD(cfg.n, method="svd").fit(Q, P).phi_
+    data = reduce_canonical_snapshots(V, Q, P, ddt_q=dQ, ddt_p=dP, potential=fom.potential)
+    learner = CanonicalOpInf().fit(data)
+    A = learner.operators_
+    Lift = np.block([[V, np.zeros_like(V)], [np.zeros_like(V), V]])
+    K = fom.position
+    exact = np.block([[np.zeros_like(K), K], [-K, np.zeros_like(K)]])
+    # least squares on the joint (2n, K) data [Q; P], worse conditioned than H-OpInf's separate
+    # blocks (measured 1.9e-7 here against 2e-11): 1e-5 leaves 50x for the BLAS, and a wrong or
+    # omitted known term gives >= 1e-3 (the test below); the structure was not imposed
+    assert relative(Lift @ A @ Lift.T, exact) < 1e-5
+    assert learner.residual_ < 1e-10
+    # a Tikhonov weight shrinks the operator: ||A_rho|| < ||A_0||, and the residual grows
+    ridge = CanonicalOpInf(1e-2).fit(data)
+    assert np.linalg.norm(ridge.operators_) < np.linalg.norm(A) and ridge.residual_ > learner.residual_
+    with pytest.raises(ValueError, match="regularization must be >= 0"):
+        CanonicalOpInf(-1.0)
+
+
+def test_fom_time_step_ladder_observes_the_midpoint_rules_order(setup):
+    """The study's canonical dt ladder on the NLS FOM over [0, 0.4]: the implicit midpoint rule is
+    second order, so the fitted slope of log error on log dt is 2 (within 0.2: the ladder's
+    finest step is 4x the reference's, whose own error adds ~1/16 at the smallest dt)."""
+    from femrom.study import canonical_time_step_ladder
+
+    cfg, fom, run = setup
+    rows = canonical_time_step_ladder(fom, run.q[:, 0], run.p[:, 0], 4e-3, 0.4, factors=(4, 2, 1),
+                                      min_block_seconds=0.01)
+    assert abs(rows[0]["observed_order"] - 2.0) < 0.2, [r["error_at_end"] for r in rows]
+    assert rows[0]["error_at_end"] > rows[1]["error_at_end"] > rows[2]["error_at_end"] > 0
+    assert all(r["seconds_per_step"] > 0 and r["cost"]["blocks"] == 3 for r in rows)
+
+
 @pytest.mark.parametrize("wrong", ["omitted", "q_and_p_swapped", "sign_flipped"])
 def test_a_wrongly_projected_nonlinear_term_spoils_the_recovery(rich_data, wrong):
     """The recovery above fails when the known term enters wrongly: the check can fail."""
@@ -168,20 +208,40 @@ def test_reduced_model_conserves_its_hamiltonian_and_mass(setup):
 
 
 def test_the_plain_baseline_midpoint_is_the_hamiltonian_roms_midpoint(setup):
-    """The case's midpoint stepper for an unstructured A^ (cases/nls.py: midpoint_plain), given the
-    Hamiltonian operator [[0, D^], [-D^, 0]], retraces HamiltonianROM's implicit midpoint run: the
+    """The unstructured first-order ROM (femrom.rom.FirstOrderROM, the plain OpInf baseline), given
+    the Hamiltonian operator [[0, D^], [-D^, 0]], retraces HamiltonianROM's implicit midpoint run: the
     baseline and H-OpInf are compared under one integrator, not two."""
     cfg, fom, run = setup
     V = CotangentLiftPSD(12, method="svd").fit(run.q, run.p).phi_
-    ops = HamiltonianOpInf(shared=True).fit_snapshots(V, run.q, run.p, cfg.dt, potential=fom.potential).operators_
+    rom = HamiltonianROM(HamiltonianOpInf(shared=True).fit_snapshots(V, run.q, run.p, cfg.dt,
+                                                                     potential=fom.potential).operators_,
+                         V, fom.potential)
     q0, p0 = V.T @ run.q[:, 0], V.T @ run.p[:, 0]
-    Q, P, _ = HamiltonianROM(ops, V, fom.potential).predict(q0, p0, cfg.dt * np.arange(501), scheme="midpoint")
-    Y, _ = nls.midpoint_plain(nls.hamiltonian_matrix(ops), fom.potential, V, np.concatenate([q0, p0]), cfg.dt, 500)
+    times = cfg.dt * np.arange(501)
+    Q, P, _ = rom.predict(q0, p0, times, scheme="midpoint")
+    plain = FirstOrderROM(linear_operator(rom), V, fom.potential, scheme="midpoint").predict(q0, p0, times)
     # the same equations from the same predictor to the same Newton tolerance: measured identical
     # to the last bit. 1e-9 admits a different but converged Newton path (rtol 1e-12 per step over
     # 500 steps, amplified by the focusing) and fails for another scheme: RK4 differs by 4.5e-4,
     # the midpoint rule at 2 dt by 1.3e-3 (measured)
-    assert relative(Y, np.vstack([Q, P])) < 1e-9
+    assert relative(np.vstack([plain.q, plain.p]), np.vstack([Q, P])) < 1e-9
+    assert plain.info["blowup_step"] is None and plain.hamiltonian is None
+    rk4 = FirstOrderROM(linear_operator(rom), V, fom.potential, scheme="rk4").predict(q0, p0, times)
+    assert 1e-5 < relative(np.vstack([rk4.q, rk4.p]), np.vstack([Q, P])) < 1e-2
+
+
+def test_a_blown_up_baseline_stops_with_nan_and_says_where(setup):
+    """An operator with an eigenvalue of real part 50 grows by e^50 over [0, 1]: past 1e3 ||y_0||
+    the run stops and the rest is NaN (a blow-up is a result, not an exception)."""
+    cfg, fom, run = setup
+    V = CotangentLiftPSD(4, method="svd").fit(run.q, run.p).phi_
+    A = 50.0 * np.eye(8)
+    times = cfg.dt * np.arange(251)
+    sol = FirstOrderROM(A, V).predict(V.T @ run.q[:, 0], V.T @ run.p[:, 0], times, scheme="rk4")
+    k = sol.info["blowup_step"]
+    # |y| e^{50 t} passes 1e3 |y_0| (|y_0| > 1) at t = ln(1e3) / 50 = 0.138: step 35 of dt = 4e-3
+    assert k == 35, k
+    assert np.all(np.isfinite(sol.q[:, :k])) and np.all(np.isnan(sol.q[:, k:]))
 
 
 # -- the case ----------------------------------------------------------------------

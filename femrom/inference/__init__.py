@@ -16,7 +16,8 @@
   solved by :func:`solve_fast` or the cvxpy reference :func:`solve_conic`),
   :class:`SecondOrderOpInf` (plain least squares, the baseline),
   :class:`HamiltonianOpInf` (symmetric ``D^_q``, ``D^_p`` by Lyapunov
-  equations), :class:`GalerkinProjection` (the intrusive reference);
+  equations), :class:`CanonicalOpInf` (an unconstrained first-order ``A^`` on
+  canonical data, H-OpInf's baseline), :class:`GalerkinProjection` (the intrusive reference);
 - :class:`ErrorSplit`, :class:`HamiltonianErrorSplit`: projection, derivative
   and optimisation errors of a fit.
 """
@@ -67,6 +68,7 @@ from femrom.inference._terms import (
 )
 from femrom.inference.learners.galerkin import GalerkinProjection
 from femrom.inference.learners.hopinf import HamiltonianOpInf
+from femrom.inference.learners.canonical_opinf import CanonicalOpInf
 from femrom.inference.learners.lopinf import LagrangianOpInf
 from femrom.inference.learners.opinf import SecondOrderOpInf
 from femrom.inference.terms.damping import Damping
@@ -78,7 +80,7 @@ from femrom.inference.terms.stiffness import Stiffness
 
 __all__ = [
     "CONIC_SOLVERS", "DERIVATIVE_SOURCES", "GRADIENT_DATA", "HAMILTONIAN_DERIVATIVE_SOURCES", "LEARNERS",
-    "SOLVERS", "TERMS", "VARIABLES", "Block", "CanonicalData", "Damping", "ErrorSplit", "FastOptions", "ForcePotential",
+    "SOLVERS", "TERMS", "VARIABLES", "Block", "CanonicalData", "CanonicalOpInf", "Damping", "ErrorSplit", "FastOptions", "ForcePotential",
     "GalerkinProjection", "canonical_from_second_order",
     "GramProblem", "HamiltonianErrorSplit", "HamiltonianOperators", "HamiltonianOpInf", "Input",
     "LagrangianOpInf", "Learner", "LinearTerm", "Mass", "Output", "ProjectedNonlinearForce",

@@ -20,6 +20,9 @@
   Stoermer-Verlet, the implicit midpoint rule and AVF, outputs, the reduced
   Hamiltonian, lazy full fields (:class:`HamiltonianSolution`), a stepper and
   HDF5 ``save``/``load``;
+- :class:`FirstOrderROM`: ``y' = A^ y + F^(y)`` on a cotangent lift without structure
+  (plain OpInf, :class:`~femrom.inference.CanonicalOpInf`), implicit midpoint or RK4, a
+  blow-up ends the run with NaN: the baseline of the Hamiltonian ROMs;
 - :func:`select_regularization`: a grid of regularization weights scored by
   training fit and by energy over an extended window;
 - :class:`HyperReducedPotential`, :func:`ecsw_weights`, :func:`sparse_nnls`:
@@ -28,6 +31,7 @@
 """
 
 from femrom.rom._base import LazyFields, ReducedModel, uniform_step
+from femrom.rom._first_order import FIRST_ORDER_SCHEMES, FirstOrderROM
 from femrom.rom._hamiltonian import (
     HAMILTONIAN_SCHEMES,
     HamiltonianROM,
@@ -52,7 +56,7 @@ from femrom.rom._steppers import ReducedStepper, run_linear
 from femrom.rom.schemes.verlet import verlet_bound
 
 __all__ = [
-    "HAMILTONIAN_SCHEMES", "REDUCED_SCHEMES", "DiscreteStateSpace", "HamiltonianROM", "HamiltonianSolution", "HamiltonianStepper",
+    "FIRST_ORDER_SCHEMES", "HAMILTONIAN_SCHEMES", "REDUCED_SCHEMES", "DiscreteStateSpace", "FirstOrderROM", "HamiltonianROM", "HamiltonianSolution", "HamiltonianStepper",
     "HyperReducedPotential", "LazyFields", "LinearParts", "ReducedModel", "ReducedNewton", "ReducedScheme",
     "ReducedSolution", "ReducedStepper", "RegularizationScore", "SecondOrderROM", "StateSpaceStepper",
     "ecsw_weights", "hamiltonian_step_matrix", "reduced_scheme", "register_reduced_scheme",

@@ -12,6 +12,11 @@ What the case scripts share, for any scene (``femrom run scene.toml`` with a
 - canonical learners (``hopinf``) on conservative scenes: :func:`check_canonical_learners`,
   :func:`fit_canonical_rom`, :class:`SceneHamiltonianROM` (a Hamiltonian ROM on the
   mass-orthonormal basis, called like a second-order one);
+- canonical Hamiltonian FOMs (no scene: a :class:`~femrom.integrators.CanonicalSystem`):
+  :func:`run_canonical`, :func:`canonical_rows` (cotangent lift, H-OpInf, Galerkin and the
+  unstructured baselines of :class:`CanonicalSpec`, training and extrapolation windows,
+  invariant drifts, costs by timed blocks), :func:`canonical_time_step_ladder`,
+  :func:`invariant_drift`, :func:`state_error`, :func:`mass_generator`, :func:`plot_invariant_drifts`;
 - metrics: :func:`relative_error`, :func:`mass_norm`, :class:`Projection` / :func:`project_run`
   (exact field errors at every r from one pass), :func:`energy_ratio`;
 - costs: :class:`Cost` (the fastest of several timed blocks, and their quartiles),
@@ -27,10 +32,22 @@ What the case scripts share, for any scene (``femrom run scene.toml`` with a
 from femrom.study._figures import (
     plot_accuracy_cost,
     plot_energy,
+    plot_invariant_drifts,
     plot_error_history,
     plot_errors,
     plot_outputs,
     render_fields,
+)
+from femrom.study._hamiltonian import (
+    CanonicalRun,
+    CanonicalSpec,
+    canonical_rows,
+    canonical_time_step_ladder,
+    invariant_drift,
+    linear_operator,
+    mass_generator,
+    run_canonical,
+    state_error,
 )
 from femrom.study._ladders import frequency_ladder, natural_frequencies, time_step_ladder
 from femrom.study._metrics import Projection, energy_ratio, mass_norm, project_run, relative_error
@@ -59,6 +76,8 @@ from femrom.study._sweep import SweepRun, run_sweep, run_sweep_point, sweep_runs
 from femrom.study._timing import Cost, blocked_cost, repeated_cost, repeated_costs
 
 __all__ = [
+    "CanonicalRun", "CanonicalSpec", "canonical_rows", "canonical_time_step_ladder", "invariant_drift",
+    "linear_operator", "mass_generator", "plot_invariant_drifts", "run_canonical", "state_error",
     "ROW_COLUMNS", "Cost", "Evaluation", "FOMRun", "Projection", "SceneHamiltonianROM", "StudyState", "SweepRun",
     "blocked_cost", "check_canonical_learners", "check_rom_config", "energy_ratio", "evaluate", "fit_canonical_rom", "fit_rom", "fom_runs", "frequency_ladder", "mass_norm",
     "natural_frequencies", "operator_checks", "peak_rss_gb", "plot_accuracy_cost", "plot_energy",

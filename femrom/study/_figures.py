@@ -187,3 +187,35 @@ def render_fields(out_dir: Path, model, store, run, solution, label: str, *, n_t
         info["paraview_seconds"] = time.perf_counter() - tic
         info["paraview"] = name
     return info
+
+
+def plot_invariant_drifts(path, times, reference: dict, kept: dict, names: dict, *, shade=None,
+                          title: str = "") -> Path:
+    """``|I(t) - I(0)| / |I(0)|`` of each invariant (one panel each) for the FOM (black) and each kept ROM.
+
+    ``reference``: name -> (k,) FOM values; ``kept``: label -> {name: (k,) values};
+    ``names``: name -> axis label. Exact invariants sit at round-off: the axis starts at 1e-16.
+    """
+    plt = pyplot()
+    floor = 1e-16
+    fig, axes = plt.subplots(len(names), 1, figsize=(7, 2.4 * len(names)), sharex=True, squeeze=False)
+    for ax, (key, label) in zip(axes[:, 0], names.items()):
+        ref = np.asarray(reference[key])
+        ax.semilogy(times, np.maximum(np.abs(ref - ref[0]) / abs(ref[0]), floor), "k-", lw=1.0, label="FOM")
+        for (name, values), style in zip(kept.items(), STYLES * 3):
+            v = np.asarray(values[key])
+            with np.errstate(all="ignore"):
+                ax.semilogy(times, np.maximum(np.abs(v - v[0]) / abs(v[0]), floor), linestyle=style, lw=1.0,
+                            label=name)
+        if shade is not None:
+            ax.axvspan(*shade, color="0.92")
+        ax.set_ylim(floor, 1e2)
+        ax.set_ylabel(f"|change| of {label}", fontsize=8)
+        ax.grid(alpha=0.3)
+    axes[0, 0].legend(fontsize=8, ncol=4)
+    axes[0, 0].set_title(title)
+    axes[-1, 0].set_xlabel("t")
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return Path(path)
