@@ -25,6 +25,7 @@ from femrom.inference import (
     SecondOrderOpInf,
     finite_difference,
     galerkin,
+    concatenate,
     reduce_snapshots,
     solve_conic,
     solve_fast,
@@ -177,6 +178,49 @@ def test_newmark_accelerations_give_the_intrusive_operators_exactly(beam):
     assert relative(learned.damping_, target) < 1e-6
     assert learned.error_split_.derivative == 0.0
     assert learned.error_split_.optimization < 1e-8
+
+
+def _newmark_run(beam, dt=2e-3, steps=1500):
+    M, K, w, Phi = beam
+    C = rayleigh_damping(M, K, 0.5, 1e-4)
+    n = M.shape[0]
+    Bfull = np.zeros((n, 1))
+    Bfull[-2, 0] = 1.0
+    inputs = lambda t: np.array([np.sin(5.0 * t) + 0.5 * np.sin(13.0 * t)])  # noqa: E731
+    system = SecondOrderSystem(mass=M, stiffness=K, damping=C, input_matrix=Bfull, inputs=inputs)
+    trajectory = Trajectory()
+    integrate(system, Newmark(), Phi[:, 0] * 0.01, np.zeros(n), dt, steps, consumers=[trajectory])
+    return system, trajectory, np.column_stack([inputs(t) for t in trajectory.t])
+
+
+def test_integrator_consistent_data_from_displacements_alone_give_the_intrusive_operators(beam):
+    """Averaging M a_k + C v_k + K q_k = B u_k with (1, 2, 1)/4 leaves displacements only:
+    M d2q/h^2 + C dq/(2h) + K A q = B A u holds exactly on a Newmark (average acceleration)
+    trajectory, so L-OpInf on displacements alone recovers what stored (v, a) give."""
+    M, K, w, Phi = beam
+    system, trajectory, U = _newmark_run(beam)
+    dt, r = 2e-3, 4
+    V = Phi[:, :r]
+    raw = reduce_snapshots(V, trajectory.q, dt, product=M, inputs=U)     # displacements only
+    data = raw.integrator_consistent()
+    assert data.n_samples == raw.n_samples - 2 and data.diagnostics["derivative_source"] == "integrator"
+    intrusive = galerkin(system, V, mass_orthonormal=True)
+    # the relation itself, column by column, with the intrusive operators: round-off of the
+    # second difference (q ~ 1e-2, h^2 = 4e-6: eps |q| / h^2 ~ 1e-12 against terms ~ 1)
+    residual = data.accelerations + intrusive.damping @ data.velocities + intrusive.stiffness @ data.states \
+        - intrusive.input_matrix @ data.inputs
+    assert np.max(np.abs(residual)) < 1e-8 * np.max(np.abs(intrusive.stiffness @ data.states))
+    learned = LagrangianOpInf(["damping"]).fit(data)
+    # as from the stored derivatives (test above): the same fast solver's 1e-8
+    assert relative(learned.stiffness_, intrusive.stiffness) < 1e-8
+    assert relative(learned.damping_, intrusive.damping) < 1e-5
+    assert relative(learned.input_matrix_, intrusive.input_matrix) < 1e-8
+    # ... where 4th-order differences of the same displacements fit the scheme's time error:
+    # the Newmark trajectory's modes run slow (period elongation), so K^ comes out too soft
+    fd = LagrangianOpInf(["damping"]).fit(raw.with_finite_differences(4))
+    assert relative(fd.stiffness_, intrusive.stiffness) > 1e-4
+    with pytest.raises(ValueError, match="one trajectory"):
+        concatenate([raw, raw]).integrator_consistent()
 
 
 def test_rayleigh_damping_learned_from_finite_differences_approaches_intrusive(beam):

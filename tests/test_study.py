@@ -145,7 +145,10 @@ def _bracket_dict(**rom):
     ({"basis": {"ranks": [0, 2]}}, "[rom.basis.ranks] must be a positive integer, got 0"),
     ({"basis": {"product": "stiffness"}}, "[rom.basis] unknown product 'stiffness'; valid: mass, euclidean"),
     ({"derivatives": {"kind": "finite_differences", "order": 3}}, "order must be one of (2, 4, 6), got 3"),
-    ({"derivatives": "spline"}, "unknown derivative kind 'spline'; valid: stored, finite_differences"),
+    ({"derivatives": "spline"}, "unknown derivative kind 'spline'; valid: stored, finite_differences, integrator"),
+    ({"snapshot_every": 0}, "[rom.snapshot_every] must be a positive integer, got 0"),
+    ({"snapshot_every": 2.5}, "[rom.snapshot_every] must be a positive integer, got 2.5"),
+    ({"snapshot_every": True}, "[rom.snapshot_every] must be a positive integer, got True"),
     ({"test": [{"name": "x", "signals": [{"kind": "step"}, {"kind": "step"}]}]},
      "[rom.test[0]] signals: the scene has 1 input(s), got 2 signal(s)"),
     ({"test": [{"name": "sigmoid"}]}, "run names must be unique across train and test"),
@@ -215,6 +218,39 @@ def test_learner_tables_take_their_own_derivatives_and_defaults():
 
 
 # -- building blocks ------------------------------------------------------------------------
+def test_learning_from_displacements_alone_every_kth_step(tmp_path):
+    """``derivatives = "integrator"``: L-OpInf from the stored displacements only, by the
+    Newmark-consistent differences, against L-OpInf from the stored (v, a); and a run that keeps
+    every 2nd step (``snapshot_every``): its store, times and ROM step are 2 dt."""
+    from femrom.snapshots import SnapshotStore
+    from femrom.study import run_study
+
+    data = _bracket_dict(learners=["galerkin", "lopinf", {"learner": "lopinf", "label": "lopinf_int",
+                                                          "derivatives": "integrator"}],
+                         basis={"ranks": [8]}, report={"render": False, "paraview": False, "keep_snapshots": True})
+    m1 = run_study(Scene.from_dict(data), tmp_path / "k1", progress=None)
+    rows = {row["learner"]: row for row in m1["roms"]}
+    assert rows["lopinf_int"]["derivatives"] == "integrator"
+    # measured at r = 8 on the unseen step: field error 6.8e-6 from displacements alone, 4.1e-5 from the
+    # stored (v, a), projection floor 6.4e-6; within 2x of the stored-derivative model is the issue's bar
+    assert rows["lopinf_int"]["test_field_error"] < 2 * rows["lopinf"]["test_field_error"]
+    assert rows["lopinf_int"]["test_field_error"] >= rows["lopinf_int"]["test_projection_error"]
+    data["rom"]["snapshot_every"] = 2
+    data["rom"]["learners"] = ["galerkin"]
+    m2 = run_study(Scene.from_dict(data), tmp_path / "k2", progress=None)
+    with SnapshotStore.open(tmp_path / "k1" / "snapshots.h5") as s1, \
+            SnapshotStore.open(tmp_path / "k2" / "snapshots.h5") as s2:
+        q1, q2 = s1.read("step", "q"), s2.read("step", "q")
+        assert q2.shape[1] == (q1.shape[1] + 1) // 2
+        np.testing.assert_array_equal(q2, q1[:, ::2])     # the same run, every 2nd step kept
+    assert m2["fom"]["step"]["snapshot_every"] == 2
+    # the FOM's cost per snapshot interval is two of its steps: speedups compare equal spans of time
+    row = m2["roms"][0]
+    assert any(m2["fom_cost"]["minimum"] == pytest.approx(2 * run["cost"]["minimum"], rel=1e-12)
+               for run in m2["fom"].values())
+    assert row["speedup"] == pytest.approx(m2["fom_cost"]["minimum"] / row["seconds_per_step"], rel=1e-9)
+
+
 def test_projection_field_error_is_exact():
     """The split ``residual^2 + dropped coordinates^2 + ROM error^2`` equals the direct mass norm."""
     rng = np.random.default_rng(0)

@@ -174,6 +174,51 @@ class SecondOrderData:
         return replace(self, velocities=Qd, accelerations=Qdd, diagnostics=d)
 
 
+    def integrator_consistent(self) -> "SecondOrderData":
+        r"""Data from the displacements alone that the Newmark (average acceleration) ROM reproduces exactly.
+
+        Newmark's average-acceleration scheme with step ``h`` (the trapezoidal rule)
+        gives ``q_{k+1} - q_k = h (v_k + v_{k+1}) / 2`` and ``v_{k+1} - v_k = h (a_k + a_{k+1}) / 2``,
+        and it enforces ``M a_k + C v_k + K q_k + f_k = B u_k`` at every step. Averaging that
+        equation with the weights ``(1, 2, 1) / 4`` (``A x_k = (x_{k-1} + 2 x_k + x_{k+1}) / 4``)
+        leaves only displacements:
+
+        .. math::
+
+            M \frac{q_{k+1} - 2 q_k + q_{k-1}}{h^2} + C \frac{q_{k+1} - q_{k-1}}{2h}
+            + K\, A q_k + A f_k = B\, A u_k .
+
+        So the regression with accelerations ``delta^2 Q^ / h^2``, velocities
+        ``delta Q^ / (2h)``, states ``A Q^`` and inputs, forces and outputs averaged
+        alike is satisfied exactly by the reduced operators of a Newmark trajectory
+        (its stored ``a_k``, ``v_k`` are not needed), and a model fitted to it and
+        stepped by Newmark with the same ``h`` reproduces sampled data of any scheme as
+        closely as a second-order model can: ``h`` is the snapshot spacing (every
+        ``k``-th step of a finer run: the ROM steps with ``h = k dt``). Finite differences
+        of the continuous derivatives instead fit the data's own time error, which
+        the ROM's Newmark steps then add a second time (period elongation twice).
+
+        Needs one uniformly sampled trajectory (``diagnostics["dt"]``); drops its first
+        and last column. Per-column projection diagnostics are dropped (the columns
+        are averages).
+        """
+        h = self.diagnostics.get("dt")
+        if h is None or self.diagnostics.get("n_trajectories", 1) != 1 or len(self.starts) > 1:
+            raise ValueError("integrator-consistent data need one trajectory with a known step dt")
+        if self.n_samples < 3:
+            raise ValueError(f"integrator-consistent data need at least 3 snapshots, got {self.n_samples}")
+        Q = self.states
+        average = lambda X: None if X is None else 0.25 * (X[:, :-2] + 2.0 * X[:, 1:-1] + X[:, 2:])  # noqa: E731
+        d = {k: v for k, v in self.diagnostics.items()
+             if k not in ("column_residual2", "column_norm2", "velocity_error", "acceleration_error")}
+        d.update(derivative_source="integrator", order=None, trimmed_columns=d.get("trimmed_columns", 0) + 1)
+        return replace(self, states=average(Q), velocities=(Q[:, 2:] - Q[:, :-2]) / (2.0 * h),
+                       accelerations=(Q[:, 2:] - 2.0 * Q[:, 1:-1] + Q[:, :-2]) / h**2,
+                       inputs=average(self.inputs), nonlinear_forces=average(self.nonlinear_forces),
+                       outputs=average(self.outputs),
+                       times=None if self.times is None else self.times[1:-1], diagnostics=d)
+
+
 def concatenate(datasets) -> SecondOrderData:
     """One data set from several trajectories (columns side by side).
 

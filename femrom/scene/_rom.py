@@ -32,7 +32,7 @@ from femrom.scene._signals import Signal
 
 PRODUCTS = ("mass", "euclidean")
 SVD_METHODS = ("randomized", "svd")
-DERIVATIVE_KINDS = ("stored", "finite_differences")
+DERIVATIVE_KINDS = ("stored", "finite_differences", "integrator")
 FD_ORDERS = (2, 4, 6)
 
 
@@ -46,7 +46,9 @@ def _positive(value, where: str, *, integer: bool = False):
 @dataclass(frozen=True)
 class Derivatives:
     """Where the learners' ``q'``, ``q''`` come from: the run's stored integrator
-    derivatives, or finite differences of the reduced displacements of ``order``."""
+    derivatives, finite differences of the reduced displacements of ``order``, or
+    ``integrator``: differences of the displacements alone that the ROM's Newmark
+    steps reproduce exactly (:meth:`femrom.inference.SecondOrderData.integrator_consistent`)."""
 
     kind: str = "stored"
     order: int = 4
@@ -64,7 +66,7 @@ class Derivatives:
 
     @property
     def tag(self) -> str:
-        return "stored" if self.kind == "stored" else f"fd{self.order}"
+        return {"stored": "stored", "integrator": "integrator"}.get(self.kind, f"fd{self.order}")
 
 
 @dataclass(frozen=True)
@@ -207,7 +209,9 @@ class RomConfig:
     derivatives, regularization }`` (e.g. L-OpInf from finite differences next to
     L-OpInf from stored derivatives); ``derivatives`` and ``regularization`` at the
     section's top are the defaults of every entry. ``extension`` is the length of the
-    energy window of each test, in multiples of its own window.
+    energy window of each test, in multiples of its own window. ``snapshot_every``: the
+    store keeps every k-th FOM step (what another solver writing every k-th step
+    gives), and the ROMs step with ``k dt``.
     """
 
     train: tuple[RunSpec, ...]
@@ -217,9 +221,10 @@ class RomConfig:
     extension: float = 10.0
     timing: TimingSpec = TimingSpec()
     report: ReportSpec = ReportSpec()
+    snapshot_every: int = 1
 
     KEYS = ("train", "test", "learners", "basis", "derivatives", "regularization", "extension",
-            "timing", "report")
+            "timing", "report", "snapshot_every")
 
     @classmethod
     def from_dict(cls, data, n_inputs: int) -> "RomConfig":
@@ -253,9 +258,12 @@ class RomConfig:
         extension = 10.0 if d["extension"] is None else _positive(d["extension"], "rom.extension")
         if extension < 1:
             raise SceneError(f"[rom] extension must be >= 1 (the test window itself), got {extension}")
+        every = 1 if d["snapshot_every"] is None else _positive(d["snapshot_every"], "rom.snapshot_every",
+                                                                 integer=True)
         return cls(runs["train"], runs["test"], learners,
                    BasisSpec.from_dict(d["basis"], "rom.basis"), extension,
-                   TimingSpec.from_dict(d["timing"], "rom.timing"), ReportSpec.from_dict(d["report"], "rom.report"))
+                   TimingSpec.from_dict(d["timing"], "rom.timing"), ReportSpec.from_dict(d["report"], "rom.report"),
+                   every)
 
     @property
     def needs_stored_derivatives(self) -> bool:

@@ -41,7 +41,7 @@ def time_step_ladder(model, reference: FOMRun | None = None, factors=(10, 5, 2),
     if error not in ERRORS:
         raise ValueError(f"unknown error {error!r}; valid: {', '.join(ERRORS)}")
     signals = None if reference is None else reference.inputs.signals
-    dt0 = model.scene.time.dt if reference is None else reference.dt
+    dt0 = model.scene.time.dt if reference is None else reference.dt / reference.every
     t_end = model.scene.time.t_end if reference is None else float(reference.times[-1])
     factors = tuple(sorted(factors, reverse=True))
     given = reference is not None
@@ -79,7 +79,7 @@ def time_step_ladder(model, reference: FOMRun | None = None, factors=(10, 5, 2),
 
 def _row(run: FOMRun, error: float) -> dict:
     s = run.summary
-    return {"dt": run.dt, "steps": s["n_steps"], "output_error": error, "stepping_seconds": s["stepping_seconds"],
+    return {"dt": run.dt / run.every, "steps": s["n_steps"], "output_error": error, "stepping_seconds": s["stepping_seconds"],
             "seconds_per_step": run.cost.seconds, "cost": run.cost.to_dict()}
 
 

@@ -16,7 +16,8 @@ from femrom.snapshots import SnapshotStore
 from femrom.study._figures import plot_accuracy_cost, plot_energy, plot_errors, plot_outputs, render_fields
 from femrom.study._ladders import time_step_ladder
 from femrom.study._canonical import check_canonical_learners
-from femrom.study._study import check_rom_config, fom_runs, pod_basis, product_matrix, reduce_runs, study_rows
+from femrom.study._study import check_rom_config, fom_runs, interval_cost, pod_basis, product_matrix, reduce_runs, \
+    study_rows
 
 ROW_COLUMNS = ["r", "learner", "derivatives", "train_output_error", "test_output_error", "test_field_error",
                "test_energy_ratio", "fit_seconds", "seconds_per_step", "speedup"]
@@ -114,7 +115,7 @@ def run_study(scene: Scene, out_dir, *, model=None, store_path=None, extend=None
         if first_test.energy is not None:
             plot_energy(out_dir / "energy.png", evaluations, r_show, labels, first_test,
                         f"reduced energy over {config.extension:g}x the window of {test[0]}")
-        fom_cost = max(runs.values(), key=lambda run: run.times.size).cost    # as study_rows' speedups
+        fom_cost = interval_cost(max(runs.values(), key=lambda run: run.times.size))    # as study_rows' speedups
         plot_accuracy_cost(out_dir / "accuracy_cost.png", rows, fom_cost.to_dict(),
                            f"{scene.name}: unseen-input output error vs cost")
         show = next((s.label for s in config.learners if s.learner != "galerkin"), labels[0])

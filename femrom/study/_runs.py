@@ -31,7 +31,10 @@ class FOMRun:
     summary : dict
         The integrator's summary (scheme, solver, timings, counts).
     cost : Cost
-        Seconds per step by repetition over blocks of the run's own steps.
+        Seconds per FOM step by repetition over blocks of the run's own steps.
+    every : int
+        The run keeps every ``every``-th FOM step (``times``, ``outputs``, ``energy``
+        and the store alike): :attr:`dt` is the snapshot spacing, ``every`` FOM steps.
     """
 
     name: str
@@ -43,6 +46,7 @@ class FOMRun:
     v0: np.ndarray
     summary: dict
     cost: Cost
+    every: int = 1
 
     @property
     def U(self) -> np.ndarray | None:
@@ -84,12 +88,13 @@ def solver_factory(model):
 
 def run_fom(model, signals: tuple[Signal, ...] | None = None, *, name: str = "run", store=None,
             dt: float | None = None, t_end: float | None = None, solver=None,
-            min_block_seconds: float = 0.1) -> FOMRun:
+            min_block_seconds: float = 0.1, every: int = 1) -> FOMRun:
     """Integrate the model under ``signals`` (one per input; ``None``: the scene's).
 
     Displacements (and whatever else the store holds) stream into trajectory
     ``name`` of ``store``; no full field is kept in memory. ``dt``/``t_end``
-    override the scene's.
+    override the scene's. ``every``: keep every ``every``-th step only (step 0
+    included), in the store and in the run's times, outputs and energy.
     """
     signals = tuple(i.signal for i in model.scene.inputs) if signals is None else tuple(signals)
     if len(signals) != model.system.n_inputs:
@@ -101,7 +106,13 @@ def run_fom(model, signals: tuple[Signal, ...] | None = None, *, name: str = "ru
     clock = StepClock()
     n_steps = int(round((model.scene.time.t_end if t_end is None else t_end) / (model.scene.time.dt if dt is None
                                                                                  else dt)))
-    writers = [] if store is None else [store.writer(name, n_steps=n_steps, dt=dt)]  # closed by the driver
+    every = int(every)
+    if every < 1 or n_steps % every:
+        raise ValueError(f"run {name!r}: every = {every} must be >= 1 and divide the {n_steps} steps")
+    writers = [] if store is None else [store.writer(name, n_steps=n_steps, dt=dt, every=every)]  # closed by the driver
     result = simulate(model, dt=dt, t_end=t_end, consumers=writers, progress=None, solver=solver, clock=clock)
-    return FOMRun(name, result.times, result.outputs, result.energy, u, model.initial_displacement,
-                  model.initial_velocity, result.summary, blocked_cost(clock.step_seconds, min_block_seconds))
+    keep = slice(None, None, every)
+    pick = lambda x: None if x is None else x[..., keep]  # noqa: E731
+    return FOMRun(name, result.times[keep], pick(result.outputs), pick(result.energy), u,
+                  model.initial_displacement, model.initial_velocity, result.summary | {"snapshot_every": every},
+                  blocked_cost(clock.step_seconds, min_block_seconds), every)

@@ -80,7 +80,8 @@ def fom_runs(model, config: RomConfig, store, *, progress=None) -> dict[str, FOM
         if progress:
             progress(f"FOM run {k + 1}/{len(specs)}: {spec.name}")
         runs[spec.name] = run_fom(model, spec.signals, name=spec.name, store=store, t_end=spec.t_end,
-                                  solver=solver, min_block_seconds=config.timing.min_block_seconds)
+                                  solver=solver, min_block_seconds=config.timing.min_block_seconds,
+                                  every=config.snapshot_every)
     runs_cache = {"hits": solver.cache.hits, "misses": solver.cache.misses}
     solver.cache.clear()  # free the factor before the SVD
     for run in runs.values():
@@ -156,7 +157,9 @@ def training_data(data: dict, r: int, derivatives):
     parts = []
     for d in data.values():
         d = d.truncated(r)
-        if derivatives.kind == "finite_differences" and (
+        if derivatives.kind == "integrator":
+            d = d.integrator_consistent()
+        elif derivatives.kind == "finite_differences" and (
                 d.diagnostics.get("derivative_source") != "finite_difference"
                 or d.diagnostics.get("order") != derivatives.order):
             d = d.with_finite_differences(derivatives.order)
@@ -257,6 +260,11 @@ def evaluate(rom, run: FOMRun, projection: Projection, *, extension: float,
                           float(times[np.argmax(big)]) if big.any() else None, solution, long_times, long.energy)
 
 
+def interval_cost(run: FOMRun) -> Cost:
+    """The FOM's cost per snapshot interval of ``run`` (``every`` FOM steps): what a ROM step replaces."""
+    return run.cost.scaled(run.every)
+
+
 def rom_costs(roms: dict, run: FOMRun, *, repeats: int = 5, min_block_seconds: float = 0.1) -> dict:
     """Seconds per reduced step of every ROM of ``roms`` on ``run``'s input, by interleaved repetition
     (:func:`~femrom.study.repeated_costs`).
@@ -307,14 +315,14 @@ def study_rows(system, basis: np.ndarray, product, data: dict, projections: dict
     A ROM whose prediction fails (a nonlinear model's Newton iteration) gets a
     ``failed`` message, infinite errors and no cost, and the study goes on.
     Returns the rows and the evaluations by ``(r, label, run)``. ``learners``
-    (specs) defaults to the config's. Speedups are the FOM's cost per step (from
-    its longest run, the first of equal ones) over the ROM's, both minima over timed blocks measured
+    (specs) defaults to the config's. Speedups are the FOM's cost per step per
+    snapshot interval (from its longest run, the first of equal ones; :func:`interval_cost`) over the ROM's, both minima over timed blocks measured
     in this process.
     """
     learners = config.learners if learners is None else learners
     train = [s.name for s in config.train if s.name in data]
     test = [s.name for s in config.test]
-    fom_cost = max(runs.values(), key=lambda run: run.times.size).cost   # the most steps: the most blocks
+    fom_cost = interval_cost(max(runs.values(), key=lambda run: run.times.size))   # the most steps: the most blocks
     score_after = {spec.name: spec.score_after for spec in (*config.train, *config.test)}
     rows, evaluations = [], {}
     for r in config.basis.ranks:

@@ -57,6 +57,14 @@ class Cost:
         """Interquartile range over the median."""
         return (self.q75 - self.q25) / self.median if self.median > 0 else 0.0
 
+    def scaled(self, factor: float) -> "Cost":
+        """The cost of ``factor`` steps (every statistic times ``factor``; blocks unchanged)."""
+        f = float(factor)
+        if f == 1.0:
+            return self
+        return Cost(self.median * f, self.q25 * f, self.q75 * f, self.minimum * f, self.maximum * f, self.blocks,
+                    self.steps_per_block / f)
+
     def to_dict(self) -> dict:
         return asdict(self)
 
