@@ -97,7 +97,7 @@ def rom_table(system, basis: np.ndarray, run, rows: list[dict], evaluations: dic
             table.append({"method": label, "r": r, "failed": row.get("failed"), "test_error": float("inf")})
             continue
         error = histories[(r, label)] = reconstructed_energy_error(system, basis, ev.solution, energy0)
-        trained = evaluations[(r, label, train)] if train else None
+        trained = evaluations.get((r, label, train))         # None: no training run, or it failed there
         out = {"method": label, "r": r, "train_error": trained and trained.field_error,
                "projection_error_train": trained and trained.projection_error,
                "test_error": ev.field_error, "projection_error": ev.projection_error,
