@@ -8,9 +8,9 @@ of a training window -> mass-orthonormal POD -> intrusive Galerkin, L-OpInf
 and plain OpInf on the same data and basis, for several r, predicting 20x the
 training window; it is repeated on coarser snapshots (:data:`COARSE_ROM`),
 where plain OpInf blows up. What is the beam's own: the analytic cantilever
-frequencies, its dt and mesh ladders, the FOM energy of the reconstructed ROM
-state, and the a priori dispersion floor of a learned model
-(:func:`dispersion_error`). The case writes, into its output folder:
+frequencies, its dt and mesh ladders, and the a priori dispersion floor of a
+learned model (:func:`dispersion_error`); the table with the FOM energy of the
+reconstructed ROM state is :func:`femrom.study.rom_table`. The case writes, into its output folder:
 
 - the study's report (``report.md``, ``metrics.json``, ``response.png``,
   ``rom_error.png``, ``energy.png``, ``accuracy_cost.png``) with the beam's

@@ -19,8 +19,9 @@ several basis sizes r:
 - what is the case's own: hyper-reduction (the learned K^ with the reduced
   potential sampled on a few nodes with non-negative ECSW weights,
   :mod:`femrom.rom._hyper`, so the reduced force stays the exact gradient of a
-  reduced potential), the FOM's ladders against the exact breather, the FOM
-  energy of the reconstructed ROM state, and the profiles q(x).
+  reduced potential), the FOM's ladders against the exact breather, and the
+  profiles q(x); the table, the FOM energy of the reconstructed ROM state and its
+  histories are :func:`femrom.study.rom_table` and :func:`femrom.study.plot_histories`.
 
 The case writes the study's report (``report.md``, ``metrics.json``,
 ``response.png``, ``rom_error.png``, ``energy.png``, ``accuracy_cost.png``)
