@@ -19,8 +19,9 @@ several basis sizes r:
 - what is the case's own: hyper-reduction (the learned K^ with the reduced
   potential sampled on a few nodes with non-negative ECSW weights,
   :mod:`femrom.rom._hyper`, so the reduced force stays the exact gradient of a
-  reduced potential), the FOM's ladders against the exact breather, the FOM
-  energy of the reconstructed ROM state, and the profiles q(x).
+  reduced potential), the FOM's ladders against the exact breather, and the
+  profiles q(x); the table, the FOM energy of the reconstructed ROM state and its
+  histories are :func:`femrom.study.rom_table` and :func:`femrom.study.plot_histories`.
 
 The case writes the study's report (``report.md``, ``metrics.json``,
 ``response.png``, ``rom_error.png``, ``energy.png``, ``accuracy_cost.png``)
@@ -34,21 +35,19 @@ Run ``python -m femrom run sine_gordon [--out DIR] [--quick]``; tests import :fu
 
 import argparse
 import dataclasses
-import time
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from femrom.integrators import Newmark, Trajectory, integrate
-from femrom.post import accuracy_cost_table, plot_accuracy_cost_groups, plot_time_series
+from femrom.post import pyplot, save_figure, table_section
 from femrom.rom import HyperReducedPotential, SecondOrderROM, ecsw_weights
-from femrom.scene import BasisSpec, Derivatives, LearnerSpec, ReportSpec, RomConfig, RunSpec, Scene, build
-from femrom.study import evaluate, plot_error_history, repeated_cost, rom_costs, run_study, scored_columns
+from femrom.scene import Derivatives, Scene, build
+from femrom.study import LEARNER_NAMES, call_cost, evaluate_runs, extrapolation_config, final_state, invariant_drift, \
+    ladder_section, mass_norm, observed_order, plot_histories, plot_output_history, rom_costs, rom_table, run_study
 
 SCENE = Path(__file__).with_suffix(".toml")
-NAMES = {"galerkin": "intrusive Galerkin", "lopinf": "L-OpInf", "lopinf_hyper": "L-OpInf + hyper-reduction",
-         "plain_opinf": "plain OpInf"}
+NAMES = LEARNER_NAMES | {"lopinf_hyper": "L-OpInf + hyper-reduction"}
 
 
 @dataclass(frozen=True)
@@ -105,12 +104,9 @@ PAPER = SineGordonStudy(dt=0.005, ranks=(2, 3, 4, 6, 8, 12), main_rank=4)
 
 def with_nodes(scene: Scene, n: int) -> Scene:
     """The scene with ``n`` interior nodes: ``n + 1`` elements split ``floor`` / ``ceil`` at the probe."""
-    params = dict(scene.structure.parameters)
-    length = params["length"]
     elements = n + 1
-    params |= {"mesh_size": length / elements, "probe_position": (elements // 2) / elements}
-    structure = dataclasses.replace(scene.structure, parameters=tuple(sorted(params.items())))
-    return dataclasses.replace(scene, structure=structure)
+    length = dict(scene.structure.parameters)["length"]
+    return scene.with_geometry(mesh_size=length / elements, probe_position=(elements // 2) / elements)
 
 
 def breather(x, t, w: float = BREATHER_FREQUENCY, centre: float = BREATHER_CENTRE):
@@ -123,8 +119,8 @@ def breather(x, t, w: float = BREATHER_FREQUENCY, centre: float = BREATHER_CENTR
 def fom_ladder(scene: Scene, study: SineGordonStudy) -> list[dict]:
     """The FOM's accuracy against cost over [0, train_window].
 
-    Two ladders of Newmark + Newton runs, each error a relative mass norm
-    ``||q_h(T) - q_ref||_M / ||q_ref||_M`` at ``T = train_window`` (``M = h I``):
+    Two ladders of Newmark + Newton runs (:func:`femrom.study.final_state`), each error a
+    relative mass norm ``||q_h(T) - q_ref||_M / ||q_ref||_M`` at ``T = train_window`` (``M = h I``):
 
     - time step, at the study's n: against the run at ``ladder_fine_dt`` on the
       same mesh (the time error alone);
@@ -136,86 +132,57 @@ def fom_ladder(scene: Scene, study: SineGordonStudy) -> list[dict]:
     T = study.train_window
     s = np.sqrt(1.0 - BREATHER_FREQUENCY**2)
 
-    def final_state(n, dt):
+    def final(n, dt):
         model = build(scene if n is None else with_nodes(scene, n))
         x = _node_positions(model)
         v_exact = 4.0 * s / np.cosh(s * (x - BREATHER_CENTRE))
         if not np.allclose(model.initial_velocity, v_exact, atol=1e-12 * np.abs(v_exact).max()):
             raise ValueError("the scene's initial velocity is not the breather of BREATHER_FREQUENCY; "
                              "the exact reference of the mesh ladder would not apply")
-        steps = int(round(T / dt))
-        if abs(steps * dt - T) > 1e-9 * T:
-            raise ValueError(f"ladder time step {dt:g} does not divide the window {T:g} s")
-        final = Trajectory(every=steps, fields=("q",))
-        summary = integrate(model.system, Newmark(), model.initial_displacement, model.initial_velocity,
-                            dt, steps, consumers=[final], progress=False)
-        row = {"n": model.system.n_dofs, "dt": dt, "steps": steps,
-               "stepping_seconds": summary.stepping_seconds,
-               "seconds_per_step": summary.stepping_seconds / steps}
-        return row, final.q[:, -1], breather(x, steps * dt), model.system.mass
-
-    def relative(a, b, M):
-        e = a - b
-        return float(np.sqrt(e @ (M @ e)) / np.sqrt(b @ (M @ b)))
+        q, row = final_state(model, dt, T)
+        M = model.system.mass
+        return row, q, breather(x, row["steps"] * dt), lambda a, b: mass_norm(M, a - b) / mass_norm(M, b)
 
     rows = []
-    _, reference, _, _ = final_state(study.n, study.ladder_fine_dt)
+    _, reference, _, _ = final(study.n, study.ladder_fine_dt)
     for dt in study.ladder_time_steps:
-        row, q, _, M = final_state(study.n, dt)
-        rows.append({"ladder": "time step", "label": f"dt={dt:g}", **row, "error": relative(q, reference, M),
+        row, q, _, relative = final(study.n, dt)
+        rows.append({"ladder": "time step", "label": f"dt={dt:g}", **row, "error": relative(q, reference),
                      "reference": f"dt = {study.ladder_fine_dt:g}, same mesh"})
     for n in study.ladder_nodes:
-        row, q, exact, M = final_state(n, study.ladder_fine_dt)
-        rows.append({"ladder": "mesh", "label": f"n={n}", **row, "error": relative(q, exact, M),
+        row, q, exact, relative = final(n, study.ladder_fine_dt)
+        rows.append({"ladder": "mesh", "label": f"n={n}", **row, "error": relative(q, exact),
                      "reference": "exact breather"})
     for name, key, sign in (("time step", "dt", 1.0), ("mesh", "n", -1.0)):
         sel = [r for r in rows if r["ladder"] == name]
-        slope = float(np.polyfit(np.log([r[key] for r in sel]), np.log([r["error"] for r in sel]), 1)[0])
+        order = sign * observed_order([r[key] for r in sel], [r["error"] for r in sel])
         for r in sel:
-            r["observed_order"] = sign * slope
+            r["observed_order"] = order
     return rows
 
+
 def study_scene(scene: Scene, study: SineGordonStudy) -> Scene:
-    """The scene at the study's n and dt, with a ``[rom]`` section: train on [0, T], test to t_end scored after T."""
+    """The scene at the study's n and dt, with a ``[rom]`` section
+    (:func:`femrom.study.extrapolation_config`): train on [0, T], test to t_end scored after T."""
     if study.n is not None:
         scene = with_nodes(scene, study.n)
     dt = scene.time.dt if study.dt is None else study.dt
-    scene = dataclasses.replace(scene, time=dataclasses.replace(scene.time, dt=dt, t_end=study.t_end))
-    T = int(round(study.train_window / dt)) * dt
-    data = Derivatives("finite_differences", study.derivative_order)
-    config = RomConfig(
-        train=(RunSpec("train", t_end=T),), test=(RunSpec("extrapolation", t_end=study.t_end, score_after=T),),
-        learners=(LearnerSpec("galerkin", "galerkin", data), LearnerSpec("lopinf", "lopinf", data),
-                  LearnerSpec("plain_opinf", "opinf", data)),
-        basis=BasisSpec(tuple(study.ranks), method="svd"), extension=1.0,
-        report=ReportSpec(render=False, paraview=False))
-    return dataclasses.replace(scene, rom=config)
+    config = extrapolation_config(dt, study.train_window, study.t_end, study.ranks,
+                                  derivatives=Derivatives("finite_differences", study.derivative_order))
+    return dataclasses.replace(scene.with_time(dt=dt, t_end=study.t_end), rom=config)
 
 
-def fom_energy(system, Q, Vel) -> np.ndarray:
-    """(k,) ndarray ``q'^T M q' / 2 + q^T K q / 2 + U(q)`` of full (n, k) states."""
-    nl = system.nonlinear
-    U = np.sum(nl.weights[:, None] * nl.phi(Q), axis=0)
-    return 0.5 * np.sum(Vel * (system.mass @ Vel) + Q * (system.stiffness @ Q), axis=0) + U
-
-
-def call_seconds(fn, q) -> float:
-    """Seconds per call of ``fn(q)``: the fastest of 5 timed blocks of at least 0.1 s."""
-    def block(n):
-        tic = time.perf_counter()
-        for _ in range(n):
-            fn(q)
-        return time.perf_counter() - tic
-    return repeated_cost(block, 100).seconds
-
-
-def hyper_reduce(state, study: SineGordonStudy) -> dict:
+def hyper_reduce(state, study: SineGordonStudy) -> tuple[list[dict], dict]:
     """Per r: the learned ROM with its potential sampled by ECSW on every ``hyper_stride``-th
-    training state, evaluated and timed like the study's ROMs (timed with the L-OpInf
-    ROMs, interleaved). Returns rows by r with the ROM and the extra metrics."""
+    training state, evaluated like the study's ROMs and timed with the L-OpInf ROMs
+    (interleaved), its reduced force and tangent timed per call against the unsampled ones.
+
+    Returns rows of the study's form (learner ``lopinf_hyper``; with the ECSW fit, the nodes and
+    weights, the call costs) and their evaluations by ``(r, learner, run)``."""
     nl, V, train_run = state.model.system.nonlinear, state.basis, state.runs["train"]
     train_states = state.projections["train"].coordinates
-    out = {}
+    fom_step = max(state.runs.values(), key=lambda run: run.times.size).cost.seconds
+    rows, evaluations, timed = [], {}, {}
     for row in state.rows:
         if row["learner"] != "lopinf":
             continue
@@ -227,89 +194,49 @@ def hyper_reduce(state, study: SineGordonStudy) -> dict:
         rom = SecondOrderROM(learned.operators_.without("projected_force").with_terms(hyper), Vr, product=state.product)
         projected = learned.operators_.term("projected_force")
         q0 = Vr.T @ (state.product @ train_run.q0)
-        out[r] = {"rom": rom, "lopinf": learned, "samples": int(nodes.size), "ecsw_residual": info["residual"],
-                  "ecsw_seconds": info["seconds"], "nodes": nodes, "weights": hyper.weights,
-                  "force_call_seconds": call_seconds(hyper.force, q0),
-                  "tangent_call_seconds": call_seconds(hyper.tangent, q0),
-                  "projected_force_call_seconds": call_seconds(projected.force, q0),
-                  "projected_tangent_call_seconds": call_seconds(projected.tangent, q0),
-                  "evaluations": {name: evaluate(rom, run, state.projections[name], extension=1.0,
-                                                 score_after=spec.score_after)
-                                  for spec in (*state.config.train, *state.config.test)
-                                  for name, run in [(spec.name, state.runs[spec.name])]}}
-    costs = rom_costs({(r, m): h[m] for r, h in out.items() for m in ("rom", "lopinf")},
-                      state.runs["extrapolation"], repeats=state.config.timing.repeats)
-    for r, h in out.items():
-        h["cost"], h["lopinf_cost"] = costs[(r, "rom")], costs[(r, "lopinf")]
-    return out
+        rows.append({"learner": "lopinf_hyper", "r": r, "_rom": rom, "samples": int(nodes.size), "nodes": nodes,
+                     "weights": hyper.weights, "ecsw_residual": info["residual"], "ecsw_seconds": info["seconds"],
+                     **{f"{name}_call_seconds": call_cost(fn, q0).seconds for name, fn in (
+                         ("force", hyper.force), ("tangent", hyper.tangent),
+                         ("projected_force", projected.force), ("projected_tangent", projected.tangent))}})
+        evaluations |= {(r, "lopinf_hyper", name): ev for name, ev in evaluate_runs(rom, state).items()}
+        timed |= {(r, "rom"): rom, (r, "lopinf"): learned}
+    costs = rom_costs(timed, state.runs["extrapolation"], repeats=state.config.timing.repeats)
+    for row in rows:
+        cost, lopinf = costs[(row["r"], "rom")], costs[(row["r"], "lopinf")]
+        row.update(seconds_per_step=cost.seconds, cost=cost.to_dict(), speedup=fom_step / cost.seconds,
+                   lopinf_seconds_per_step=lopinf.seconds, speedup_over_lopinf=lopinf.seconds / cost.seconds)
+    return rows, evaluations
+
+
+#: what a hyper-reduced row adds to the table
+HYPER_COLUMNS = ("ecsw_residual", "ecsw_seconds", "force_call_seconds", "tangent_call_seconds",
+                 "projected_force_call_seconds", "projected_tangent_call_seconds", "lopinf_seconds_per_step",
+                 "speedup_over_lopinf")
 
 
 def case_rows(state, study: SineGordonStudy, out_dir: Path) -> dict:
-    """The case's table: the study's ROMs and the hyper-reduced ones, with the FOM energy of the
-    reconstructed state, the ROM's own energy drift and the costs; and its plots."""
+    """The case's table: the study's ROMs and the hyper-reduced ones (:func:`femrom.study.rom_table`:
+    errors, the FOM energy of the reconstructed state, the ROM's own energy drift, the costs), with
+    the nodes at which each samples the potential; and its plots."""
     system, V, test = state.model.system, state.basis, state.runs["extrapolation"]
-    times, T = test.times, state.config.test[0].score_after
-    E0, window = test.energy[0], scored_columns(test, T)
-    hyper = hyper_reduce(state, study)
-    fom_step = max(state.runs.values(), key=lambda run: run.times.size).cost.seconds
-    rows, curves = [], {}
-    entries = [(row["learner"], row["r"], row, state.evaluations.get((row["r"], row["learner"], "extrapolation")))
-               for row in state.rows]
-    entries += [("lopinf_hyper", r, h, h["evaluations"]["extrapolation"]) for r, h in hyper.items()]
-    for method, r, src, ev in entries:
-        if ev is None:
-            rows.append({"method": method, "r": r, "failed": src.get("failed"), "test_error": float("inf")})
-            continue
-        hyper_row = method == "lopinf_hyper"
-        train_ev = src["evaluations"]["train"] if hyper_row else state.evaluations[(r, method, "train")]
-        cost = src["cost"].seconds if hyper_row else src["seconds_per_step"]
-        solution = ev.solution
-        energy_error = np.abs(fom_energy(system, V[:, :r] @ solution.q, V[:, :r] @ solution.v) - E0) / E0
-        rom_energy = solution.energy
-        row = {"method": method, "r": r, "samples": src.get("samples", system.n_dofs),
-               "train_error": train_ev.field_error, "test_error": ev.field_error,
-               "projection_error": ev.projection_error, "energy_error_max": float(np.max(energy_error)),
-               "energy_error_test_max": float(np.max(energy_error[window])),
-               "rom_energy_drift": float(np.max(np.abs(rom_energy - rom_energy[0])) / abs(rom_energy[0])),
-               "seconds_per_step": cost, "online_seconds": cost * (times.size - 1), "speedup": fom_step / cost}
-        if hyper_row:
-            row.update({k: src[k] for k in ("ecsw_residual", "ecsw_seconds", "force_call_seconds",
-                                            "tangent_call_seconds", "projected_force_call_seconds",
-                                            "projected_tangent_call_seconds")},
-                       lopinf_seconds_per_step=src["lopinf_cost"].seconds,
-                       speedup_over_lopinf=src["lopinf_cost"].seconds / cost)
-        if method != "galerkin":
-            K = (src["rom"] if hyper_row else src["_rom"]).operators_.stiffness
-            row["stiffness_asymmetry"] = float(np.linalg.norm(K - K.T) / np.linalg.norm(K))
-        rows.append(row)
-        if r == study.main_rank:
-            curves[method] = {"energy_error": energy_error, "q": solution.q,
-                              "outputs": np.asarray(system.output_matrix @ (V[:, :r] @ solution.q))}
-    r0 = study.main_rank
-    evaluations = dict(state.evaluations) | {(r, "lopinf_hyper", "extrapolation"): h["evaluations"]["extrapolation"]
-                                             for r, h in hyper.items()}
-    shown = [m for m in NAMES if m in curves]
-    plot_error_history(out_dir / "rom_state_error.png", test, state.projections["extrapolation"], evaluations, r0,
-                       shown, shade=(0.0, T), envelope=250,
-                       title=f"sine-Gordon n = {system.n_dofs}: state error, trained on [0, {T:g}] s")
-    plot_time_series(out_dir / "rom_energy_error.png", times,
-                     {"FOM": np.abs(test.energy - E0) / E0} | {f"{NAMES[m]} (r={r0})": curves[m]["energy_error"]
-                                                               for m in shown},
-                     logy=True, shade=(0.0, T), ylabel="|E - E0| / E0", envelope=250,
-                     title="energy error (FOM energy of the reconstructed state)")
-    plot_time_series(out_dir / "rom_outputs.png", times,
-                     {"FOM": test.outputs[0]} | {NAMES[m]: curves[m]["outputs"][0] for m in ("lopinf", "lopinf_hyper")
-                                                 if m in curves},
-                     shade=(0.0, T), ylabel=f"q at {system.output_names[0]}",
-                     title=f"output {system.output_names[0]} (r={r0})")
-    Q = state.store.read("extrapolation", "q")
-    _plot_profiles(out_dir / "rom_profiles.png", state.model, Q, times, V[:, :r0], curves, NAMES,
+    T, r0 = state.config.test[0].score_after, study.main_rank
+    hyper_rows, hyper_evaluations = hyper_reduce(state, study)
+    sources, evaluations = [*state.rows, *hyper_rows], state.evaluations | hyper_evaluations
+    rows, histories = rom_table(system, V, test, sources, evaluations, train="train", score_after=T)
+    for row, src in zip(rows, sources):
+        if "failed" not in row:
+            row |= {"samples": src.get("samples", system.n_dofs)} | {k: src[k] for k in HYPER_COLUMNS if k in src}
+    plot_histories(out_dir, test, state.projections["extrapolation"], evaluations, rows, histories, r0, NAMES,
+                   title=f"sine-Gordon n = {system.n_dofs}, trained on [0, {T:g}] s", shade=(0.0, T), envelope=250)
+    shown = {m: NAMES[m] for m in ("lopinf", "lopinf_hyper") if (r0, m, test.name) in evaluations}
+    plot_output_history(out_dir / "rom_outputs.png", test, evaluations, r0, shown, shade=(0.0, T),
+                        ylabel=f"q at {system.output_names[0]}", title=f"output {system.output_names[0]} (r={r0})")
+    _plot_profiles(out_dir / "rom_profiles.png", state.model, state.store.read("extrapolation", "q"), test.times,
+                   V[:, :r0], {shown[m]: evaluations[(r0, m, test.name)].solution.q for m in shown},
                    [study.train_window, 0.5 * (study.train_window + study.t_end), study.t_end])
-    plot_accuracy_cost_groups(out_dir / "accuracy_cost_rom.png", [r for r in rows if "failed" not in r],
-                              "online_seconds", "test_error", "r", "method",
-                              title="test-window error vs online time (labels: r)")
-    return {"rows": rows, "fom_energy_drift": float(np.max(np.abs(test.energy - E0)) / E0), "energy0": float(E0),
-            "hyper_nodes": {str(r): {"nodes": h["nodes"], "weights": h["weights"]} for r, h in hyper.items()}}
+    return {"rows": rows, "fom_energy_drift": invariant_drift(test.energy), "energy0": float(test.energy[0]),
+            "hyper_nodes": {str(h["r"]): {"nodes": h["nodes"], "weights": h["weights"]} for h in hyper_rows}}
 
 
 COLUMNS = ["method", "r", "samples", "train_error", "test_error", "projection_error", "energy_error_max",
@@ -326,11 +253,6 @@ def run(out_dir, *, quick: bool = False, paper: bool = False, study: SineGordonS
     def extend(state):
         own = case_rows(state, study, out_dir)
         ladder = fom_ladder(scene, study)
-        plot_accuracy_cost_groups(out_dir / "accuracy_cost_fom.png", ladder, "stepping_seconds", "error",
-                                  "label", "ladder",
-                                  title=f"FOM error at t = {study.train_window:g} s: time steps at n = "
-                                        f"{state.model.system.n_dofs} (vs dt = {study.ladder_fine_dt:g}), meshes vs "
-                                        "the exact breather")
         summary = state.runs["extrapolation"].summary
         metrics = {"case": "sine_gordon", "settings": dataclasses.asdict(study), "dt": scene.time.dt,
                    "boundary_conditions": "q = 0 at both ends (the breather decays as exp(-0.6 |x - 20|))",
@@ -338,27 +260,27 @@ def run(out_dir, *, quick: bool = False, paper: bool = False, study: SineGordonS
                            "energy_drift": own["fom_energy_drift"], "energy0": own["energy0"]},
                    "rows": own["rows"], "fom_ladder": ladder, "hyper_nodes": own["hyper_nodes"]}
         sections = [
-            "## The case's table\n\nErrors in the mass norm over the test window; energy error = FOM energy of the "
-            "reconstructed ROM state against E(0), maximum over [0, t_end]; speedup = FOM step over ROM step (each "
-            "the fastest of timed blocks); samples = nodes at which the nonlinear potential is evaluated.\n\n"
-            + accuracy_cost_table(own["rows"], COLUMNS),
-            f"## FOM accuracy against cost (relative error at t = {study.train_window:g} s)\n\n"
-            + accuracy_cost_table(ladder, ["ladder", "n", "dt", "steps", "error", "reference", "stepping_seconds",
-                                           "seconds_per_step", "observed_order"])
-            + "\n\nNewmark average acceleration and P1 with a lumped mass (symmetric finite differences) are "
-              "both second order."]
+            table_section("The case's table", own["rows"], COLUMNS, text=(
+                "Errors in the mass norm over the test window; energy error = FOM energy of the reconstructed ROM "
+                "state against E(0), maximum over [0, t_end]; speedup = FOM step over ROM step (each the fastest "
+                "of timed blocks); samples = nodes at which the nonlinear potential is evaluated.")),
+            ladder_section(out_dir / "accuracy_cost_fom.png", ladder, "stepping_seconds", "error", "label",
+                           group="ladder", heading=f"FOM accuracy against cost (relative error at t = "
+                           f"{study.train_window:g} s; time steps at n = {state.model.system.n_dofs} against dt = "
+                           f"{study.ladder_fine_dt:g}, meshes against the exact breather)",
+                           columns=["ladder", "n", "dt", "steps", "error", "reference", "stepping_seconds",
+                                    "seconds_per_step", "observed_order"],
+                           note="Newmark average acceleration and P1 with a lumped mass (symmetric finite "
+                                "differences) are both second order.")]
         return metrics, sections
 
     return run_study(scene, out_dir, extend=extend, progress=None)
 
 
-def _plot_profiles(path, model, Q, times, V, curves, names, at):
-    """q(x) of the FOM and the ROMs at a few times (the seed's extrapolation figure)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+def _plot_profiles(path, model, Q, times, V, curves: dict, at):
+    """q(x) of the FOM (``Q``, (n, k)) and of the ROMs (``curves``: legend name -> (r, k)
+    coordinates in ``V``) at a few times ``at`` (the seed's extrapolation figure)."""
+    plt = pyplot()
     x = _node_positions(model)
     order = np.argsort(x)
     x = x[order]
@@ -366,17 +288,14 @@ def _plot_profiles(path, model, Q, times, V, curves, names, at):
     for ax, t in zip(np.atleast_1d(axes), at):
         k = int(np.argmin(np.abs(times - t)))
         ax.plot(x, Q[order, k], "k-", lw=2.0, label="FOM")
-        for m, style in (("lopinf", "--"), ("lopinf_hyper", ":")):
-            if m in curves:
-                ax.plot(x, (V @ curves[m]["q"][:, k])[order], style, lw=1.3, label=names[m])
+        for (name, q), style in zip(curves.items(), ("--", ":")):
+            ax.plot(x, (V @ q[:, k])[order], style, lw=1.3, label=name)
         ax.set_title(f"t = {times[k]:g} s")
         ax.set_xlabel("x")
         ax.grid(alpha=0.3)
     np.atleast_1d(axes)[0].set_ylabel("q")
     np.atleast_1d(axes)[0].legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
+    save_figure(fig, path, dpi=100)
 
 
 def _node_positions(model) -> np.ndarray:

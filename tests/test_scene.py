@@ -132,3 +132,17 @@ def test_full_scene_assembles_every_listed_effect():
     # the initial condition 1e-3 x^2 is interpolated in value and slope; the tip probe reads it
     assert float(s.outputs(model.initial_displacement)[0]) == pytest.approx(1e-3)
     assert np.all(s.full_field(model.initial_displacement)[:2] == 0)  # clamped dofs stay zero
+
+
+def test_scene_edits_return_new_scenes_that_build_what_they_say():
+    scene = Scene.from_dict(BEAM)
+    finer = scene.with_geometry(mesh_size=0.05).with_time(dt=5e-4, t_end=0.02)
+    # the edit is a new scene; the original and the untouched entries stay as they were
+    assert dict(scene.structure.parameters)["mesh_size"] == 0.1 and scene.time.dt == 1e-3
+    assert dict(finer.structure.parameters) == {"length": 1.0, "mesh_size": 0.05}
+    assert (finer.time.dt, finer.time.t_end, finer.time.integrator) == (5e-4, 0.02, scene.time.integrator)
+    # the geometry parameter reaches the mesh: 10 -> 20 Hermite elements, clamped at one end,
+    # 2 dofs per node: 2 * 10 and 2 * 20 free dofs
+    assert (build(scene).system.n_dofs, build(finer).system.n_dofs) == (20, 40)
+    with pytest.raises(TypeError):
+        scene.with_time(timestep=1e-3)     # not a [time] entry

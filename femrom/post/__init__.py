@@ -18,9 +18,10 @@ from femrom.post._report import (
     plot_time_series,
     pyplot,
     save_figure,
+    table_section,
     write_metrics,
 )
 
 __all__ = ["accuracy_cost_table", "jsonable", "machine_description", "mesh_arrays", "plot_accuracy_cost",
            "plot_accuracy_cost_groups", "plot_response", "plot_time_series", "pyplot", "render_available",
-           "render_grid", "save_figure", "vertex_displacements", "write_metrics", "write_vtu_series"]
+           "render_grid", "save_figure", "table_section", "vertex_displacements", "write_metrics", "write_vtu_series"]

@@ -188,3 +188,10 @@ def plot_accuracy_cost_groups(path, rows: list[dict], cost: str, error: str, lab
     if title:
         ax.set_title(title, fontsize=10)
     return save_figure(fig, path, dpi=100)
+
+
+def table_section(heading: str, rows: list[dict], columns: list[str], *, text: str = "", note: str = "") -> str:
+    """A report section in markdown: ``## heading``, an optional paragraph ``text``, the table of
+    ``rows`` in ``columns`` (:func:`accuracy_cost_table`), an optional closing ``note``."""
+    parts = [f"## {heading}", text, accuracy_cost_table(rows, columns), note]
+    return "\n\n".join(part for part in parts if part)

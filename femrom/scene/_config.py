@@ -386,6 +386,16 @@ class Scene:
         """The scene with a sweep point's ``(path, value)`` pairs set (:class:`SweepConfig`)."""
         return with_parameters(self, values)
 
+    def with_time(self, **changes) -> "Scene":
+        """The scene with ``[time]`` entries replaced, e.g. ``scene.with_time(dt=1e-4, t_end=0.5)``."""
+        return replace(self, time=replace(self.time, **changes))
+
+    def with_geometry(self, **parameters) -> "Scene":
+        """The scene with geometry parameters set (``[structure] parameters``, e.g. ``mesh_size=0.05``),
+        the others kept; what a mesh ladder needs."""
+        merged = dict(self.structure.parameters) | parameters
+        return replace(self, structure=replace(self.structure, parameters=tuple(sorted(merged.items()))))
+
     def effect(self, name: str) -> EffectConfig | None:
         return next((e for e in self.effects if e.name == name), None)
 

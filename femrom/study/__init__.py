@@ -6,6 +6,8 @@ What the case scripts share, for any scene (``femrom run scene.toml`` with a
 - runs: :func:`run_fom` (one model, any input signals, fields streamed to a
   store, each step timed without the consumers), :class:`FOMRun`,
   :func:`solver_factory` (one factorisation for all runs of one ``dt``);
+- a study of extrapolation in time (train on a release's first window, predict far beyond it):
+  :func:`extrapolation_config` (its learners :data:`LEARNERS`, named :data:`LEARNER_NAMES`);
 - the study's steps: :func:`fom_runs`, :func:`pod_basis`, :func:`reduce_runs`,
   :func:`training_data`, :func:`fit_rom`, :func:`evaluate`, :func:`rom_costs`,
   :func:`study_rows`;
@@ -16,12 +18,21 @@ What the case scripts share, for any scene (``femrom run scene.toml`` with a
   :func:`run_canonical`, :func:`canonical_rows` (cotangent lift, H-OpInf, Galerkin and the
   unstructured baselines of :class:`CanonicalSpec`, training and extrapolation windows,
   invariant drifts, costs by timed blocks), :func:`canonical_time_step_ladder`,
-  :func:`invariant_drift`, :func:`state_error`, :func:`mass_generator`, :func:`plot_invariant_drifts`;
+  :func:`state_error`, :func:`mass_generator`, :func:`plot_invariant_drifts`;
 - metrics: :func:`relative_error`, :func:`mass_norm`, :class:`Projection` / :func:`project_run`
   (exact field errors at every r from one pass), :func:`energy_ratio`;
+- over time on one run: :func:`state_energy` and :func:`reconstructed_energy_error` (the FOM
+  energy of a ROM's reconstructed state), :func:`rom_table` (errors, energy errors and costs
+  per learner and r), :func:`invariant_drift`, :func:`plot_energy_error_history`,
+  :func:`plot_output_history`, :func:`plot_histories` (the pictures of a table),
+  :func:`evaluate_runs` (a case's own ROM on every run, as the study's);
 - costs: :class:`Cost` (the fastest of several timed blocks, and their quartiles),
-  :func:`blocked_cost`, :func:`repeated_costs` (interleaved);
-- the FOM's accuracy against its cost: :func:`time_step_ladder`, :func:`frequency_ladder`;
+  :func:`blocked_cost`, :func:`repeated_costs` (interleaved), :func:`call_cost` (of a function);
+- the scene's own run: :func:`scene_run` (:class:`SceneRun`: response plot, energy drift,
+  report section);
+- the FOM's accuracy against its cost: :func:`time_step_ladder`, :func:`frequency_ladder`,
+  :func:`natural_frequencies`, :func:`final_state`, :func:`observed_order`, :func:`ladder_section`
+  (a ladder's plot and report section);
 - sweeps: :func:`run_sweep` (a scene's ``[sweep]`` as Dask tasks, one store file
   per run, merged into one store; a killed worker's run reruns elsewhere);
 - figures and report: :func:`plot_outputs`, :func:`plot_errors`, :func:`plot_error_history`,
@@ -32,27 +43,44 @@ What the case scripts share, for any scene (``femrom run scene.toml`` with a
 from femrom.study._figures import (
     plot_accuracy_cost,
     plot_energy,
-    plot_invariant_drifts,
     plot_error_history,
     plot_errors,
+    plot_invariant_drifts,
     plot_outputs,
     render_fields,
 )
+from femrom.study._extrapolation import LEARNER_NAMES, LEARNERS, extrapolation_config
 from femrom.study._hamiltonian import (
     CanonicalRun,
     CanonicalSpec,
     canonical_rows,
     canonical_time_step_ladder,
-    invariant_drift,
     linear_operator,
     mass_generator,
     run_canonical,
     state_error,
 )
-from femrom.study._ladders import frequency_ladder, natural_frequencies, time_step_ladder
-from femrom.study._metrics import Projection, energy_ratio, mass_norm, project_run, relative_error
+from femrom.study._histories import (
+    evaluate_runs,
+    plot_energy_error_history,
+    plot_histories,
+    plot_output_history,
+    reconstructed_energy_error,
+    rom_table,
+    state_energy,
+)
+from femrom.study._ladders import (
+    final_state,
+    frequency_ladder,
+    ladder_section,
+    natural_frequencies,
+    observed_order,
+    time_step_ladder,
+)
+from femrom.study._metrics import Projection, energy_ratio, invariant_drift, mass_norm, project_run, relative_error
 from femrom.study._pipeline import ROW_COLUMNS, StudyState, peak_rss_gb, public_rows, run_study, write_report
 from femrom.study._runs import FOMRun, run_fom, solver_factory
+from femrom.study._scene_run import SceneRun, scene_run
 from femrom.study._study import (
     Evaluation,
     check_rom_config,
@@ -73,17 +101,21 @@ from femrom.study._study import (
 )
 from femrom.study._canonical import SceneHamiltonianROM, check_canonical_learners, fit_canonical_rom
 from femrom.study._sweep import SweepRun, run_sweep, run_sweep_point, sweep_runs
-from femrom.study._timing import Cost, blocked_cost, repeated_cost, repeated_costs
+from femrom.study._timing import Cost, blocked_cost, call_cost, repeated_cost, repeated_costs
 
 __all__ = [
-    "CanonicalRun", "CanonicalSpec", "canonical_rows", "canonical_time_step_ladder", "invariant_drift",
-    "linear_operator", "mass_generator", "plot_invariant_drifts", "run_canonical", "state_error",
-    "ROW_COLUMNS", "Cost", "Evaluation", "FOMRun", "Projection", "SceneHamiltonianROM", "StudyState", "SweepRun",
-    "blocked_cost", "check_canonical_learners", "check_rom_config", "energy_ratio", "evaluate", "fit_canonical_rom", "fit_rom", "fom_runs", "frequency_ladder", "mass_norm",
-    "natural_frequencies", "operator_checks", "peak_rss_gb", "plot_accuracy_cost", "plot_energy",
-    "plot_error_history", "plot_errors", "plot_outputs", "pod_basis", "product_matrix", "project_run",
-    "projected_forces", "public_rows", "reduce_runs", "relative_error", "render_fields", "repeated_cost",
-    "repeated_costs", "rom_cost", "rom_costs", "run_fom", "run_study", "run_sweep", "run_sweep_point",
-    "scored_columns", "solver_factory", "study_learners", "study_rows", "sweep_runs", "time_step_ladder",
-    "training_data", "write_report",
+    "CanonicalRun", "CanonicalSpec", "Cost", "Evaluation", "FOMRun", "LEARNERS", "LEARNER_NAMES",
+    "Projection", "ROW_COLUMNS", "SceneHamiltonianROM", "SceneRun", "StudyState", "SweepRun", "blocked_cost",
+    "call_cost", "canonical_rows", "canonical_time_step_ladder", "check_canonical_learners",
+    "check_rom_config", "energy_ratio", "evaluate", "evaluate_runs", "extrapolation_config",
+    "final_state", "fit_canonical_rom", "fit_rom", "fom_runs", "frequency_ladder", "invariant_drift",
+    "ladder_section", "linear_operator", "mass_generator", "mass_norm", "natural_frequencies",
+    "observed_order", "operator_checks", "peak_rss_gb", "plot_accuracy_cost", "plot_energy",
+    "plot_energy_error_history", "plot_error_history", "plot_errors", "plot_histories",
+    "plot_invariant_drifts", "plot_output_history", "plot_outputs", "pod_basis", "product_matrix",
+    "project_run", "projected_forces", "public_rows", "reconstructed_energy_error", "reduce_runs",
+    "relative_error", "render_fields", "repeated_cost", "repeated_costs", "rom_cost", "rom_costs",
+    "rom_table", "run_canonical", "run_fom", "run_study", "run_sweep", "run_sweep_point", "scene_run",
+    "scored_columns", "solver_factory", "state_energy", "state_error", "study_learners", "study_rows",
+    "sweep_runs", "time_step_ladder", "training_data", "write_report",
 ]

@@ -32,6 +32,7 @@ from femrom.basis import CotangentLiftPSD
 from femrom.inference import CanonicalOpInf, HamiltonianOpInf, reduce_canonical_snapshots
 from femrom.integrators import integrate_canonical
 from femrom.rom import FirstOrderROM, HamiltonianROM
+from femrom.study._metrics import invariant_drift
 from femrom.study._timing import Cost, repeated_cost, repeated_costs
 
 #: The models a :class:`CanonicalSpec` can name.
@@ -95,12 +96,6 @@ def run_canonical(system, q0, p0, dt: float, n_steps: int, *, scheme: str = "mid
     cost = repeated_cost(_canonical_block(system, q0, p0, dt, scheme), min(n_steps, 1000), repeats=repeats,
                          min_block_seconds=min_block_seconds)
     return CanonicalRun(dt * np.arange(n_steps + 1), tr.q, tr.p, tr.hamiltonian, tr.iterations, tr.seconds, cost)
-
-
-def invariant_drift(values, window: slice = slice(None)) -> float:
-    """``max |I(t) - I(0)| / |I(0)|`` over ``window`` (``I(0)``: the first value of the whole record)."""
-    values = np.asarray(values)
-    return float(np.max(np.abs(values[window] - values[0])) / abs(values[0]))
 
 
 def state_error(Q, P, Qr, Pr, window: slice = slice(None)) -> float:

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
 import time
 
 import numpy as np
@@ -71,7 +70,7 @@ def time_step_ladder(model, reference: FOMRun | None = None, factors=(10, 5, 2),
         rows.append(_row(reference, 0.0))
     fitted = [r for r in rows if r["output_error"] > 0]
     if len(fitted) >= 2:
-        order = float(np.polyfit(np.log([r["dt"] for r in fitted]), np.log([r["output_error"] for r in fitted]), 1)[0])
+        order = observed_order([r["dt"] for r in fitted], [r["output_error"] for r in fitted])
         for r in rows:
             r["observed_order"] = order
     return rows
@@ -102,10 +101,8 @@ def frequency_ladder(scene, values, *, parameter: str = "mesh_size", count: int 
 
     rows = []
     for value in values:
-        params = dict(scene.structure.parameters) | {parameter: float(value)}
-        structure = dataclasses.replace(scene.structure, parameters=tuple(sorted(params.items())))
         tic = time.perf_counter()
-        model = build(dataclasses.replace(scene, structure=structure))
+        model = build(scene.with_geometry(**{parameter: float(value)}))
         omega = natural_frequencies(model.system, count)
         rows.append({parameter: float(value), "dofs": model.system.n_dofs, "omega": omega, "f1_hz": float(omega[0] / (2 * np.pi)),
                      "seconds": time.perf_counter() - tic})
@@ -113,3 +110,50 @@ def frequency_ladder(scene, values, *, parameter: str = "mesh_size", count: int 
     for row in rows:
         row["frequency_error"] = float(np.max(np.abs(row["omega"] / reference - 1)))
     return rows
+
+
+def observed_order(steps, errors) -> float:
+    """The slope of ``log error`` against ``log step`` (least squares): the order ``p`` of
+    ``error ~ C step^p`` along a ladder (a mesh ladder in node counts gives ``-p``)."""
+    return float(np.polyfit(np.log(np.asarray(steps, dtype=float)), np.log(np.asarray(errors, dtype=float)), 1)[0])
+
+
+def final_state(model, dt: float, t_end: float) -> tuple[np.ndarray, dict]:
+    """The model's displacement at ``t_end``, released from its initial state and stepped at ``dt``
+    with the scene's scheme (only the last state kept), and the run's cost.
+
+    Returns
+    -------
+    q : (n,) ndarray
+        ``q(t_end)``.
+    row : dict
+        ``n`` (dofs), ``dt``, ``steps``, ``stepping_seconds``, ``seconds_per_step``.
+
+    Raises ``ValueError`` if ``dt`` does not divide ``t_end`` (the state would be at another time).
+    """
+    from femrom.integrators import Trajectory, simulate
+
+    steps = int(round(t_end / dt))
+    if abs(steps * dt - t_end) > 1e-9 * t_end:
+        raise ValueError(f"time step {dt:g} does not divide the window {t_end:g}")
+    last = Trajectory(every=steps, fields=("q",))
+    summary = simulate(model, dt=dt, t_end=steps * dt, consumers=[last], progress=False).summary
+    return last.q[:, -1], {"n": model.system.n_dofs, "dt": dt, "steps": steps,
+                           "stepping_seconds": summary["stepping_seconds"],
+                           "seconds_per_step": summary["stepping_seconds"] / steps}
+
+
+def ladder_section(path, rows: list[dict], cost: str, error: str, label: str, *, heading: str, columns: list[str],
+                   group: str | None = None, note: str = "") -> str:
+    """Plot a ladder's ``error`` against ``cost`` (log-log, points annotated with ``label``; one
+    line per value of ``group`` if given; titled ``heading``) into ``path``, and return its report
+    section: ``heading``, the table of ``columns``, the observed order when the rows carry one
+    (``observed_order``), ``note``."""
+    from femrom.post import plot_accuracy_cost, plot_accuracy_cost_groups, table_section
+
+    if group is None:
+        plot_accuracy_cost(path, rows, cost, error, label, title=heading)
+    else:
+        plot_accuracy_cost_groups(path, rows, cost, error, label, group, title=heading)
+    order = f"Observed order {rows[0]['observed_order']:.2f}." if "observed_order" in rows[0] else ""
+    return table_section(heading, rows, columns, note=" ".join(part for part in (order, note) if part))

@@ -15,6 +15,15 @@ def relative_error(reference: np.ndarray, approximation: np.ndarray) -> float:
     return float(np.linalg.norm(approximation - reference) / np.linalg.norm(reference))
 
 
+def invariant_drift(values, window: slice = slice(None)) -> float:
+    """``max |I(t) - I(0)| / |I(0)|`` over ``window`` of a (k,) history (``I(0)``: its first value;
+    ``inf`` once a value in the window is not finite: a model that blew up)."""
+    values = np.asarray(values, dtype=float)
+    with np.errstate(over="ignore", invalid="ignore"):
+        change = np.abs(values[window] - values[0]) / abs(values[0])
+    return float(np.max(change)) if np.all(np.isfinite(change)) else float("inf")
+
+
 def mass_norm(M, X) -> float:
     """Frobenius norm of ``X`` (n, k) in the product ``M``: ``sqrt(trace(X^T M X))``."""
     return float(np.sqrt(max(np.sum(X * (M @ X)), 0.0)))

@@ -121,3 +121,18 @@ def repeated_costs(blocks: dict, n_steps: int, *, repeats: int = 5, slices: int 
 def repeated_cost(block, n_steps: int, **options) -> Cost:
     """:func:`repeated_costs` of one ``block(n) -> seconds``."""
     return repeated_costs({0: block}, n_steps, **options)[0]
+
+
+def call_cost(fn, *args, repeats: int = 5, min_block_seconds: float = 0.1) -> Cost:
+    """Seconds per call of ``fn(*args)`` (e.g. a reduced force at one state): :func:`repeated_cost`
+    of blocks of consecutive calls, each block at least ``min_block_seconds`` long (sized from a
+    first block of 100 calls), the fastest of ``repeats`` blocks the cost."""
+    import time
+
+    def block(n: int) -> float:
+        tic = time.perf_counter()
+        for _ in range(n):
+            fn(*args)
+        return time.perf_counter() - tic
+
+    return repeated_cost(block, 100, repeats=repeats, min_block_seconds=min_block_seconds)
