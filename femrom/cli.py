@@ -7,6 +7,8 @@
     femrom info my_scene.toml         build the scene and print its sizes and effects
     femrom sweep my_scene.toml -o out/ [--scheduler tcp://host:port] [--workers 2]
                                       the scene's [sweep] runs as Dask tasks, into out/sweep.h5
+    femrom ingest series.pvd -o store.h5 [--inputs u.csv] [--density RHO] [--output NAME:X,Y,Z:C]
+                                      another solver's displacement series into a snapshot store
 """
 
 from __future__ import annotations
@@ -119,6 +121,41 @@ def _sweep(args) -> int:
     return 0
 
 
+def _probe(text: str) -> tuple[str, tuple[float, float, float], str]:
+    """``NAME:X,Y,Z:COMPONENT`` of ``--output``."""
+    try:
+        name, point, component = text.split(":")
+        x, y, z = (float(v) for v in point.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--output {text!r}: expected NAME:X,Y,Z:COMPONENT, e.g. tip:0.1,0,0.2:z") \
+            from None
+    return name, (x, y, z), component
+
+
+def _ingest(args) -> int:
+    """``femrom ingest SERIES -o STORE``: another solver's displacement series into a snapshot store."""
+    from femrom.snapshots import IngestError, SnapshotStoreError, ingest, ingested_model, read_series
+
+    say = (lambda message: print(f"femrom: {message}", file=sys.stderr))
+    fixed = None if args.fixed == "none" else ("auto" if args.fixed == "auto" else args.fixed.split(","))
+    out = args.out or args.series.with_suffix(".h5")
+    try:
+        series = read_series(args.series, field=args.field, mesh=args.mesh)
+        model = ingested_model(series, density=args.density, lumped=args.lumped, fixed=fixed, inputs=args.inputs,
+                               outputs=args.output, length_scale=args.length_scale, progress=say)
+        ingest(series, model, out, every=args.every, overwrite=args.overwrite, length_scale=args.length_scale,
+               progress=say)
+    except (IngestError, SnapshotStoreError, FileNotFoundError) as exc:
+        print(f"femrom: {exc}", file=sys.stderr)
+        return 2
+    s = model.system
+    steps = series.times[::args.every]
+    print(f"{args.series}: {steps.size} snapshots of {s.n_dofs} free dofs ({model.fixed.size} fixed, "
+          f"{model.detail['fixed']}), t in [{steps[0]:g}, {steps[-1]:g}], {s.n_inputs} input(s), "
+          f"{s.n_outputs} output(s); store {out}")
+    return 0
+
+
 def _study_line(metrics: dict) -> str:
     """One line of a study's result: the first learned model's error at the largest r."""
     r = max(metrics["ranks"])
@@ -144,6 +181,22 @@ def main(argv: list[str] | None = None) -> int:
     sweep.add_argument("--scheduler", help="address of a running Dask scheduler (default: a LocalCluster)")
     sweep.add_argument("--workers", type=int, default=2, help="LocalCluster worker processes (default 2)")
     sweep.add_argument("--keep-parts", action="store_true", help="keep the per-run store files")
+    ing = sub.add_parser("ingest", help="stream another solver's displacement series into a snapshot store")
+    ing.add_argument("series", type=Path, help=".pvd (+ .vtu), .xdmf, or an .h5/.npz array (K, n_points, 3)")
+    ing.add_argument("-o", "--out", type=Path, help="the store (default: the series' name with .h5)")
+    ing.add_argument("--mesh", type=Path, help="the mesh file of an array series (any format meshio reads)")
+    ing.add_argument("--field", help="point-data name of the displacements (default: the only vector field)")
+    ing.add_argument("--density", type=float, default=1.0, help="for the mass matrix (default 1)")
+    ing.add_argument("--lumped", action="store_true", help="lumped (diagonal) mass instead of consistent")
+    ing.add_argument("--fixed", default="auto",
+                     help="Dirichlet dofs: auto (zero throughout), none, or boundary names NAME[,NAME]")
+    ing.add_argument("--inputs", type=Path, help="input table: CSV with a 't' column, or .npz with t, u")
+    ing.add_argument("--output", action="append", type=_probe, default=[],
+                     help="a displacement probe NAME:X,Y,Z:COMPONENT (repeatable)")
+    ing.add_argument("--every", type=int, default=1, help="keep every k-th step of the series")
+    ing.add_argument("--length-scale", type=float, default=1.0,
+                     help="multiplies the displacements (1e-3: a series in mm on a mesh in m)")
+    ing.add_argument("--overwrite", action="store_true", help="replace an existing store")
 
     if argv[:1] == ["run"]:
         args, rest = parser.parse_known_args(argv)
@@ -164,6 +217,8 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     if args.command == "sweep":
         return _sweep(args)
+    if args.command == "ingest":
+        return _ingest(args)
     # run
     if args.target is None or args.target in ("-h", "--help"):
         print("usage: femrom run CASE [case options] | femrom run SCENE.toml [-o OUT]")

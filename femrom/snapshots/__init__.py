@@ -10,6 +10,11 @@
   checkpoint, in HDF5's SWMR mode so a killed run leaves a readable file.
 - :func:`resume` -- continue a stopped run from its last committed chunk,
   bit-identically.
+- :func:`read_series`, :func:`ingested_model`, :func:`ingest` -- another solver's
+  displacement series (``.pvd`` + ``.vtu``, XDMF, an HDF5/``.npz`` array with its
+  mesh) streamed into a store, with femrom's own model of the data (P1 on the
+  series' mesh, a mass matrix, Dirichlet dofs detected or named, tabulated inputs,
+  probes); one :class:`IngestError` line naming the file and step for a bad series.
 - :func:`read_rows` -- committed rows of one dataset by path, for readers
   elsewhere (Dask workers) that a store planned with
   :meth:`~SnapshotStore.column_blocks`.
@@ -29,12 +34,25 @@ a declared length beyond the data, a read past it) is a one-line
 """
 
 from femrom.snapshots._errors import SnapshotStoreError
+from femrom.snapshots._ingest import (
+    SERIES_READERS,
+    DisplacementSeries,
+    IngestedModel,
+    IngestError,
+    TabulatedInputs,
+    ingest,
+    ingested_model,
+    read_input_table,
+    read_series,
+)
 from femrom.snapshots._format import DEFAULT_UNITS, FORMAT_NAME, FORMAT_VERSION
 from femrom.snapshots._resume import model_solver, resume
 from femrom.snapshots._store import SnapshotStore, read_rows
 from femrom.snapshots._writer import SnapshotWriter, default_chunk_steps
 
 __all__ = [
+    "SERIES_READERS", "DisplacementSeries", "IngestError", "IngestedModel", "TabulatedInputs", "ingest",
+    "ingested_model", "read_input_table", "read_series",
     "DEFAULT_UNITS",
     "FORMAT_NAME",
     "FORMAT_VERSION",
