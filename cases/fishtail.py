@@ -41,7 +41,8 @@ from femrom.post import accuracy_cost_table, plot_accuracy_cost
 from femrom.scene import BasisSpec, Derivatives, InputConfig, LearnerSpec, ReportSpec, RomConfig, RunSpec, \
     Scene, Signal, build
 from femrom.solvers import make_solver
-from femrom.study import ROW_COLUMNS, pod_basis, public_rows, reduce_runs, run_study, study_rows
+from femrom.study import ROW_COLUMNS, pod_basis, public_rows, reduce_runs, run_study, study_rows, subsampled_rows, \
+    subsampled_section
 
 SCENE = Path(__file__).with_suffix(".toml")
 
@@ -205,7 +206,9 @@ def run(out_dir, *, quick: bool = False, level: str = "small", train: str = "sig
                    "mesh_size": dict(scene.structure.parameters)["mesh_size"],
                    "roms_reverse": reverse_study(state, [x for x in ("galerkin", "lopinf", "opinf")
                                                          if x in learners]) if reverse else []}
-        sections = []
+        state.progress("learning from snapshots every k-th step")
+        metrics["subsampled"] = subsampled_rows(state, (1, 2, 5, 10))
+        sections = [subsampled_section(metrics["subsampled"], train, state.config.test[0].name)]
         if metrics["roms_reverse"]:
             sections.append(f"## The reverse: trained on the {state.config.test[0].name} input, tested on the "
                             f"{train} input\n\n" + accuracy_cost_table(metrics["roms_reverse"], ROW_COLUMNS))

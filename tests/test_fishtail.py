@@ -329,6 +329,21 @@ def test_main_job_runs_the_small_fishtail_end_to_end(main_job):
     assert 1.8 < metrics["time_step_ladder"][0]["observed_order"] < 2.2
 
 
+def test_main_job_learns_from_displacements_alone_every_kth_step(main_job):
+    """The report's every-k-th-step rows (femrom.study.subsampled_rows). Measured at r = 12: every
+    step, displacements alone 9.7e-5 (the projection floor 9.0e-5), stored q', q'' 7.0e-4, 4th-order
+    differences 1.06e-2; at k = 2, 4.0e-2 for all three (Galerkin too: the ROM's step h = 2 dt limits)."""
+    _, _, metrics = main_job
+    rows = {(x["every"], x["derivatives"]): x for x in metrics["subsampled"]}
+    assert {k for k, _ in rows} == {1, 2, 5, 10}
+    one = {source: rows[1, source]["test_field_error"] for source in ("integrator", "stored", "fd4")}
+    # the issue's bar: within 2x of the stored-derivative model (measured 7x better); above the floor
+    assert one["integrator"] < 2 * one["stored"] and one["integrator"] < one["fd4"] / 10
+    assert one["integrator"] >= rows[1, "integrator"]["test_projection_error"]
+    for k in (2, 5, 10):      # at equal k the displacements alone are never worse than the stored data (+5 %)
+        assert rows[k, "integrator"]["test_field_error"] < 1.05 * rows[k, "stored"]["test_field_error"], k
+
+
 def test_main_job_lopinf_predicts_the_unseen_step_and_stays_stable(main_job):
     """The seed's claim on femrom's own fishtail: trained on the sigmoid, L-OpInf predicts
     the step. Measured (2026-11-23): output error 2.7e-3, 1.5e-3, 1.4e-3, 5.3e-4 at r = 4, 6,

@@ -125,6 +125,26 @@ def test_learning_from_the_foreign_displacements_predicts_its_unseen_trajectory(
     assert errors["integrator"][0] < 1e-3 and errors["integrator"][1] < 1e-3
     assert errors["integrator"][0] < errors["fd4"][0] / 3
 
+    # back out: the prediction on the series' mesh with its error field, the outputs as CSV
+    from femrom.post import export_prediction
+
+    rom = SecondOrderROM(basis=basis, product=M, learner=LagrangianOpInf(["damping"])).fit(raw.integrator_consistent())
+    prediction = rom.predict(np.zeros(M.shape[0]), tt, inputs=Ut)
+    written = export_prediction(folder / "prediction.pvd", ingested.space, ingested.system.condensation, tt, basis,
+                                prediction.q, reference=lambda k: Qt[:, k], outputs=prediction.outputs,
+                                output_names=ingested.system.output_names, every=10)
+    assert written["written_times"] == 31
+    back = read_series(written["pvd"], field="displacement")
+    k, t, U = list(back.steps())[7]
+    assert t == pytest.approx(tt[70], rel=1e-8)
+    expected = ingested.free_values(U)          # the written field, read back into femrom's free dofs
+    np.testing.assert_allclose(expected, basis @ prediction.q[:, 70], rtol=1e-12, atol=1e-18)
+    error = ingested.free_values(read_series(written["pvd"], field="error").steps().__iter__().__next__()[2])
+    np.testing.assert_allclose(error, basis @ prediction.q[:, 0] - Qt[:, 0], atol=1e-18)
+    t_csv, y_csv, names = read_input_table(written["csv"])
+    assert names == ("end_z",)
+    np.testing.assert_allclose(y_csv, prediction.outputs, rtol=1e-12)
+
 
 # -- a bad series is one line naming the file and step ----------------------------------------
 def _copy_pvd(folder: Path, target: Path, edit=None):

@@ -33,6 +33,9 @@ What the case scripts share, for any scene (``femrom run scene.toml`` with a
 - the FOM's accuracy against its cost: :func:`time_step_ladder`, :func:`frequency_ladder`,
   :func:`natural_frequencies`, :func:`final_state`, :func:`observed_order`, :func:`ladder_section`
   (a ladder's plot and report section);
+- snapshots every k-th step (what another solver's output gives): :func:`subsampled_rows`
+  (one learner from the displacements alone, from stored derivatives and from differences,
+  read from the study's store every k-th column: :func:`every_kth`), :func:`subsampled_section`;
 - sweeps: :func:`run_sweep` (a scene's ``[sweep]`` as Dask tasks, one store file
   per run, merged into one store; a killed worker's run reruns elsewhere);
 - figures and report: :func:`plot_outputs`, :func:`plot_errors`, :func:`plot_error_history`,
@@ -100,6 +103,7 @@ from femrom.study._study import (
     training_data,
 )
 from femrom.study._canonical import SceneHamiltonianROM, check_canonical_learners, fit_canonical_rom
+from femrom.study._subsampled import every_kth, subsampled_rows, subsampled_section
 from femrom.study._sweep import SweepRun, run_sweep, run_sweep_point, sweep_runs
 from femrom.study._timing import Cost, blocked_cost, call_cost, repeated_cost, repeated_costs
 
@@ -116,6 +120,6 @@ __all__ = [
     "project_run", "projected_forces", "public_rows", "reconstructed_energy_error", "reduce_runs",
     "relative_error", "render_fields", "repeated_cost", "repeated_costs", "rom_cost", "rom_costs",
     "rom_table", "run_canonical", "run_fom", "run_study", "run_sweep", "run_sweep_point", "scene_run",
-    "scored_columns", "solver_factory", "state_energy", "state_error", "study_learners", "study_rows",
+    "scored_columns", "solver_factory", "state_energy", "every_kth", "subsampled_rows", "subsampled_section", "state_error", "study_learners", "study_rows",
     "sweep_runs", "time_step_ladder", "training_data", "write_report",
 ]

@@ -1,0 +1,122 @@
+r"""Learning from snapshots saved every k-th step: what another solver's output every k steps gives.
+
+:func:`subsampled_rows` takes a finished study (its store, runs, basis and product,
+a :class:`~femrom.study.StudyState`) and, for each k, keeps every k-th column of the
+training run (the store is read block by block, nothing re-run), fits one learner
+at one r from
+
+- the displacements alone, by the integrator-consistent differences at the snapshot
+  spacing ``h = k dt`` (:meth:`~femrom.inference.SecondOrderData.integrator_consistent`),
+- the stored Newmark ``q'``, ``q''`` at the kept steps (when the store has them),
+- 4th-order finite differences of the kept displacements,
+
+and predicts the first test run on its every-k-th-step grid with the ROM stepping
+``h``; errors against the test run's kept steps (the field error exact, from the
+study's projection of that run).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import replace
+
+import numpy as np
+
+from femrom.inference import learner_class, reduce_snapshots
+from femrom.linalg import as_block_source, store_source
+from femrom.rom import SecondOrderROM
+from femrom.study._metrics import Projection, relative_error
+from femrom.study._study import projected_forces
+
+#: The derivative data compared, by label.
+SOURCES = ("integrator", "stored", "fd4")
+
+
+def every_kth(source, k: int):
+    """A block source of every ``k``-th column of ``source`` (columns ``0, k, 2k, ...``), block by block."""
+    source = as_block_source(source)
+
+    def blocks():
+        offset = 0
+        for block in source.blocks():
+            first = (-offset) % k
+            yield block[:, first::k]
+            offset += block.shape[1]
+
+    return as_block_source(blocks)
+
+
+def subsampled_rows(state, every=(1, 2, 5, 10), *, r: int | None = None, learner: str = "lopinf") -> list[dict]:
+    """One row per (k, derivative source): the learner at rank ``r`` (default: the study's largest).
+
+    Rows hold ``every``, ``h``, ``learner``, ``derivatives``, ``train_output_error``,
+    ``test_output_error``, ``test_field_error``, ``test_projection_error`` (the basis'
+    floor on the kept steps) and ``fit_seconds``; a source the store lacks (stored
+    derivatives) is skipped, a prediction that fails gets infinite errors and ``failed``.
+    """
+    config, store, runs, W = state.config, state.store, state.runs, state.product
+    system = state.model.system
+    r = max(config.basis.ranks) if r is None else int(r)
+    V = state.basis[:, :r]
+    train, test = runs[config.train[0].name], runs[config.test[0].name]
+    projection = state.projections[test.name]
+    stored = {"v", "a"} <= set(store.fields)
+    rows = []
+    for k in every:
+        h = k * train.dt
+        keep = slice(None, None, k)
+        q = every_kth(store_source(store, "q", [train.name]), k)
+        derivatives = {}
+        if stored:
+            derivatives = {"velocities": every_kth(store_source(store, "v", [train.name]), k),
+                           "accelerations": every_kth(store_source(store, "a", [train.name]), k)}
+        outputs = None if train.outputs is None else train.outputs[:, keep]
+        raw = reduce_snapshots(V, q, h, product=W, inputs=None if train.U is None else train.U[:, keep],
+                               outputs=outputs, **derivatives,
+                               derivatives="stored" if stored else "finite_difference")
+        if system.nonlinear is not None:
+            if system.nonlinear.stateful:
+                raise ValueError("learning every k-th step takes stateless nonlinear forces only")
+            raw = replace(raw, nonlinear_forces=projected_forces(system.nonlinear, V, q))
+        data = {"integrator": raw.integrator_consistent(), "fd4": raw.with_finite_differences(4)}
+        if stored:
+            data["stored"] = raw
+        times = test.times[keep]
+        floor = Projection(projection.coordinates[:, keep], projection.residual2[keep], projection.norm2[keep])
+        for source in SOURCES:
+            if source not in data:
+                continue
+            tic = time.perf_counter()
+            cls = learner_class(learner)
+            rom = SecondOrderROM(basis=V, product=W, learner=cls.for_system(system, basis=V)).fit(data[source])
+            row = {"every": k, "h": h, "learner": learner, "r": r, "derivatives": source,
+                   "fit_seconds": time.perf_counter() - tic,
+                   "test_projection_error": floor.projection_error(r)}
+            try:
+                with np.errstate(all="ignore"):
+                    fit = rom.predict(train.q0, train.times[keep], v0=train.v0, inputs=None if train.U is None
+                                      else train.U[:, keep])
+                    prediction = rom.predict(test.q0, times, v0=test.v0, inputs=test.inputs.sampled(times))
+            except (RuntimeError, np.linalg.LinAlgError) as exc:
+                rows.append(row | {"failed": str(exc), "train_output_error": float("inf"),
+                                   "test_output_error": float("inf"), "test_field_error": float("inf")})
+                continue
+            row |= {"train_output_error": float("nan") if outputs is None else relative_error(outputs, fit.outputs),
+                    "test_output_error": float("nan") if test.outputs is None else relative_error(
+                        test.outputs[:, keep], prediction.outputs),
+                    "test_field_error": floor.field_error(prediction.q)}
+            rows.append(row)
+    return rows
+
+
+def subsampled_section(rows: list[dict], train: str, test: str) -> str:
+    """The report's section on ``rows`` (:func:`subsampled_rows`)."""
+    from femrom.post import accuracy_cost_table
+
+    return (f"## Learning from snapshots every k-th step (trained on {train}, tested on {test})\n\n"
+            "The training run's displacements every k-th step, h = k dt; derivatives: `integrator` (from the "
+            "displacements alone, the differences the ROM's Newmark steps reproduce, "
+            "`SecondOrderData.integrator_consistent`), `stored` (the FOM's Newmark q', q'' at the kept steps), "
+            "`fd4` (4th-order differences of the kept displacements); every ROM steps h.\n\n"
+            + accuracy_cost_table(rows, ["every", "h", "r", "derivatives", "train_output_error", "test_output_error",
+                                         "test_field_error", "test_projection_error", "fit_seconds"]))
