@@ -1,6 +1,7 @@
 """``femrom`` command line: run a scene file or a named case, list the cases.
 
     femrom cases                      list the case scripts in cases/
+    femrom --debug COMMAND ...        errors with their traceback (otherwise one line, exit 2)
     femrom run beam [case options]    run a named case (cases/beam.py)
     femrom run my_scene.toml -o out/  run any scene file: outputs, energy, plot; with a
                                       [rom] section the whole reduced-model study and report
@@ -166,8 +167,31 @@ def _study_line(metrics: dict) -> str:
             f"speedup {row['speedup']:.3g}x")
 
 
+def _user_errors() -> tuple[type[BaseException], ...]:
+    """The failures a user's input causes: reported in one line, exit 2 (``--debug``: the traceback)."""
+    from femrom.mesh import MeshError
+    from femrom.scene import SceneError
+    from femrom.snapshots import IngestError, SnapshotStoreError
+
+    return SceneError, IngestError, SnapshotStoreError, MeshError, FileNotFoundError, ValueError
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
+    debug = bool(argv[:1] == ["--debug"])
+    if debug:
+        argv = argv[1:]
+    try:
+        return _main(argv)
+    except _user_errors() as exc:
+        if debug:
+            raise
+        message = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        print(f"femrom: {message}", file=sys.stderr)
+        return 2
+
+
+def _main(argv: list[str]) -> int:
     parser = argparse.ArgumentParser(prog="femrom", description=__doc__.split("\n")[0])
     sub = parser.add_subparsers(dest="command", required=True)
     sub.add_parser("cases", help="list the named cases")

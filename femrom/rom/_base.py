@@ -50,6 +50,8 @@ class ReducedModel:
                 raise ValueError(f"{name} is required")
             return np.zeros(r)
         x = np.asarray(x, dtype=float).ravel()
+        if not np.all(np.isfinite(x)):
+            raise ValueError(f"{name} is not finite (NaN or inf at index {int(np.flatnonzero(~np.isfinite(x))[0])})")
         if x.size == r:
             return x
         if self.basis is not None and x.size == self.basis.shape[0]:

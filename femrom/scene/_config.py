@@ -35,6 +35,8 @@ Example (``cases/beam.toml``)::
 
 from __future__ import annotations
 
+import math
+
 import tomllib
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
@@ -91,8 +93,14 @@ class MaterialConfig:
                 "area": None, "second_moment": None}
         d = _take(data, "material", keys, ("youngs_modulus", "density"))
         for k, v in d.items():
-            if v is not None and not float(v) > 0:
-                raise SceneError(f"[material] {k} must be positive, got {v}")
+            if v is None:
+                continue
+            number = isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+            if k == "poisson_ratio":     # the elasticity form is positive definite for -1 < nu < 1/2
+                if not (number and -1.0 < v < 0.5):
+                    raise SceneError(f"[material] poisson_ratio must lie in (-1, 0.5), got {v!r}")
+            elif not (number and v > 0):
+                raise SceneError(f"[material] {k} must be a finite positive number, got {v!r}")
         return cls(**{k: (None if v is None else float(v)) for k, v in d.items()})
 
 

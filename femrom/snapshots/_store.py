@@ -11,6 +11,7 @@ from __future__ import annotations
 import datetime
 import os
 import socket
+import weakref
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Iterator
@@ -299,6 +300,12 @@ class SnapshotStore:
         if self._writer is not None:
             raise SnapshotStoreError(f"{self.path}: trajectory {self._writer.trajectory!r} is "
                                      "still being written; close its writer first")
+        key = _path_key(self.path)
+        owner = _WRITING.get(key)
+        if owner is not None and owner is not self:
+            busy = getattr(owner._writer, "trajectory", "?")
+            raise SnapshotStoreError(f"{self.path}: is open for writing by another SnapshotStore of this process "
+                                     f"(trajectory {busy!r}); close that writer first")
         if self._file is not None:
             self._file.close()
             self._file = None
@@ -311,9 +318,13 @@ class SnapshotStore:
             change_layout(f)
         f = _format.open_swmr_writer(self.path)
         self._file, self._swmr_reader, self._writer = f, False, writer
+        _WRITING[key] = self
         return f
 
     def _writer_closed(self) -> None:
+        key = _path_key(self.path)
+        if _WRITING.get(key) is self:
+            del _WRITING[key]
         self._writer = None
         if self._file is not None:
             self._file.close()
@@ -610,8 +621,11 @@ def _live_writer(path: Path) -> int | None:
     f, _ = _format.open_for_reading(path)
     with f:
         pid, host = f.attrs.get("writer_pid"), _format.text(f.attrs.get("writer_host", ""))
-    if pid is not None and host == socket.gethostname() and _process_alive(int(pid)):
-        return int(pid)
+    if pid is not None and host == socket.gethostname():
+        if int(pid) == os.getpid() and _path_key(path) in _WRITING:
+            return int(pid)
+        if _process_alive(int(pid)):
+            return int(pid)
     return None
 
 
@@ -634,8 +648,18 @@ def _readonly(x: np.ndarray) -> np.ndarray:
     return x
 
 
+#: The store objects of this process that hold a writer, by file (a second one is refused: two
+#: writers in one process would change the layout under each other, and the file's "open for
+#: write" flags name this process, which recovery could not tell from a dead one).
+_WRITING: "weakref.WeakValueDictionary[str, SnapshotStore]" = weakref.WeakValueDictionary()
+
+
+def _path_key(path: Path) -> str:
+    return os.path.realpath(path)
+
+
 def _process_alive(pid: int) -> bool:
-    if pid == os.getpid():
+    if pid == os.getpid():      # this process: a writer of its own is known in _WRITING, so the flags are stale
         return False
     try:
         os.kill(pid, 0)

@@ -1,0 +1,121 @@
+"""Hostile and extreme inputs: one clear error naming the culprit, or the correct acceptance.
+
+Each case is what a user can do by mistake or on purpose; the error must name the key,
+argument or file, and nothing may be left half-written.
+"""
+
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+from femrom.integrators import Newmark, integrate
+from femrom.scene import Scene, SceneError, SecondOrderSystem
+from femrom.snapshots import SnapshotStore, SnapshotStoreError
+
+ROOT = Path(__file__).parents[1]
+
+
+def _chain(n=6) -> SecondOrderSystem:
+    K = sp.diags([2.0 * np.ones(n), -np.ones(n - 1), -np.ones(n - 1)], [0, 1, -1], format="csr")
+    return SecondOrderSystem(mass=sp.identity(n, format="csr"), stiffness=K)
+
+
+# -- stores: two writers in one process ------------------------------------------------------
+def test_a_second_store_object_in_this_process_cannot_take_a_writer(tmp_path):
+    """Two SnapshotStore objects on one file, both asking for a writer: the second is refused like a
+    second process, and the first one's trajectory is intact and readable afterwards."""
+    system = _chain()
+    path = tmp_path / "s.h5"
+    first = SnapshotStore.create(path, system, dt=0.1, n_steps=20)
+    writer = first.writer(chunk_steps=4)
+    integrate(system, Newmark(), np.ones(6), np.zeros(6), 0.1, 10, consumers=[writer])   # closes it
+    writer = first.writer(chunk_steps=4)              # a second trajectory, still open
+    second = SnapshotStore.open(path, system=system)  # reading beside a writer is fine (SWMR)
+    assert second.trajectories == ("000", "001")
+    with pytest.raises(SnapshotStoreError, match=r"s\.h5: is open for writing by another SnapshotStore of "
+                                                 r"this process \(trajectory '001'\)"):
+        second.writer()
+    integrate(system, Newmark(), np.ones(6), np.zeros(6), 0.1, 12, consumers=[writer])
+    first.close()
+    with SnapshotStore.open(path) as store:
+        assert store.trajectories == ("000", "001")
+        assert store.read("000", "q").shape == (6, 11) and store.read("001", "q").shape == (6, 13)
+    # once the first writer is closed the second object may write
+    integrate(system, Newmark(), np.ones(6), np.zeros(6), 0.1, 5, consumers=[second.writer()])
+    second.close()
+    with SnapshotStore.open(path) as store:
+        assert store.trajectories == ("000", "001", "002")
+
+
+# -- scene keys: wrong types, non-finite and out-of-range values, valid extremes ------------
+def _beam(**material):
+    text = (ROOT / "cases" / "beam.toml").read_text()
+    import tomllib
+
+    data = tomllib.loads(text)
+    data["material"] |= material
+    return data
+
+
+@pytest.mark.parametrize("key, value, fragment", [
+    ("youngs_modulus", True, "[material] youngs_modulus must be a finite positive number, got True"),
+    ("youngs_modulus", "steel", "[material] youngs_modulus must be a finite positive number, got 'steel'"),
+    ("youngs_modulus", float("inf"), "[material] youngs_modulus must be a finite positive number, got inf"),
+    ("density", float("nan"), "[material] density must be a finite positive number, got nan"),
+    ("density", -7850.0, "[material] density must be a finite positive number, got -7850.0"),
+    ("area", 0.0, "[material] area must be a finite positive number, got 0.0"),
+    ("poisson_ratio", 0.5, "[material] poisson_ratio must lie in (-1, 0.5), got 0.5"),
+    ("poisson_ratio", -1.0, "[material] poisson_ratio must lie in (-1, 0.5), got -1.0"),
+    ("poisson_ratio", "0.3", "[material] poisson_ratio must lie in (-1, 0.5), got '0.3'"),
+])
+def test_bad_material_values_are_one_clear_error(key, value, fragment):
+    with pytest.raises(SceneError) as info:
+        Scene.from_dict(_beam(**{key: value}))
+    assert str(info.value) == fragment
+
+
+@pytest.mark.parametrize("nu", [0.0, -0.3, 0.49])
+def test_valid_poisson_ratios_are_accepted(nu):
+    """-1 < nu < 0.5 is the range where the elasticity form is positive definite (auxetic nu < 0 too)."""
+    assert Scene.from_dict(_beam(poisson_ratio=nu)).material.poisson_ratio == nu
+
+
+# -- the CLI: every femrom error is one line and exit 2 (a traceback only with --debug) --------
+def _femrom(*args, cwd=None):
+    return subprocess.run([sys.executable, "-m", "femrom", *args], capture_output=True, text=True,
+                          timeout=300, cwd=cwd)
+
+
+def test_cli_errors_are_one_line_and_debug_shows_the_traceback(tmp_path):
+    bad = tmp_path / "bad.toml"
+    bad.write_text((ROOT / "cases" / "beam.toml").read_text().replace("density = 7850.0", "density = true"))
+    for command in (["info", str(bad)], ["run", str(bad), "-o", str(tmp_path / "out")]):
+        proc = _femrom(*command)
+        lines = proc.stderr.strip().splitlines()
+        assert proc.returncode == 2 and len(lines) == 1, proc.stderr
+        assert "density must be a finite positive number, got True" in lines[0] and str(bad) in lines[0]
+    proc = _femrom("--debug", "info", str(bad))
+    assert proc.returncode != 0 and "Traceback" in proc.stderr and "density must be" in proc.stderr
+    missing = _femrom("info", str(tmp_path / "nowhere.toml"))
+    assert missing.returncode == 2 and missing.stderr.strip().splitlines() == [
+        f"femrom: scene file not found: {tmp_path / 'nowhere.toml'}"]
+    not_a_store = tmp_path / "x.h5"
+    not_a_store.write_text("not hdf5")
+    proc = _femrom("ingest", str(tmp_path / "series.npz"), "--mesh", str(not_a_store))
+    assert proc.returncode == 2 and len(proc.stderr.strip().splitlines()) == 1
+
+
+# -- reduced models: non-finite initial states -------------------------------------------------
+def test_a_nan_initial_state_is_refused_by_name():
+    from femrom.inference import ReducedOperators
+    from femrom.rom import SecondOrderROM
+
+    rom = SecondOrderROM(ReducedOperators.from_matrices(np.diag([1.0, 4.0])))
+    with pytest.raises(ValueError, match=r"q0 is not finite"):
+        rom.predict(np.array([np.nan, 0.0]), np.linspace(0, 1, 11))
+    with pytest.raises(ValueError, match=r"v0 is not finite"):
+        rom.predict(np.zeros(2), np.linspace(0, 1, 11), v0=np.array([0.0, np.inf]))
