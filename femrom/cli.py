@@ -56,7 +56,20 @@ def load_case(name: str):
 
 def run_scene_file(path: Path, out_dir: Path) -> dict:
     """Build and integrate a scene; write outputs.npz, metrics.json and response.png
-    (with a ``[rom]`` section: :func:`femrom.study.run_study`, the whole report)."""
+    (with a ``[rom]`` section: :func:`femrom.study.run_study`, the whole report).
+
+    The results go to a staging folder beside ``out_dir`` that replaces it only when
+    the run completes (:func:`femrom.post.staged_output`): a failed run leaves the
+    previous results, and a second run into the same folder at once is refused.
+    """
+    from femrom.post import staged_output
+
+    with staged_output(out_dir) as staging:
+        metrics = _run_scene_file(path, staging)
+    return metrics
+
+
+def _run_scene_file(path: Path, out_dir: Path) -> dict:
     from femrom.integrators import scheme_for, simulate
     from femrom.post import plot_response, write_metrics
     from femrom.scene import Scene, SceneError, build

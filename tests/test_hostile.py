@@ -119,3 +119,53 @@ def test_a_nan_initial_state_is_refused_by_name():
         rom.predict(np.array([np.nan, 0.0]), np.linspace(0, 1, 11))
     with pytest.raises(ValueError, match=r"v0 is not finite"):
         rom.predict(np.zeros(2), np.linspace(0, 1, 11), v0=np.array([0.0, np.inf]))
+
+
+# -- results appear whole or not at all -------------------------------------------------------
+def test_an_output_path_that_is_a_file_is_refused_before_anything_runs(tmp_path):
+    out = tmp_path / "out"
+    out.write_text("a file")
+    proc = _femrom("run", str(ROOT / "cases" / "beam.toml"), "-o", str(out))
+    assert proc.returncode == 2 and proc.stderr.strip().splitlines() == [f"femrom: {out}: exists and is not a folder"]
+    assert out.read_text() == "a file"
+
+
+def test_a_failed_run_keeps_the_previous_results_and_leaves_no_staging(tmp_path):
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "metrics.json").write_text("{\"old\": true}")
+    bad = tmp_path / "bad.toml"
+    bad.write_text((ROOT / "cases" / "beam.toml").read_text().replace('clamped = ["left"]', 'clamped = ["nowhere"]'))
+    proc = _femrom("run", str(bad), "-o", str(out))
+    assert proc.returncode == 2 and len(proc.stderr.strip().splitlines()) == 1 and "nowhere" in proc.stderr
+    assert sorted(p.name for p in out.iterdir()) == ["metrics.json"]
+    assert (out / "metrics.json").read_text() == "{\"old\": true}"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.toml", "out"]       # no staging, no lock left
+
+
+def test_a_second_run_into_the_same_folder_at_once_is_refused(tmp_path):
+    from femrom.post import staged_output
+
+    out = tmp_path / "out"
+    with staged_output(out) as staging:          # a run in progress (this process holds the folder)
+        (staging / "partial.txt").write_text("x")
+        proc = _femrom("run", str(ROOT / "cases" / "beam.toml"), "-o", str(out))
+        assert proc.returncode == 2 and proc.stderr.strip().splitlines() == [
+            f"femrom: {out}: another run is writing its results there now"]
+    assert (out / "partial.txt").read_text() == "x"   # the first run's results, whole
+
+
+def test_a_rerun_replaces_the_folder_whole(tmp_path):
+    from femrom.post import staged_output
+
+    out = tmp_path / "out"
+    with staged_output(out) as staging:
+        (staging / "old_only.txt").write_text("old")
+    with staged_output(out) as staging:
+        (staging / "new.txt").write_text("new")
+    assert sorted(p.name for p in out.iterdir()) == ["new.txt"]          # no mix of old and new files
+    with pytest.raises(RuntimeError, match="disk full"):
+        with staged_output(out) as staging:
+            (staging / "half.txt").write_text("half")
+            raise RuntimeError("disk full")
+    assert sorted(p.name for p in out.iterdir()) == ["new.txt"]

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import uuid
 import platform
 from pathlib import Path
 
@@ -45,7 +46,7 @@ def write_metrics(path, metrics: dict) -> Path:
     """Write ``metrics`` as JSON (numpy values converted); atomic replace."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_suffix(path.suffix + ".tmp")
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.{uuid.uuid4().hex[:8]}.tmp")   # never shared by two writers
     tmp.write_text(dumps(metrics, indent=2) + "\n")
     os.replace(tmp, path)
     return path

@@ -150,7 +150,8 @@ def run_study(scene: Scene, out_dir, *, model=None, store_path=None, extend=None
         "train": list(train), "test": list(test), "ranks": list(config.basis.ranks),
         "extension": config.extension, "learners": labels,
         "snapshots": {"bytes": store_bytes, "fields": store_fields,
-                      "path": str(store_path) if config.report.keep_snapshots else None},
+                      "path": (store_path.name if store_path.parent == out_dir else str(store_path))
+                      if config.report.keep_snapshots else None},
         "factorization_seconds": runs[train[0]].summary.get("factorization_seconds"),
         "pod": {"method": config.basis.method, "product": config.basis.product, "seconds": timings["pod_seconds"],
                 "passes": config.basis.power_iterations + 2 if config.basis.method == "randomized" else 1,
