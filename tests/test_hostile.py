@@ -78,6 +78,21 @@ def test_bad_material_values_are_one_clear_error(key, value, fragment):
     assert str(info.value) == fragment
 
 
+@pytest.mark.parametrize("time, fragment", [
+    ({"dt": 1e-14, "t_end": 0.01}, "[time] t_end / dt = 1e+12 steps, more than femrom runs in one go (1e+08)"),
+    ({"dt": True}, "[time] dt must be a finite number, got True"),
+    ({"t_end": float("inf")}, "[time] t_end must be a finite number, got inf"),
+    ({"dt": "1e-3"}, "[time] dt must be a finite number, got '1e-3'"),
+    ({"dt": 0.0}, "[time] needs 0 < dt <= t_end"),
+])
+def test_bad_time_windows_are_one_clear_error(time, fragment):
+    data = _beam()
+    data["time"] |= time
+    with pytest.raises(SceneError) as info:
+        Scene.from_dict(data)
+    assert fragment in str(info.value)
+
+
 @pytest.mark.parametrize("nu", [0.0, -0.3, 0.49])
 def test_valid_poisson_ratios_are_accepted(nu):
     """-1 < nu < 0.5 is the range where the elasticity form is positive definite (auxetic nu < 0 too)."""
@@ -169,3 +184,36 @@ def test_a_rerun_replaces_the_folder_whole(tmp_path):
             (staging / "half.txt").write_text("half")
             raise RuntimeError("disk full")
     assert sorted(p.name for p in out.iterdir()) == ["new.txt"]
+
+
+# -- physics that refuses nonsense -------------------------------------------------------------
+def test_a_static_load_on_an_unsupported_model_is_refused():
+    """The cantilever without its clamp: K is singular (rigid-body modes); the static solve used to
+    return a tip deflection of -4.75e9 m under 10 N with exit 0."""
+    from femrom.scene import build
+
+    data = _beam()
+    del data["boundary"]
+    with pytest.raises(SceneError, match=r"static_load needs supports: the model has no \[boundary\] conditions"):
+        build(Scene.from_dict(data))
+
+
+def test_a_near_singular_stiffness_is_detected_by_its_condition_estimate():
+    """A chain held by a spring of 1e-14 x its own stiffness: exactly solvable, numerically a mechanism
+    (condition ~1e16 > 1/(1e4 eps)); held by a spring of 1e-3 it is accepted."""
+    from femrom.scene._build import _checked_static
+
+    n = 50
+    for ground, refused in ((1e-14, True), (1e-3, False)):
+        K = sp.diags([2.0 * np.ones(n), -np.ones(n - 1), -np.ones(n - 1)], [0, 1, -1], format="lil")
+        K[0, 0] = K[-1, -1] = 1.0
+        K[0, 0] += ground
+        K = K.tocsc()
+        f = np.zeros(n)
+        f[-1] = 1.0
+        q = sp.linalg.spsolve(K, f)
+        if refused:
+            with pytest.raises(SceneError, match="stiffness is \\(near\\) singular"):
+                _checked_static(K, f, q)
+        else:
+            np.testing.assert_array_equal(_checked_static(K, f, q), q)

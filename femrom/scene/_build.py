@@ -133,9 +133,14 @@ def _initial_state(scene, space, system):
         return np.zeros(n), np.zeros(n)
     if ic.kind == "static_load":
         f = cond.vector(space.load_vector(ic.load))
+        if not cond.fixed.size:
+            raise SceneError("[initial_conditions] static_load needs supports: the model has no [boundary] "
+                             "conditions, so its stiffness is singular (rigid-body motion); use kind = 'zero' "
+                             "or 'expression' for a free structure")
         solver = make_solver(system.stiffness, strategy=scene.time.solver,
-                                 near_nullspace=_near_nullspace(space, cond))
-        return solver.solve(f), np.zeros(n)
+                             near_nullspace=_near_nullspace(space, cond))
+        q = solver.solve(f)
+        return _checked_static(system.stiffness, f, q), np.zeros(n)
     if ic.kind == "mode":
         shape = _mode_shape(system, ic.index)
         dofs, _ = space.coordinates(ic.component)
@@ -147,6 +152,27 @@ def _initial_state(scene, space, system):
         v = cond.vector(space.interpolate(_expression(ic.velocity), ic.component))
         return q, v
     raise SceneError(f"unknown initial condition {ic.kind!r}")
+
+
+#: ``||K||_1 ||q|| / ||f||`` (a lower bound of cond(K)) above which a static solution is refused:
+#: at 1 / (1e4 eps) the solve has lost all but ~4 digits (a mechanism, a support that holds nothing).
+STATIC_CONDITION_LIMIT = 1.0 / (1e4 * np.finfo(float).eps)
+
+
+def _checked_static(K, f, q) -> np.ndarray:
+    """``q`` of ``K q = f``, or one SceneError when ``K`` is (near) singular or the solve is not finite."""
+    norm_f = float(np.linalg.norm(f))
+    if not np.all(np.isfinite(q)):
+        raise SceneError("[initial_conditions] static_load: the static solution is not finite (singular stiffness: "
+                         "a mechanism or missing supports)")
+    if norm_f == 0:
+        return q
+    estimate = float(abs(K).sum(axis=0).max()) * float(np.linalg.norm(q)) / norm_f
+    if estimate > STATIC_CONDITION_LIMIT:
+        raise SceneError(f"[initial_conditions] static_load: the stiffness is (near) singular, condition >= "
+                         f"{estimate:.1e} (a mechanism or supports that do not hold the structure); "
+                         "check [boundary]")
+    return q
 
 
 def _near_nullspace(space, cond):

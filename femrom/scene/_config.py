@@ -235,6 +235,11 @@ class InitialConfig:
                    str(d["displacement"]), str(d["velocity"]))
 
 
+#: The most steps one run may take: 1e8 steps of a 1e3-dof model are ~1e5 s of stepping; beyond
+#: that a window is a mistake (dt = 1e-14 over 0.01 s asks for 1e12) more often than a plan.
+MAX_STEPS = 1e8
+
+
 @dataclass(frozen=True)
 class TimeConfig:
     """The time window and scheme. ``integrator`` names a scheme registered in
@@ -253,8 +258,16 @@ class TimeConfig:
                                  "spectral_radius": 0.8, "solver": "auto"}, ("t_end", "dt"))
         if not isinstance(d["integrator"], str) or not d["integrator"]:
             raise SceneError(f"[time] integrator must be a scheme name, got {d['integrator']!r}")
+        for key in ("t_end", "dt", "spectral_radius"):
+            v = d[key]
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+                raise SceneError(f"[time] {key} must be a finite number, got {v!r}")
         if not (0 < float(d["dt"]) <= float(d["t_end"])):
             raise SceneError(f"[time] needs 0 < dt <= t_end, got dt={d['dt']}, t_end={d['t_end']}")
+        steps = float(d["t_end"]) / float(d["dt"])
+        if steps > MAX_STEPS:
+            raise SceneError(f"[time] t_end / dt = {steps:.3g} steps, more than femrom runs in one go "
+                             f"({MAX_STEPS:.0e}); raise dt or split the window")
         if not 0 <= float(d["spectral_radius"]) <= 1:
             raise SceneError(f"[time] spectral_radius must lie in [0, 1], got {d['spectral_radius']}")
         return cls(float(d["t_end"]), float(d["dt"]), d["integrator"], float(d["spectral_radius"]), str(d["solver"]))
