@@ -217,3 +217,47 @@ def test_a_near_singular_stiffness_is_detected_by_its_condition_estimate():
                 _checked_static(K, f, q)
         else:
             np.testing.assert_array_equal(_checked_static(K, f, q), q)
+
+
+# -- data: complex, bytes, NaN and all-zero snapshots ------------------------------------------
+@pytest.mark.parametrize("X, fragment", [
+    (np.zeros((12, 6)), "every snapshot is zero"),
+    (np.where(np.eye(12, 6) > 0, np.nan, 1.0), "snapshot column 0 is not finite"),
+    (np.ones((12, 6)) * (1 + 1j), "snapshots must be real numbers, got dtype complex128"),
+    (np.full((12, 6), b"1.0"), "snapshots must be real numbers, got dtype |S3"),
+])
+def test_pod_refuses_data_it_cannot_decompose(X, fragment):
+    from femrom.basis import POD
+
+    with pytest.raises(ValueError, match=fragment.replace("(", "\\(").replace("|", "\\|")):
+        POD(rank=2, method="svd").fit(X)
+
+
+def test_streamed_blocks_with_nan_or_complex_values_are_refused_by_entry():
+    from femrom.basis import POD
+    from femrom.linalg import as_block_source
+
+    X = np.random.default_rng(0).standard_normal((30, 12))
+    X[4, 9] = np.inf
+    with pytest.raises(ValueError, match=r"not finite: entry \(4, 1\) of the block is inf"):
+        POD(rank=2, method="randomized").fit(as_block_source(lambda: iter([X[:, :8], X[:, 8:]])))
+    with pytest.raises(ValueError, match="must hold real numbers, got dtype complex128"):
+        POD(rank=2, method="randomized").fit(as_block_source(lambda: iter([X[:, :8] * 1j])))
+
+
+def test_a_store_refuses_complex_or_non_finite_snapshots(tmp_path):
+    from femrom.integrators import StepResult
+
+    system = _chain()
+    store = SnapshotStore.create(tmp_path / "s.h5", system, fields=("q", "v"), dt=0.1, n_steps=4)
+    writer = store.writer(chunk_steps=2)
+    writer(StepResult(0, 0.0, np.ones(6), np.zeros(6), np.zeros(6)))
+    with pytest.raises(SnapshotStoreError, match=r"step 1 of trajectory '000' has 'q' with dtype complex128"):
+        writer(StepResult(1, 0.1, np.ones(6) * 1j, np.zeros(6), np.zeros(6)))
+    with pytest.raises(SnapshotStoreError, match=r"step 1 of trajectory '000' has 'v' with values that are not finite"):
+        writer(StepResult(1, 0.1, np.ones(6), np.full(6, np.nan), np.zeros(6)))
+    writer(StepResult(1, 0.1, 2 * np.ones(6), np.zeros(6), np.zeros(6)))
+    writer.close()
+    store.close()
+    with SnapshotStore.open(tmp_path / "s.h5") as s:
+        np.testing.assert_array_equal(s.read("000", "q"), np.column_stack([np.ones(6), 2 * np.ones(6)]))

@@ -258,7 +258,15 @@ class POD:
         if product is None and isinstance(data, StreamingSketch):
             product = data.product.matrix
         inner = InnerProduct(product)
+        if isinstance(data, np.ndarray):     # in-memory data: checked here (streamed blocks: by the SVD)
+            if data.dtype.kind not in "fiu":
+                raise ValueError(f"POD: snapshots must be real numbers, got dtype {data.dtype}")
+            if not np.all(np.isfinite(data)):
+                bad = np.argwhere(~np.isfinite(data))[0]
+                raise ValueError(f"POD: snapshot column {bad[1]} is not finite (row {bad[0]})")
         svd = self._decompose(data, method, inner)
+        if not svd.total_energy > 0:
+            raise ValueError("POD: every snapshot is zero; there is nothing to build a basis from")
         rank = truncation_rank(svd.s, svd.total_energy, rank=self.rank, energy=self.energy,
                                tolerance=self.tolerance)
         self.svd_ = svd

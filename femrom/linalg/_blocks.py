@@ -43,9 +43,14 @@ def as_column_block(block: Any, n: int | None = None) -> np.ndarray:
     """One block as an (n, b) float64 array; a 1-D block is one column.
 
     Raises ``ValueError`` naming the bad shape when the block is not 1-D or
-    2-D, or has a row count other than ``n``.
+    2-D, or has a row count other than ``n``, and the bad entry when it is not a
+    real finite number (complex, bytes, NaN or inf would otherwise be cast silently
+    or surface as "SVD did not converge").
     """
-    block = np.asarray(block, dtype=np.float64)
+    raw = np.asarray(block)
+    if raw.dtype.kind not in "fiu":
+        raise ValueError(f"a block of snapshot columns must hold real numbers, got dtype {raw.dtype}")
+    block = np.asarray(raw, dtype=np.float64)
     if block.ndim == 1:
         block = block[:, None]
     if block.ndim != 2:
@@ -53,6 +58,10 @@ def as_column_block(block: Any, n: int | None = None) -> np.ndarray:
     if n is not None and block.shape[0] != n:
         raise ValueError(f"block has {block.shape[0]} rows, expected n = {n} "
                          "(blocks are columns of the (n, K) snapshot matrix)")
+    if not np.isfinite(block).all():
+        row, column = np.argwhere(~np.isfinite(block))[0]
+        raise ValueError(f"a block of snapshot columns is not finite: entry ({row}, {column}) of the block is "
+                         f"{block[row, column]}")
     return block
 
 
@@ -81,7 +90,8 @@ def _read_ahead(blocks: Iterator[Any], depth: int) -> Iterator[Any]:
     def reader() -> None:
         try:
             for item in blocks:
-                if not put(np.asarray(item, dtype=np.float64)):
+                item = np.asarray(item)          # read here; cast (and checked) by as_column_block
+                if not put(item.astype(np.float64, copy=False) if item.dtype.kind in "fiu" else item):
                     return
             put(_END)
         except BaseException as error:  # handed to the consumer, raised there

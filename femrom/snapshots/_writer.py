@@ -219,7 +219,12 @@ class SnapshotWriter:
             self._commit_initial(result)
         row, buffers = self._buffered, self._buffers
         for key in self._keys:
-            buffers[key][row] = self._value(result, key)
+            value = np.asarray(self._value(result, key))
+            if value.dtype.kind not in "fiu" or not np.isfinite(value).all():
+                what = f"dtype {value.dtype}" if value.dtype.kind not in "fiu" else "values that are not finite"
+                raise SnapshotStoreError(f"{self.store.path}: step {result.step} of trajectory {self.trajectory!r} "
+                                         f"has {key!r} with {what}; only real finite numbers are stored")
+            buffers[key][row] = value
         buffers["t"][row], buffers["step"][row] = result.t, result.step
         self._last, self._last_step = result, result.step
         self._buffered += 1
