@@ -261,3 +261,13 @@ def test_a_store_refuses_complex_or_non_finite_snapshots(tmp_path):
     store.close()
     with SnapshotStore.open(tmp_path / "s.h5") as s:
         np.testing.assert_array_equal(s.read("000", "q"), np.column_stack([np.ones(6), 2 * np.ones(6)]))
+
+
+def test_a_mesh_size_gmsh_does_not_honour_is_refused():
+    """mesh_size = 1e-300 used to mesh at gmsh's default size with exit 0."""
+    from femrom.mesh import MeshError, build_mesh
+
+    with pytest.raises(MeshError, match=r"mesh_size = 1e-300 asked for, gmsh made elements of mean edge"):
+        build_mesh(ROOT / "tests" / "data" / "bracket.geo", {"mesh_size": 1e-300})
+    mesh = build_mesh(ROOT / "tests" / "data" / "bracket.geo", {"mesh_size": 0.02})    # honoured: accepted
+    assert mesh.t.shape[1] > 100
