@@ -7,9 +7,10 @@ What the case scripts share, for any scene (``femrom run scene.toml`` with a
   store, each step timed without the consumers), :class:`FOMRun`,
   :func:`solver_factory` (one factorisation for all runs of one ``dt``);
 - a study of extrapolation in time (train on a release's first window, predict far beyond it):
-  :func:`extrapolation_config` (its learners :data:`LEARNERS`, named :data:`LEARNER_NAMES`);
+  :func:`extrapolation_config` (its learners :data:`LEARNERS`, named :data:`LEARNER_NAMES`),
+  :func:`extrapolation_scene` (a scene with it);
 - the study's steps: :func:`fom_runs`, :func:`pod_basis`, :func:`reduce_runs`,
-  :func:`training_data`, :func:`fit_rom`, :func:`evaluate`, :func:`rom_costs`,
+  :func:`training_data`, :func:`fit_rom`, :func:`evaluate`, :func:`rom_costs`, :func:`study_costs`,
   :func:`study_rows`;
 - canonical learners (``hopinf``) on conservative scenes: :func:`check_canonical_learners`,
   :func:`fit_canonical_rom`, :class:`SceneHamiltonianROM` (a Hamiltonian ROM on the
@@ -25,14 +26,19 @@ What the case scripts share, for any scene (``femrom run scene.toml`` with a
   energy of a ROM's reconstructed state), :func:`rom_table` (errors, energy errors and costs
   per learner and r), :func:`invariant_drift`, :func:`plot_energy_error_history`,
   :func:`plot_output_history`, :func:`plot_histories` (the pictures of a table),
-  :func:`evaluate_runs` (a case's own ROM on every run, as the study's);
+  :func:`evaluate_runs` (a case's own ROM on every run, as the study's), :func:`extra_rom_rows`
+  (a case's own ROMs as study rows, timed interleaved with the study's);
+- hyper-reduction: :func:`hyper_reduced_rows` (a learned ROM's known conservative force
+  replaced by its ECSW-sampled potential, :data:`HYPER_COLUMNS`);
 - costs: :class:`Cost` (the fastest of several timed blocks, and their quartiles),
   :func:`blocked_cost`, :func:`repeated_costs` (interleaved), :func:`call_cost` (of a function);
 - the scene's own run: :func:`scene_run` (:class:`SceneRun`: response plot, energy drift,
   report section);
 - the FOM's accuracy against its cost: :func:`time_step_ladder`, :func:`frequency_ladder`,
-  :func:`natural_frequencies`, :func:`final_state`, :func:`observed_order`, :func:`ladder_section`
-  (a ladder's plot and report section);
+  :func:`natural_frequencies`, :func:`final_state`, :func:`final_state_ladders` (time steps
+  against a fine run, meshes against an exact solution, in the mass norm at a final time),
+  :func:`observed_order`, :func:`ladder_section` (a ladder's plot and report section),
+  :func:`final_state_section`;
 - sweeps: :func:`run_sweep` (a scene's ``[sweep]`` as Dask tasks, one store file
   per run, merged into one store; a killed worker's run reruns elsewhere);
 - figures and report: :func:`plot_outputs`, :func:`plot_errors`, :func:`plot_error_history`,
@@ -49,7 +55,7 @@ from femrom.study._figures import (
     plot_outputs,
     render_fields,
 )
-from femrom.study._extrapolation import LEARNER_NAMES, LEARNERS, extrapolation_config
+from femrom.study._extrapolation import LEARNER_NAMES, LEARNERS, extrapolation_config, extrapolation_scene
 from femrom.study._hamiltonian import (
     CanonicalRun,
     CanonicalSpec,
@@ -62,6 +68,7 @@ from femrom.study._hamiltonian import (
 )
 from femrom.study._histories import (
     evaluate_runs,
+    extra_rom_rows,
     plot_energy_error_history,
     plot_histories,
     plot_output_history,
@@ -69,8 +76,11 @@ from femrom.study._histories import (
     rom_table,
     state_energy,
 )
+from femrom.study._hyper import HYPER_COLUMNS, hyper_reduced_rows
 from femrom.study._ladders import (
     final_state,
+    final_state_ladders,
+    final_state_section,
     frequency_ladder,
     ladder_section,
     natural_frequencies,
@@ -95,6 +105,7 @@ from femrom.study._study import (
     rom_cost,
     rom_costs,
     scored_columns,
+    study_costs,
     study_learners,
     study_rows,
     training_data,
@@ -104,11 +115,11 @@ from femrom.study._sweep import SweepRun, run_sweep, run_sweep_point, sweep_runs
 from femrom.study._timing import Cost, blocked_cost, call_cost, repeated_cost, repeated_costs
 
 __all__ = [
-    "CanonicalRun", "CanonicalSpec", "Cost", "Evaluation", "FOMRun", "LEARNERS", "LEARNER_NAMES",
+    "CanonicalRun", "CanonicalSpec", "Cost", "Evaluation", "FOMRun", "HYPER_COLUMNS", "LEARNERS", "LEARNER_NAMES",
     "Projection", "ROW_COLUMNS", "SceneHamiltonianROM", "SceneRun", "StudyState", "SweepRun", "blocked_cost",
     "call_cost", "canonical_rows", "canonical_time_step_ladder", "check_canonical_learners",
-    "check_rom_config", "energy_ratio", "evaluate", "evaluate_runs", "extrapolation_config",
-    "final_state", "fit_canonical_rom", "fit_rom", "fom_runs", "frequency_ladder", "invariant_drift",
+    "check_rom_config", "energy_ratio", "evaluate", "evaluate_runs", "extra_rom_rows", "extrapolation_config", "extrapolation_scene",
+    "final_state", "final_state_ladders", "final_state_section", "fit_canonical_rom", "fit_rom", "fom_runs", "frequency_ladder", "hyper_reduced_rows", "invariant_drift",
     "ladder_section", "linear_operator", "mass_generator", "mass_norm", "natural_frequencies",
     "observed_order", "operator_checks", "peak_rss_gb", "plot_accuracy_cost", "plot_energy",
     "plot_energy_error_history", "plot_error_history", "plot_errors", "plot_histories",
@@ -116,6 +127,6 @@ __all__ = [
     "project_run", "projected_forces", "public_rows", "reconstructed_energy_error", "reduce_runs",
     "relative_error", "render_fields", "repeated_cost", "repeated_costs", "rom_cost", "rom_costs",
     "rom_table", "run_canonical", "run_fom", "run_study", "run_sweep", "run_sweep_point", "scene_run",
-    "scored_columns", "solver_factory", "state_energy", "state_error", "study_learners", "study_rows",
+    "scored_columns", "solver_factory", "state_energy", "state_error", "study_costs", "study_learners", "study_rows",
     "sweep_runs", "time_step_ladder", "training_data", "write_report",
 ]

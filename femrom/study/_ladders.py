@@ -143,6 +143,76 @@ def final_state(model, dt: float, t_end: float) -> tuple[np.ndarray, dict]:
                            "seconds_per_step": summary["stepping_seconds"] / steps}
 
 
+def final_state_ladders(model, t_end: float, time_steps, fine_dt: float, meshes, exact, *,
+                        exact_name: str = "exact solution", dimension: int = 1) -> list[dict]:
+    r"""The FOM's error at ``t_end`` against its cost, over time steps and over meshes.
+
+    Every error is the relative mass norm of a final state (:func:`final_state`: the
+    scene's scheme from the initial state, only the last state kept),
+
+    .. math::
+
+        e = \|q_h(T) - q_{ref}\|_M / \|q_{ref}\|_M, \qquad \|x\|_M = \sqrt{x^T M x},
+
+    on two ladders:
+
+    - ``"time step"``: ``model`` stepped at each of ``time_steps`` against the same model at
+      ``fine_dt`` (the time error alone);
+    - ``"mesh"``: each model of ``meshes`` stepped at ``fine_dt`` against ``exact(model, t)``
+      (the space error, when ``fine_dt`` makes the time part negligible).
+
+    Parameters
+    ----------
+    model : FullOrderModel
+        The time ladder's model.
+    t_end : float
+        The final time ``T``; every step must divide it.
+    time_steps : sequence of float
+    fine_dt : float
+    meshes : iterable of FullOrderModel
+        The mesh ladder, coarsest first (a generator builds each model when its turn comes).
+    exact : callable ``(model, t) -> (n,) ndarray``
+        The exact displacement at the model's free dofs at time ``t``.
+    exact_name : str
+        What ``exact`` is, for the rows' ``reference``.
+    dimension : int
+        The mesh's dimension ``d``: the mesh ladder's order is fitted against the dofs ``n ~ h^-d``,
+        ``p = -d * slope(log e, log n)``.
+
+    Returns
+    -------
+    list of dict
+        Per run, the time ladder's first: ``ladder``, ``label`` (``dt=...``, ``n=...``),
+        :func:`final_state`'s row (``n``, ``dt``, ``steps``, ``stepping_seconds``,
+        ``seconds_per_step``), ``error``, ``reference`` and ``observed_order`` (of its
+        ladder, :func:`observed_order`).
+    """
+    from femrom.study._metrics import mass_norm
+
+    def relative(M, q, reference):
+        return mass_norm(M, q - reference) / mass_norm(M, reference)
+
+    reference, _ = final_state(model, fine_dt, t_end)
+    rows = []
+    for dt in time_steps:
+        q, row = final_state(model, dt, t_end)
+        rows.append({"ladder": "time step", "label": f"dt={dt:g}", **row,
+                     "error": relative(model.system.mass, q, reference),
+                     "reference": f"dt = {fine_dt:g}, same mesh"})
+    for mesh in meshes:
+        q, row = final_state(mesh, fine_dt, t_end)
+        exact_q = exact(mesh, row["steps"] * fine_dt)
+        rows.append({"ladder": "mesh", "label": f"n={row['n']}", **row,
+                     "error": relative(mesh.system.mass, q, exact_q), "reference": exact_name})
+    for name, key, sign in (("time step", "dt", 1.0), ("mesh", "n", -float(dimension))):
+        ladder = [row for row in rows if row["ladder"] == name]
+        if len(ladder) >= 2:
+            order = sign * observed_order([row[key] for row in ladder], [row["error"] for row in ladder])
+            for row in ladder:
+                row["observed_order"] = order
+    return rows
+
+
 def ladder_section(path, rows: list[dict], cost: str, error: str, label: str, *, heading: str, columns: list[str],
                    group: str | None = None, note: str = "") -> str:
     """Plot a ladder's ``error`` against ``cost`` (log-log, points annotated with ``label``; one
@@ -153,7 +223,27 @@ def ladder_section(path, rows: list[dict], cost: str, error: str, label: str, *,
 
     if group is None:
         plot_accuracy_cost(path, rows, cost, error, label, title=heading)
+        order = f"Observed order {rows[0]['observed_order']:.2f}." if "observed_order" in rows[0] else ""
     else:
         plot_accuracy_cost_groups(path, rows, cost, error, label, group, title=heading)
-    order = f"Observed order {rows[0]['observed_order']:.2f}." if "observed_order" in rows[0] else ""
+        orders = {}                                  # each group's order, from its first row
+        for row in rows:
+            if "observed_order" in row:
+                orders.setdefault(row[group], row["observed_order"])
+        order = "Observed order: " + ", ".join(f"{name} {p:.2f}" for name, p in orders.items()) + "." if orders else ""
     return table_section(heading, rows, columns, note=" ".join(part for part in (order, note) if part))
+
+
+#: the report's columns of :func:`final_state_ladders` rows
+FINAL_STATE_COLUMNS = ["ladder", "n", "dt", "steps", "error", "reference", "stepping_seconds", "seconds_per_step",
+                       "observed_order"]
+
+
+def final_state_section(path, rows: list[dict], *, note: str = "") -> str:
+    """The plot (error against stepping time, one line per ladder, points labelled ``dt=`` / ``n=``)
+    into ``path`` and the report section of :func:`final_state_ladders` rows (:func:`ladder_section`):
+    their table, the observed order of each ladder, ``note``."""
+    t_end = rows[0]["steps"] * rows[0]["dt"]
+    return ladder_section(path, rows, "stepping_seconds", "error", "label", group="ladder", columns=FINAL_STATE_COLUMNS,
+                          heading=f"FOM accuracy against cost (relative error in the mass norm at t = {t_end:g} s)",
+                          note=note)
