@@ -65,10 +65,12 @@ def test_rom_table_scores_after_the_training_window_and_keeps_failures():
                          blowup_time=None)
     K = np.array([[1.0, 0.5], [0.0, 4.0]])
     rom = SimpleNamespace(operators_=SimpleNamespace(stiffness=K))
-    rows = [{"learner": "a", "r": 2, "_rom": rom, "seconds_per_step": 1e-6, "speedup": 30.0, "cost": None},
+    rows = [{"learner": "a", "r": 2, "_rom": rom, "seconds_per_step": 1e-6, "speedup": 30.0, "cost": None,
+             "fit_seconds": 2.0},
             {"learner": "b", "r": 2, "failed": "test: Newton did not converge"}]
     evaluations = {(2, "a", "test"): ev, (2, "a", "train"): SimpleNamespace(field_error=0.01, projection_error=0.005)}
-    table, histories = rom_table(system, np.eye(2), run, rows, evaluations, train="train", score_after=1.0)
+    table, histories = rom_table(system, np.eye(2), run, rows, evaluations, train="train", score_after=1.0,
+                                 carry=("fit_seconds",))
     a, b = table
     np.testing.assert_allclose(histories[(2, "a")], amplitude**2 - 1, atol=1e-15)
     assert a["energy_error_max"] == pytest.approx(0.69) and a["energy_error_train_max"] == pytest.approx(0.21)
@@ -76,6 +78,9 @@ def test_rom_table_scores_after_the_training_window_and_keeps_failures():
     assert (a["train_error"], a["test_error"], a["error_over_projection"]) == (0.01, 0.2, 2.0)
     assert a["online_seconds"] == pytest.approx(4e-6)                  # 4 steps
     assert a["stiffness_asymmetry"] == pytest.approx(np.linalg.norm(K - K.T) / np.linalg.norm(K))
+    # symmetric part [[1, 1/4], [1/4, 4]]: smallest eigenvalue (5 - sqrt(9 + 1/4)) / 2; no damping
+    assert a["stiffness_min_eig"] == pytest.approx((5 - np.sqrt(9.25)) / 2, rel=1e-14) and a["damping_min_eig"] is None
+    assert a["fit_seconds"] == 2.0 and "fit_seconds" not in b          # carried, failed rows aside
     assert b == {"method": "b", "r": 2, "failed": "test: Newton did not converge", "test_error": float("inf")}
 
 

@@ -37,8 +37,9 @@ What the case scripts share, for any scene (``femrom run scene.toml`` with a
 - the FOM's accuracy against its cost: :func:`time_step_ladder`, :func:`frequency_ladder`,
   :func:`natural_frequencies`, :func:`final_state`, :func:`final_state_ladders` (time steps
   against a fine run, meshes against an exact solution, in the mass norm at a final time),
-  :func:`observed_order`, :func:`ladder_section` (a ladder's plot and report section),
-  :func:`final_state_section`;
+  :func:`observed_order`, :func:`ladder_section` (a ladder's plot and report section,
+  :func:`ladder_table` its text), :func:`time_step_section`, :func:`frequency_section`,
+  :func:`final_state_section` (each with its ladder's columns);
 - sweeps: :func:`run_sweep` (a scene's ``[sweep]`` as Dask tasks, one store file
   per run, merged into one store; a killed worker's run reruns elsewhere);
 - figures and report: :func:`plot_outputs`, :func:`plot_errors`, :func:`plot_error_history`,
@@ -78,14 +79,20 @@ from femrom.study._histories import (
 )
 from femrom.study._hyper import HYPER_COLUMNS, hyper_reduced_rows
 from femrom.study._ladders import (
+    FINAL_STATE_COLUMNS,
+    FREQUENCY_COLUMNS,
+    TIME_STEP_COLUMNS,
     final_state,
     final_state_ladders,
     final_state_section,
     frequency_ladder,
+    frequency_section,
     ladder_section,
+    ladder_table,
     natural_frequencies,
     observed_order,
     time_step_ladder,
+    time_step_section,
 )
 from femrom.study._metrics import Projection, energy_ratio, invariant_drift, mass_norm, project_run, relative_error
 from femrom.study._pipeline import ROW_COLUMNS, StudyState, peak_rss_gb, public_rows, run_study, write_report
@@ -115,12 +122,12 @@ from femrom.study._sweep import SweepRun, run_sweep, run_sweep_point, sweep_runs
 from femrom.study._timing import Cost, blocked_cost, call_cost, repeated_cost, repeated_costs
 
 __all__ = [
-    "CanonicalRun", "CanonicalSpec", "Cost", "Evaluation", "FOMRun", "HYPER_COLUMNS", "LEARNERS", "LEARNER_NAMES",
-    "Projection", "ROW_COLUMNS", "SceneHamiltonianROM", "SceneRun", "StudyState", "SweepRun", "blocked_cost",
+    "CanonicalRun", "CanonicalSpec", "Cost", "Evaluation", "FINAL_STATE_COLUMNS", "FOMRun", "FREQUENCY_COLUMNS", "HYPER_COLUMNS", "LEARNERS", "LEARNER_NAMES",
+    "Projection", "ROW_COLUMNS", "SceneHamiltonianROM", "SceneRun", "StudyState", "SweepRun", "TIME_STEP_COLUMNS", "blocked_cost",
     "call_cost", "canonical_rows", "canonical_time_step_ladder", "check_canonical_learners",
     "check_rom_config", "energy_ratio", "evaluate", "evaluate_runs", "extra_rom_rows", "extrapolation_config", "extrapolation_scene",
-    "final_state", "final_state_ladders", "final_state_section", "fit_canonical_rom", "fit_rom", "fom_runs", "frequency_ladder", "hyper_reduced_rows", "invariant_drift",
-    "ladder_section", "linear_operator", "mass_generator", "mass_norm", "natural_frequencies",
+    "final_state", "final_state_ladders", "final_state_section", "fit_canonical_rom", "fit_rom", "fom_runs", "frequency_ladder", "frequency_section", "hyper_reduced_rows", "invariant_drift",
+    "ladder_section", "ladder_table", "linear_operator", "mass_generator", "mass_norm", "natural_frequencies",
     "observed_order", "operator_checks", "peak_rss_gb", "plot_accuracy_cost", "plot_energy",
     "plot_energy_error_history", "plot_error_history", "plot_errors", "plot_histories",
     "plot_invariant_drifts", "plot_output_history", "plot_outputs", "pod_basis", "product_matrix",
@@ -128,5 +135,5 @@ __all__ = [
     "relative_error", "render_fields", "repeated_cost", "repeated_costs", "rom_cost", "rom_costs",
     "rom_table", "run_canonical", "run_fom", "run_study", "run_sweep", "run_sweep_point", "scene_run",
     "scored_columns", "solver_factory", "state_energy", "state_error", "study_costs", "study_learners", "study_rows",
-    "sweep_runs", "time_step_ladder", "training_data", "write_report",
+    "sweep_runs", "time_step_ladder", "time_step_section", "training_data", "write_report",
 ]

@@ -72,7 +72,9 @@ def rom_table(system, basis: np.ndarray, run, rows: list[dict], evaluations: dic
     ``energy_error_test_max`` (over the scored steps), ``rom_energy_drift`` (the ROM's own
     energy, :func:`energy_drift`), ``rom_energy_growth`` and ``blowup_time`` (of the
     :class:`~femrom.study.Evaluation`), ``seconds_per_step``, ``online_seconds`` (the run's
-    steps), ``speedup``, ``cost`` (the row's, with its spread) and ``stiffness_asymmetry`` ``||K^ - K^T||_F / ||K^||_F``. A failed model
+    steps), ``speedup``, ``cost`` (the row's, with its spread), ``stiffness_asymmetry`` ``||K^ - K^T||_F / ||K^||_F``
+    and the smallest eigenvalues of the symmetric parts of ``K^`` and ``C^`` (``stiffness_min_eig``,
+    ``damping_min_eig``; ``None`` without a damping). A failed model
     has ``method``, ``r``, ``failed`` and an infinite ``test_error``. The keys ``carry`` of a
     source row that has them (a case's own columns) close its table row, failed rows aside.
 
@@ -104,9 +106,11 @@ def rom_table(system, basis: np.ndarray, run, rows: list[dict], evaluations: dic
                 "seconds_per_step": row["seconds_per_step"],
                 "online_seconds": row["seconds_per_step"] * (run.times.size - 1), "speedup": row["speedup"],
                 "cost": row.get("cost")}
-        K = row["_rom"].operators_.stiffness
+        K, C = row["_rom"].operators_.stiffness, getattr(row["_rom"].operators_, "damping", None)
         if K is not None:
             out["stiffness_asymmetry"] = float(np.linalg.norm(K - K.T) / np.linalg.norm(K))
+            out["stiffness_min_eig"] = float(np.linalg.eigvalsh(0.5 * (K + K.T))[0])
+            out["damping_min_eig"] = None if C is None else float(np.linalg.eigvalsh(0.5 * (C + C.T))[0])
         table.append(out | {key: row[key] for key in carry if key in row})
     return table, histories
 

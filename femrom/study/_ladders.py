@@ -213,25 +213,56 @@ def final_state_ladders(model, t_end: float, time_steps, fine_dt: float, meshes,
     return rows
 
 
+def ladder_table(rows: list[dict], *, heading: str, columns: list[str], group: str | None = None,
+                 note: str = "") -> str:
+    """A ladder's report section: ``heading``, the table of ``columns``, the observed order when
+    the rows carry one (``observed_order``; with ``group``, that of each group's first row), ``note``."""
+    from femrom.post import table_section
+
+    orders = {}
+    for row in rows:
+        if "observed_order" in row:
+            orders.setdefault(None if group is None else row[group], row["observed_order"])
+    if group is None:
+        order = f"Observed order {orders[None]:.2f}." if orders else ""
+    else:
+        order = "Observed order: " + ", ".join(f"{name} {p:.2f}" for name, p in orders.items()) + "." if orders else ""
+    return table_section(heading, rows, columns, note=" ".join(part for part in (order, note) if part))
+
+
 def ladder_section(path, rows: list[dict], cost: str, error: str, label: str, *, heading: str, columns: list[str],
                    group: str | None = None, note: str = "") -> str:
     """Plot a ladder's ``error`` against ``cost`` (log-log, points annotated with ``label``; one
-    line per value of ``group`` if given; titled ``heading``) into ``path``, and return its report
-    section: ``heading``, the table of ``columns``, the observed order when the rows carry one
-    (``observed_order``), ``note``."""
-    from femrom.post import plot_accuracy_cost, plot_accuracy_cost_groups, table_section
+    line per value of ``group`` if given; titled ``heading``; rows with a zero error, a reference
+    against itself, left out) into ``path``, and return its report section (:func:`ladder_table`)."""
+    from femrom.post import plot_accuracy_cost, plot_accuracy_cost_groups
 
+    shown = [row for row in rows if row[error] > 0]
     if group is None:
-        plot_accuracy_cost(path, rows, cost, error, label, title=heading)
-        order = f"Observed order {rows[0]['observed_order']:.2f}." if "observed_order" in rows[0] else ""
+        plot_accuracy_cost(path, shown, cost, error, label, title=heading)
     else:
-        plot_accuracy_cost_groups(path, rows, cost, error, label, group, title=heading)
-        orders = {}                                  # each group's order, from its first row
-        for row in rows:
-            if "observed_order" in row:
-                orders.setdefault(row[group], row["observed_order"])
-        order = "Observed order: " + ", ".join(f"{name} {p:.2f}" for name, p in orders.items()) + "." if orders else ""
-    return table_section(heading, rows, columns, note=" ".join(part for part in (order, note) if part))
+        plot_accuracy_cost_groups(path, shown, cost, error, label, group, title=heading)
+    return ladder_table(rows, heading=heading, columns=columns, group=group, note=note)
+
+
+#: the report's columns of :func:`time_step_ladder` rows
+TIME_STEP_COLUMNS = ["dt", "steps", "output_error", "stepping_seconds", "seconds_per_step"]
+#: the report's columns of :func:`frequency_ladder` rows
+FREQUENCY_COLUMNS = ["mesh_size", "dofs", "frequency_error", "f1_hz", "seconds"]
+
+
+def time_step_section(path, rows: list[dict], *, heading: str, note: str = "") -> str:
+    """:func:`ladder_section` of :func:`time_step_ladder` rows: output error against stepping time,
+    points labelled with dt, the columns :data:`TIME_STEP_COLUMNS`."""
+    return ladder_section(path, rows, "stepping_seconds", "output_error", "dt", heading=heading,
+                          columns=TIME_STEP_COLUMNS, note=note)
+
+
+def frequency_section(path, rows: list[dict], *, heading: str, note: str = "") -> str:
+    """:func:`ladder_section` of :func:`frequency_ladder` rows: frequency error against build +
+    eigensolve time, points labelled with the dofs, the columns :data:`FREQUENCY_COLUMNS`."""
+    return ladder_section(path, rows, "seconds", "frequency_error", "dofs", heading=heading,
+                          columns=FREQUENCY_COLUMNS, note=note)
 
 
 #: the report's columns of :func:`final_state_ladders` rows
