@@ -146,3 +146,21 @@ def test_scene_edits_return_new_scenes_that_build_what_they_say():
     assert (build(scene).system.n_dofs, build(finer).system.n_dofs) == (20, 40)
     with pytest.raises(TypeError):
         scene.with_time(timestep=1e-3)     # not a [time] entry
+
+
+def test_free_coordinates_locate_each_component_in_the_free_dof_vector():
+    model = build(Scene.from_dict(BEAM), mesh=_line_mesh())
+    x_nodes = np.linspace(0.0, 1.0, 11)
+    index, points = model.free_coordinates()                 # the first component: w
+    # the clamped node x = 0 has no free dof; the 10 others in node order
+    assert points.shape == (1, 10) and index.shape == (10,)
+    np.testing.assert_allclose(points[0], x_nodes[1:], rtol=0, atol=1e-15)
+    # the initial condition is the nodal interpolant of 1e-3 x^2 (values exact to round-off),
+    # so the positions pick the values out of the free vector and nothing else
+    np.testing.assert_allclose(model.initial_displacement[index], 1e-3 * points[0] ** 2, rtol=1e-14)
+    slope_index, slope_points = model.free_coordinates("slope")
+    # slopes: central differences of 1e-3 x^2 with step 1e-6 (exact for a quadratic up to
+    # round-off 1e-3 * 1e-16 / 1e-6 = 1e-13)
+    np.testing.assert_allclose(model.initial_displacement[slope_index], 2e-3 * slope_points[0], rtol=0, atol=1e-12)
+    # together the two components are every free dof, once
+    np.testing.assert_array_equal(np.sort(np.concatenate([index, slope_index])), np.arange(model.system.n_dofs))

@@ -3,7 +3,8 @@
 Three separate pieces:
 
 - a *scheme* takes one step and declares its ``order``: :class:`Newmark`
-  (average acceleration by default), :class:`GeneralizedAlpha`,
+  (average acceleration by default; its discrete frequencies :func:`newmark_frequencies`),
+  :class:`GeneralizedAlpha`,
   :class:`CentralDifference` (explicit Stoermer-Verlet), :class:`ImplicitMidpoint`;
   each is registered by the name a scene's ``[time] integrator`` uses
   (:data:`SCHEMES`, :func:`register_scheme`, :func:`scheme_for`);
@@ -36,7 +37,7 @@ from femrom.integrators._hamiltonian import (
 )
 from femrom.integrators._implicit import ImplicitSolve
 from femrom.integrators._midpoint import ImplicitMidpoint
-from femrom.integrators._newmark import GeneralizedAlpha, Newmark, NewmarkAverageAcceleration
+from femrom.integrators._newmark import GeneralizedAlpha, Newmark, NewmarkAverageAcceleration, newmark_frequencies
 from femrom.integrators._newton import NEWTON_METHODS, ConvergenceError, Newton, solve_newton
 from femrom.integrators._schemes import SCHEMES, register_scheme, scheme_for
 from femrom.integrators._simulate import SimulationResult, simulate
@@ -48,5 +49,5 @@ __all__ = [
     "ImplicitSolve", "Integration", "IntegrationError", "IntegrationSummary", "MaxFrequency", "Newmark",
     "NewmarkAverageAcceleration", "Newton", "OutputRecorder", "SimulationResult", "StepClock", "StepResult",
     "Trajectory", "bound_max_frequency", "estimate_max_frequency", "integrate", "integrate_canonical",
-    "iterate", "register_scheme", "scheme_for", "simulate", "solve_newton",
+    "iterate", "newmark_frequencies", "register_scheme", "scheme_for", "simulate", "solve_newton",
 ]

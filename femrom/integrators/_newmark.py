@@ -30,6 +30,25 @@ from femrom.integrators._newton import Newton
 from femrom.integrators._schemes import register_scheme
 
 
+def newmark_frequencies(omega, dt: float):
+    r"""The frequencies at which Newmark average acceleration (``beta = 1/4``, ``gamma = 1/2``)
+    steps undamped modes of frequencies ``omega`` [rad/s] at step ``dt``.
+
+    A mode ``q'' + omega^2 q = 0`` obeys ``q_{n+1} - 2 q_n + q_{n-1} = -(omega dt)^2
+    (q_{n+1} + 2 q_n + q_{n-1}) / 4``, whose solutions are ``cos(Omega t_n)`` and
+    ``sin(Omega t_n)`` with
+
+    .. math::
+
+        \tan(\Omega\, dt / 2) = \omega\, dt / 2,
+
+    a phase lag and no amplitude error. ``omega``: float or ndarray; returns ``Omega`` alike.
+    """
+    import numpy as np
+
+    return 2.0 / dt * np.arctan(0.5 * np.asarray(omega) * dt)
+
+
 @dataclass
 class NewmarkCache:
     """What a Newmark-family step reuses: ``dt``, the effective matrix and its solver

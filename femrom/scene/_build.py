@@ -35,6 +35,24 @@ class FullOrderModel:
     def times(self) -> np.ndarray:
         return self.scene.time.dt * np.arange(self.scene.time.n_steps + 1)
 
+    def free_coordinates(self, component: str | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Where the free dofs of one field component sit (the space's first component by default:
+        a line's values ``w`` or ``u``, not its slopes; a solid's ``x``).
+
+        Returns
+        -------
+        index : (k,) int ndarray
+            Positions of the component's free dofs in a free-dof vector (``q``, a column of
+            a snapshot matrix), in the space's node order.
+        points : (dim, k) ndarray
+            Their coordinates (mesh nodes; on P2 solids also edge midpoints).
+        """
+        dofs, points = self.space.coordinates(component)
+        free = self.system.condensation.free
+        index = np.minimum(np.searchsorted(free, dofs), free.size - 1)
+        keep = free[index] == dofs                    # the fixed dofs have no position
+        return index[keep], np.asarray(points)[:, keep]
+
 
 def _assemble(scene: Scene, mesh, timings: dict):
     """The system of the listed effects on ``mesh``; fills ``timings`` per stage."""

@@ -7,9 +7,10 @@ What the case scripts share, for any scene (``femrom run scene.toml`` with a
   store, each step timed without the consumers), :class:`FOMRun`,
   :func:`solver_factory` (one factorisation for all runs of one ``dt``);
 - a study of extrapolation in time (train on a release's first window, predict far beyond it):
-  :func:`extrapolation_config` (its learners :data:`LEARNERS`, named :data:`LEARNER_NAMES`);
+  :func:`extrapolation_config` (its learners :data:`LEARNERS`, named :data:`LEARNER_NAMES`),
+  :func:`extrapolation_scene` (a scene with it);
 - the study's steps: :func:`fom_runs`, :func:`pod_basis`, :func:`reduce_runs`,
-  :func:`training_data`, :func:`fit_rom`, :func:`evaluate`, :func:`rom_costs`,
+  :func:`training_data`, :func:`fit_rom`, :func:`evaluate`, :func:`rom_costs`, :func:`study_costs`,
   :func:`study_rows`;
 - canonical learners (``hopinf``) on conservative scenes: :func:`check_canonical_learners`,
   :func:`fit_canonical_rom`, :class:`SceneHamiltonianROM` (a Hamiltonian ROM on the
@@ -25,14 +26,20 @@ What the case scripts share, for any scene (``femrom run scene.toml`` with a
   energy of a ROM's reconstructed state), :func:`rom_table` (errors, energy errors and costs
   per learner and r), :func:`invariant_drift`, :func:`plot_energy_error_history`,
   :func:`plot_output_history`, :func:`plot_histories` (the pictures of a table),
-  :func:`evaluate_runs` (a case's own ROM on every run, as the study's);
+  :func:`evaluate_runs` (a case's own ROM on every run, as the study's), :func:`extra_rom_rows`
+  (a case's own ROMs as study rows, timed interleaved with the study's);
+- hyper-reduction: :func:`hyper_reduced_rows` (a learned ROM's known conservative force
+  replaced by its ECSW-sampled potential, :data:`HYPER_COLUMNS`);
 - costs: :class:`Cost` (the fastest of several timed blocks, and their quartiles),
   :func:`blocked_cost`, :func:`repeated_costs` (interleaved), :func:`call_cost` (of a function);
 - the scene's own run: :func:`scene_run` (:class:`SceneRun`: response plot, energy drift,
   report section);
 - the FOM's accuracy against its cost: :func:`time_step_ladder`, :func:`frequency_ladder`,
-  :func:`natural_frequencies`, :func:`final_state`, :func:`observed_order`, :func:`ladder_section`
-  (a ladder's plot and report section);
+  :func:`natural_frequencies`, :func:`final_state`, :func:`final_state_ladders` (time steps
+  against a fine run, meshes against an exact solution, in the mass norm at a final time),
+  :func:`observed_order`, :func:`ladder_section` (a ladder's plot and report section,
+  :func:`ladder_table` its text), :func:`time_step_section`, :func:`frequency_section`,
+  :func:`final_state_section` (each with its ladder's columns);
 - snapshots every k-th step (what another solver's output gives): :func:`subsampled_rows`
   (one learner from the displacements alone, from stored derivatives and from differences,
   read from the study's store every k-th column: :func:`every_kth`), :func:`subsampled_section`;
@@ -52,7 +59,7 @@ from femrom.study._figures import (
     plot_outputs,
     render_fields,
 )
-from femrom.study._extrapolation import LEARNER_NAMES, LEARNERS, extrapolation_config
+from femrom.study._extrapolation import LEARNER_NAMES, LEARNERS, extrapolation_config, extrapolation_scene
 from femrom.study._hamiltonian import (
     CanonicalRun,
     CanonicalSpec,
@@ -65,6 +72,7 @@ from femrom.study._hamiltonian import (
 )
 from femrom.study._histories import (
     evaluate_runs,
+    extra_rom_rows,
     plot_energy_error_history,
     plot_histories,
     plot_output_history,
@@ -72,13 +80,22 @@ from femrom.study._histories import (
     rom_table,
     state_energy,
 )
+from femrom.study._hyper import HYPER_COLUMNS, hyper_reduced_rows
 from femrom.study._ladders import (
+    FINAL_STATE_COLUMNS,
+    FREQUENCY_COLUMNS,
+    TIME_STEP_COLUMNS,
     final_state,
+    final_state_ladders,
+    final_state_section,
     frequency_ladder,
+    frequency_section,
     ladder_section,
+    ladder_table,
     natural_frequencies,
     observed_order,
     time_step_ladder,
+    time_step_section,
 )
 from femrom.study._metrics import Projection, energy_ratio, invariant_drift, mass_norm, project_run, relative_error
 from femrom.study._pipeline import ROW_COLUMNS, StudyState, peak_rss_gb, public_rows, run_study, write_report
@@ -98,6 +115,7 @@ from femrom.study._study import (
     rom_cost,
     rom_costs,
     scored_columns,
+    study_costs,
     study_learners,
     study_rows,
     training_data,
@@ -108,18 +126,19 @@ from femrom.study._sweep import SweepRun, run_sweep, run_sweep_point, sweep_runs
 from femrom.study._timing import Cost, blocked_cost, call_cost, repeated_cost, repeated_costs
 
 __all__ = [
-    "CanonicalRun", "CanonicalSpec", "Cost", "Evaluation", "FOMRun", "LEARNERS", "LEARNER_NAMES",
-    "Projection", "ROW_COLUMNS", "SceneHamiltonianROM", "SceneRun", "StudyState", "SweepRun", "blocked_cost",
+    "CanonicalRun", "CanonicalSpec", "Cost", "Evaluation", "FINAL_STATE_COLUMNS", "FOMRun", "FREQUENCY_COLUMNS", "HYPER_COLUMNS", "LEARNERS", "LEARNER_NAMES",
+    "Projection", "ROW_COLUMNS", "SceneHamiltonianROM", "SceneRun", "StudyState", "SweepRun", "TIME_STEP_COLUMNS", "blocked_cost",
     "call_cost", "canonical_rows", "canonical_time_step_ladder", "check_canonical_learners",
-    "check_rom_config", "energy_ratio", "evaluate", "evaluate_runs", "extrapolation_config",
-    "final_state", "fit_canonical_rom", "fit_rom", "fom_runs", "frequency_ladder", "invariant_drift",
-    "ladder_section", "linear_operator", "mass_generator", "mass_norm", "natural_frequencies",
+    "check_rom_config", "energy_ratio", "evaluate", "evaluate_runs", "extra_rom_rows", "extrapolation_config", "extrapolation_scene",
+    "final_state", "final_state_ladders", "final_state_section", "fit_canonical_rom", "fit_rom", "fom_runs", "frequency_ladder", "frequency_section", "hyper_reduced_rows", "invariant_drift",
+    "ladder_section", "ladder_table", "linear_operator", "mass_generator", "mass_norm", "natural_frequencies",
     "observed_order", "operator_checks", "peak_rss_gb", "plot_accuracy_cost", "plot_energy",
     "plot_energy_error_history", "plot_error_history", "plot_errors", "plot_histories",
     "plot_invariant_drifts", "plot_output_history", "plot_outputs", "pod_basis", "product_matrix",
     "project_run", "projected_forces", "public_rows", "reconstructed_energy_error", "reduce_runs",
     "relative_error", "render_fields", "repeated_cost", "repeated_costs", "rom_cost", "rom_costs",
     "rom_table", "run_canonical", "run_fom", "run_study", "run_sweep", "run_sweep_point", "scene_run",
-    "scored_columns", "solver_factory", "state_energy", "every_kth", "subsampled_rows", "subsampled_section", "state_error", "study_learners", "study_rows",
-    "sweep_runs", "time_step_ladder", "training_data", "write_report",
+    "scored_columns", "solver_factory", "state_energy", "every_kth", "subsampled_rows", "subsampled_section",
+    "state_error", "study_costs", "study_learners", "study_rows",
+    "sweep_runs", "time_step_ladder", "time_step_section", "training_data", "write_report",
 ]

@@ -3,7 +3,9 @@ the same release far beyond ``T``."""
 
 from __future__ import annotations
 
-from femrom.scene import BasisSpec, Derivatives, LearnerSpec, ReportSpec, RomConfig, RunSpec
+from dataclasses import replace
+
+from femrom.scene import BasisSpec, Derivatives, LearnerSpec, ReportSpec, RomConfig, RunSpec, Scene
 
 #: label -> registered learner: the intrusive reference, L-OpInf and plain OpInf
 LEARNERS = {"galerkin": "galerkin", "lopinf": "lopinf", "plain_opinf": "opinf"}
@@ -31,3 +33,10 @@ def extrapolation_config(dt: float, train_window: float, t_end: float, ranks, *,
         test=(RunSpec("extrapolation", t_end=int(round(t_end / dt)) * dt, score_after=T),),
         learners=specs, basis=BasisSpec(tuple(ranks), method="svd"), extension=1.0,
         report=ReportSpec(render=False, paraview=False))
+
+
+def extrapolation_scene(scene: Scene, dt: float, train_window: float, t_end: float, ranks, **options) -> Scene:
+    """``scene`` stepped at ``dt`` over ``[0, t_end]`` with the ``[rom]`` section of
+    :func:`extrapolation_config` (``options``: its ``derivatives``, ``terms``, ``learners``)."""
+    config = extrapolation_config(dt, train_window, t_end, ranks, **options)
+    return replace(scene.with_time(dt=dt, t_end=t_end), rom=config)

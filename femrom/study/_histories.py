@@ -23,7 +23,7 @@ import numpy as np
 from femrom.post import plot_accuracy_cost_groups, plot_time_series
 from femrom.study._figures import plot_error_history
 from femrom.study._metrics import invariant_drift
-from femrom.study._study import evaluate, scored_columns
+from femrom.study._study import evaluate, scored_columns, study_costs
 
 
 def state_energy(system, Q: np.ndarray, Qdot: np.ndarray) -> np.ndarray:
@@ -58,7 +58,7 @@ def _peak(values: np.ndarray) -> float:
 
 
 def rom_table(system, basis: np.ndarray, run, rows: list[dict], evaluations: dict, *, train: str | None = None,
-              score_after: float | None = None) -> tuple[list[dict], dict]:
+              score_after: float | None = None, carry=()) -> tuple[list[dict], dict]:
     """One row per study row on ``run`` (a :class:`~femrom.study.FOMRun` with its energy), and the
     energy-error histories.
 
@@ -72,8 +72,11 @@ def rom_table(system, basis: np.ndarray, run, rows: list[dict], evaluations: dic
     ``energy_error_test_max`` (over the scored steps), ``rom_energy_drift`` (the ROM's own
     energy, :func:`energy_drift`), ``rom_energy_growth`` and ``blowup_time`` (of the
     :class:`~femrom.study.Evaluation`), ``seconds_per_step``, ``online_seconds`` (the run's
-    steps), ``speedup``, ``cost`` (the row's, with its spread) and ``stiffness_asymmetry`` ``||K^ - K^T||_F / ||K^||_F``. A failed model
-    has ``method``, ``r``, ``failed`` and an infinite ``test_error``.
+    steps), ``speedup``, ``cost`` (the row's, with its spread), ``stiffness_asymmetry`` ``||K^ - K^T||_F / ||K^||_F``
+    and the smallest eigenvalues of the symmetric parts of ``K^`` and ``C^`` (``stiffness_min_eig``,
+    ``damping_min_eig``; ``None`` without a damping). A failed model
+    has ``method``, ``r``, ``failed`` and an infinite ``test_error``. The keys ``carry`` of a
+    source row that has them (a case's own columns) close its table row, failed rows aside.
 
     Returns
     -------
@@ -103,10 +106,12 @@ def rom_table(system, basis: np.ndarray, run, rows: list[dict], evaluations: dic
                 "seconds_per_step": row["seconds_per_step"],
                 "online_seconds": row["seconds_per_step"] * (run.times.size - 1), "speedup": row["speedup"],
                 "cost": row.get("cost")}
-        K = row["_rom"].operators_.stiffness
+        K, C = row["_rom"].operators_.stiffness, getattr(row["_rom"].operators_, "damping", None)
         if K is not None:
             out["stiffness_asymmetry"] = float(np.linalg.norm(K - K.T) / np.linalg.norm(K))
-        table.append(out)
+            out["stiffness_min_eig"] = float(np.linalg.eigvalsh(0.5 * (K + K.T))[0])
+            out["damping_min_eig"] = None if C is None else float(np.linalg.eigvalsh(0.5 * (C + C.T))[0])
+        table.append(out | {key: row[key] for key in carry if key in row})
     return table, histories
 
 
@@ -168,3 +173,40 @@ def evaluate_runs(rom, state) -> dict:
     return {spec.name: evaluate(rom, state.runs[spec.name], state.projections[spec.name],
                                 extension=state.config.extension, score_after=spec.score_after)
             for spec in specs}
+
+
+def extra_rom_rows(state, roms: dict, *, alongside=()) -> tuple[list[dict], dict]:
+    """Rows of the study's form for a case's own ROMs (e.g. hyper-reduced ones), so that
+    :func:`rom_table` treats them like the study's.
+
+    ``roms``: ``(r, label) -> ROM`` (labels other than the study's learners). Each ROM is
+    evaluated on every run (:func:`evaluate_runs`) and timed on the first test run
+    (:func:`~femrom.study.study_costs`), interleaved with the study's ROMs of the learners
+    ``alongside`` at the same r, timed anew in the same rounds: ``{learner}_seconds_per_step``
+    and ``speedup_over_{learner}`` (that ROM's step over this one's) compare models measured
+    side by side.
+
+    Returns
+    -------
+    rows : list of dict
+        ``learner``, ``r``, ``_rom``, ``seconds_per_step``, ``cost``, ``speedup``,
+        ``speedup_range``, and per learner alongside the two columns above; in the order of ``roms``.
+    evaluations : dict
+        ``(r, label, run name) -> Evaluation``.
+    """
+    study = {(row["r"], row["learner"]): row["_rom"] for row in state.rows if "failed" not in row}
+    timed = {("own", key): rom for key, rom in roms.items()}
+    timed |= {("study", (r, learner)): study[(r, learner)] for r, _ in roms for learner in alongside
+              if (r, learner) in study}
+    costs = study_costs(timed, state.runs, state.config)
+    rows, evaluations = [], {}
+    for (r, label), rom in roms.items():
+        row = {"learner": label, "r": r, "_rom": rom, **costs[("own", (r, label))]}
+        for learner in alongside:
+            other = costs.get(("study", (r, learner)))
+            if other is not None:
+                row[f"{learner}_seconds_per_step"] = other["seconds_per_step"]
+                row[f"speedup_over_{learner}"] = other["seconds_per_step"] / row["seconds_per_step"]
+        rows.append(row)
+        evaluations |= {(r, label, name): ev for name, ev in evaluate_runs(rom, state).items()}
+    return rows, evaluations

@@ -143,17 +143,138 @@ def final_state(model, dt: float, t_end: float) -> tuple[np.ndarray, dict]:
                            "seconds_per_step": summary["stepping_seconds"] / steps}
 
 
+def final_state_ladders(model, t_end: float, time_steps, fine_dt: float, meshes, exact, *,
+                        exact_name: str = "exact solution", dimension: int = 1) -> list[dict]:
+    r"""The FOM's error at ``t_end`` against its cost, over time steps and over meshes.
+
+    Every error is the relative mass norm of a final state (:func:`final_state`: the
+    scene's scheme from the initial state, only the last state kept),
+
+    .. math::
+
+        e = \|q_h(T) - q_{ref}\|_M / \|q_{ref}\|_M, \qquad \|x\|_M = \sqrt{x^T M x},
+
+    on two ladders:
+
+    - ``"time step"``: ``model`` stepped at each of ``time_steps`` against the same model at
+      ``fine_dt`` (the time error alone);
+    - ``"mesh"``: each model of ``meshes`` stepped at ``fine_dt`` against ``exact(model, t)``
+      (the space error, when ``fine_dt`` makes the time part negligible).
+
+    Parameters
+    ----------
+    model : FullOrderModel
+        The time ladder's model.
+    t_end : float
+        The final time ``T``; every step must divide it.
+    time_steps : sequence of float
+    fine_dt : float
+    meshes : iterable of FullOrderModel
+        The mesh ladder, coarsest first (a generator builds each model when its turn comes).
+    exact : callable ``(model, t) -> (n,) ndarray``
+        The exact displacement at the model's free dofs at time ``t``.
+    exact_name : str
+        What ``exact`` is, for the rows' ``reference``.
+    dimension : int
+        The mesh's dimension ``d``: the mesh ladder's order is fitted against the dofs ``n ~ h^-d``,
+        ``p = -d * slope(log e, log n)``.
+
+    Returns
+    -------
+    list of dict
+        Per run, the time ladder's first: ``ladder``, ``label`` (``dt=...``, ``n=...``),
+        :func:`final_state`'s row (``n``, ``dt``, ``steps``, ``stepping_seconds``,
+        ``seconds_per_step``), ``error``, ``reference`` and ``observed_order`` (of its
+        ladder, :func:`observed_order`).
+    """
+    from femrom.study._metrics import mass_norm
+
+    def relative(M, q, reference):
+        return mass_norm(M, q - reference) / mass_norm(M, reference)
+
+    reference, _ = final_state(model, fine_dt, t_end)
+    rows = []
+    for dt in time_steps:
+        q, row = final_state(model, dt, t_end)
+        rows.append({"ladder": "time step", "label": f"dt={dt:g}", **row,
+                     "error": relative(model.system.mass, q, reference),
+                     "reference": f"dt = {fine_dt:g}, same mesh"})
+    for mesh in meshes:
+        q, row = final_state(mesh, fine_dt, t_end)
+        exact_q = exact(mesh, row["steps"] * fine_dt)
+        rows.append({"ladder": "mesh", "label": f"n={row['n']}", **row,
+                     "error": relative(mesh.system.mass, q, exact_q), "reference": exact_name})
+    for name, key, sign in (("time step", "dt", 1.0), ("mesh", "n", -float(dimension))):
+        ladder = [row for row in rows if row["ladder"] == name]
+        if len(ladder) >= 2:
+            order = sign * observed_order([row[key] for row in ladder], [row["error"] for row in ladder])
+            for row in ladder:
+                row["observed_order"] = order
+    return rows
+
+
+def ladder_table(rows: list[dict], *, heading: str, columns: list[str], group: str | None = None,
+                 note: str = "") -> str:
+    """A ladder's report section: ``heading``, the table of ``columns``, the observed order when
+    the rows carry one (``observed_order``; with ``group``, that of each group's first row), ``note``."""
+    from femrom.post import table_section
+
+    orders = {}
+    for row in rows:
+        if "observed_order" in row:
+            orders.setdefault(None if group is None else row[group], row["observed_order"])
+    if group is None:
+        order = f"Observed order {orders[None]:.2f}." if orders else ""
+    else:
+        order = "Observed order: " + ", ".join(f"{name} {p:.2f}" for name, p in orders.items()) + "." if orders else ""
+    return table_section(heading, rows, columns, note=" ".join(part for part in (order, note) if part))
+
+
 def ladder_section(path, rows: list[dict], cost: str, error: str, label: str, *, heading: str, columns: list[str],
                    group: str | None = None, note: str = "") -> str:
     """Plot a ladder's ``error`` against ``cost`` (log-log, points annotated with ``label``; one
-    line per value of ``group`` if given; titled ``heading``) into ``path``, and return its report
-    section: ``heading``, the table of ``columns``, the observed order when the rows carry one
-    (``observed_order``), ``note``."""
-    from femrom.post import plot_accuracy_cost, plot_accuracy_cost_groups, table_section
+    line per value of ``group`` if given; titled ``heading``; rows with a zero error, a reference
+    against itself, left out) into ``path``, and return its report section (:func:`ladder_table`)."""
+    from femrom.post import plot_accuracy_cost, plot_accuracy_cost_groups
 
+    shown = [row for row in rows if row[error] > 0]
     if group is None:
-        plot_accuracy_cost(path, rows, cost, error, label, title=heading)
+        plot_accuracy_cost(path, shown, cost, error, label, title=heading)
     else:
-        plot_accuracy_cost_groups(path, rows, cost, error, label, group, title=heading)
-    order = f"Observed order {rows[0]['observed_order']:.2f}." if "observed_order" in rows[0] else ""
-    return table_section(heading, rows, columns, note=" ".join(part for part in (order, note) if part))
+        plot_accuracy_cost_groups(path, shown, cost, error, label, group, title=heading)
+    return ladder_table(rows, heading=heading, columns=columns, group=group, note=note)
+
+
+#: the report's columns of :func:`time_step_ladder` rows
+TIME_STEP_COLUMNS = ["dt", "steps", "output_error", "stepping_seconds", "seconds_per_step"]
+#: the report's columns of :func:`frequency_ladder` rows
+FREQUENCY_COLUMNS = ["mesh_size", "dofs", "frequency_error", "f1_hz", "seconds"]
+
+
+def time_step_section(path, rows: list[dict], *, heading: str, note: str = "") -> str:
+    """:func:`ladder_section` of :func:`time_step_ladder` rows: output error against stepping time,
+    points labelled with dt, the columns :data:`TIME_STEP_COLUMNS`."""
+    return ladder_section(path, rows, "stepping_seconds", "output_error", "dt", heading=heading,
+                          columns=TIME_STEP_COLUMNS, note=note)
+
+
+def frequency_section(path, rows: list[dict], *, heading: str, note: str = "") -> str:
+    """:func:`ladder_section` of :func:`frequency_ladder` rows: frequency error against build +
+    eigensolve time, points labelled with the dofs, the columns :data:`FREQUENCY_COLUMNS`."""
+    return ladder_section(path, rows, "seconds", "frequency_error", "dofs", heading=heading,
+                          columns=FREQUENCY_COLUMNS, note=note)
+
+
+#: the report's columns of :func:`final_state_ladders` rows
+FINAL_STATE_COLUMNS = ["ladder", "n", "dt", "steps", "error", "reference", "stepping_seconds", "seconds_per_step",
+                       "observed_order"]
+
+
+def final_state_section(path, rows: list[dict], *, note: str = "") -> str:
+    """The plot (error against stepping time, one line per ladder, points labelled ``dt=`` / ``n=``)
+    into ``path`` and the report section of :func:`final_state_ladders` rows (:func:`ladder_section`):
+    their table, the observed order of each ladder, ``note``."""
+    t_end = rows[0]["steps"] * rows[0]["dt"]
+    return ladder_section(path, rows, "stepping_seconds", "error", "label", group="ladder", columns=FINAL_STATE_COLUMNS,
+                          heading=f"FOM accuracy against cost (relative error in the mass norm at t = {t_end:g} s)",
+                          note=note)

@@ -14,7 +14,7 @@ from femrom.post import plot_accuracy_cost as plot_points
 from femrom.scene import Scene, build
 from femrom.snapshots import SnapshotStore
 from femrom.study._figures import plot_accuracy_cost, plot_energy, plot_errors, plot_outputs, render_fields
-from femrom.study._ladders import time_step_ladder
+from femrom.study._ladders import TIME_STEP_COLUMNS, ladder_table, time_step_ladder
 from femrom.study._canonical import check_canonical_learners
 from femrom.study._study import check_rom_config, fom_runs, interval_cost, pod_basis, product_matrix, reduce_runs, \
     study_rows
@@ -200,12 +200,8 @@ def write_report(path: Path, m: dict, energy_plot: bool = True, sections=()) -> 
     lines += ["![accuracy vs cost](accuracy_cost.png)", ""]
     if m["time_step_ladder"]:
         rows = m["time_step_ladder"]
-        lines += [f"## FOM time step (output error against the run at dt = {rows[-1]['dt']:g})", "",
-                  accuracy_cost_table(rows, ["dt", "steps", "output_error", "stepping_seconds",
-                                             "seconds_per_step"]), ""]
-        if "observed_order" in rows[0]:
-            lines += [f"Observed order {rows[0]['observed_order']:.2f}.", ""]
-        lines += ["![dt ladder](accuracy_cost_dt.png)", ""]
+        lines += [ladder_table(rows, heading=f"FOM time step (output error against the run at dt = {rows[-1]['dt']:g})",
+                               columns=TIME_STEP_COLUMNS), "", "![dt ladder](accuracy_cost_dt.png)", ""]
     r = m["renders"]
     if r.get("render"):
         lines += ["## Renders", "", f"backend: {r.get('render_backend')}", "", "![render](render.png)", ""]

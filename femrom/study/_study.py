@@ -310,7 +310,7 @@ def operator_checks(rom) -> dict:
 def study_rows(system, basis: np.ndarray, product, data: dict, projections: dict, runs: dict[str, FOMRun],
                config: RomConfig, *, learners=None, progress=None) -> tuple[list[dict], dict]:
     """One row per (r, learner): fit on the training data, evaluate on every run, cost on the first test
-    (all models timed together, interleaved: :func:`rom_costs`).
+    (all models timed together, interleaved: :func:`study_costs`).
 
     A ROM whose prediction fails (a nonlinear model's Newton iteration) gets a
     ``failed`` message, infinite errors and no cost, and the study goes on.
@@ -322,7 +322,6 @@ def study_rows(system, basis: np.ndarray, product, data: dict, projections: dict
     learners = config.learners if learners is None else learners
     train = [s.name for s in config.train if s.name in data]
     test = [s.name for s in config.test]
-    fom_cost = interval_cost(max(runs.values(), key=lambda run: run.times.size))   # the most steps: the most blocks
     score_after = {spec.name: spec.score_after for spec in (*config.train, *config.test)}
     rows, evaluations = [], {}
     for r in config.basis.ranks:
@@ -354,15 +353,25 @@ def study_rows(system, basis: np.ndarray, product, data: dict, projections: dict
             rows.append(row)
     if progress:
         progress(f"timing {len(rows)} reduced models ({config.timing.repeats} interleaved rounds)")
-    timed = {i: row["_rom"] for i, row in enumerate(rows) if "failed" not in row}
-    costs = rom_costs(timed, runs[test[0]], repeats=config.timing.repeats,
-                      min_block_seconds=config.timing.min_block_seconds)
-    for i, row in enumerate(rows):
-        if i not in costs:          # a ROM that fails cannot be timed
-            row.update(seconds_per_step=float("nan"), cost=None, speedup=float("nan"))
-            continue
-        cost = costs[i]
-        row.update(seconds_per_step=cost.seconds, cost=cost.to_dict(),
-                   speedup=fom_cost.seconds / max(cost.seconds, 1e-15),
-                   speedup_range=[fom_cost.minimum / max(cost.q75, 1e-15), fom_cost.q75 / max(cost.minimum, 1e-15)])
+    costs = study_costs({i: row["_rom"] for i, row in enumerate(rows) if "failed" not in row}, runs, config)
+    for i, row in enumerate(rows):      # a ROM that fails cannot be timed
+        row.update(costs.get(i, {"seconds_per_step": float("nan"), "cost": None, "speedup": float("nan")}))
     return rows, evaluations
+
+
+def study_costs(roms: dict, runs: dict[str, FOMRun], config: RomConfig) -> dict:
+    """The cost columns of a study's rows for ROMs timed together: :func:`rom_costs` (interleaved)
+    on the first test run, with the config's ``[rom.timing]``.
+
+    Returns, per key of ``roms``: ``seconds_per_step`` (the fastest block), ``cost``
+    (:class:`Cost` as a dict, with its spread), ``speedup`` (the FOM's cost per snapshot
+    interval of its longest run, :func:`interval_cost`, over the ROM's) and ``speedup_range``
+    (FOM minimum over ROM upper quartile, FOM upper quartile over ROM minimum).
+    """
+    fom_cost = interval_cost(max(runs.values(), key=lambda run: run.times.size))   # the most steps: the most blocks
+    costs = rom_costs(roms, runs[config.test[0].name], repeats=config.timing.repeats,
+                      min_block_seconds=config.timing.min_block_seconds)
+    return {key: {"seconds_per_step": cost.seconds, "cost": cost.to_dict(),
+                  "speedup": fom_cost.seconds / max(cost.seconds, 1e-15),
+                  "speedup_range": [fom_cost.minimum / max(cost.q75, 1e-15), fom_cost.q75 / max(cost.minimum, 1e-15)]}
+            for key, cost in costs.items()}
