@@ -6,6 +6,7 @@ one module each in the package ``femrom.scene.effects``, found by :func:`registe
 
 from femrom.scene._build import FullOrderModel, build
 from femrom.scene._config import (
+    MAX_STEPS,
     BoundaryConfig,
     EffectConfig,
     InitialConfig,
@@ -26,6 +27,7 @@ from femrom.scene._sweep import SweepConfig
 from femrom.scene._system import SecondOrderSystem
 
 __all__ = [
+    "MAX_STEPS",
     "EFFECTS", "Assembly", "BasisSpec", "BoundaryConfig", "Derivatives", "LearnerSpec", "ReportSpec",
     "RomConfig", "RunSpec", "TimingSpec", "Effect", "EffectConfig", "FullOrderModel", "InitialConfig",
     "InputConfig", "LoadConfig", "MaterialConfig", "OutputConfig", "ProbeConfig", "Scene",
