@@ -29,7 +29,8 @@ from __future__ import annotations
 import os
 import time
 import xml.etree.ElementTree as ElementTree
-from dataclasses import dataclass, field
+from dataclasses import dataclass
+from dataclasses import field as dataclass_field
 from pathlib import Path
 from typing import Iterator
 
@@ -67,9 +68,9 @@ class DisplacementSeries:
     times: np.ndarray
     mesh_path: Path
     field: str
-    _steps: object = field(repr=False, default=None)
+    _steps: object = dataclass_field(repr=False, default=None)
     n_points: int = 0
-    cells: object = field(repr=False, default=None)   # (points, cells) when the mesh file is no mesh file (XDMF)
+    cells: object = dataclass_field(repr=False, default=None)   # (points, cells) when the mesh file is no mesh file (XDMF)
 
     def steps(self) -> Iterator[tuple[int, float, np.ndarray]]:
         """Yield ``(k, t_k, U_k)`` with ``U_k`` (n_points, dim), checked finite and of the mesh's size."""
@@ -317,7 +318,7 @@ class IngestedModel:
     space: object
     system: SecondOrderSystem
     fixed: np.ndarray
-    detail: dict = field(default_factory=dict)
+    detail: dict = dataclass_field(default_factory=dict)
 
     def free_values(self, values: np.ndarray) -> np.ndarray:
         """(n_free,) free dofs of point values (n_points, dim)."""

@@ -14,8 +14,9 @@ reduced Hamiltonian is
 for the intrusive model. A canonical learner (``hopinf``) fits symmetric ``D^_q``,
 ``D^_p`` from the study's reduced data seen canonically
 (:func:`~femrom.inference.canonical_from_second_order`: ``p^ = q^'``), its output map
-``E^`` from the recorded outputs (on ``q^`` alone: the scene's outputs are displacements), and the ROM steps with the implicit midpoint rule
-(symplectic; with a potential, Newton on ``J grad H^``). :class:`SceneHamiltonianROM`
+``E^`` from the recorded outputs (on ``q^`` alone: the scene's outputs are
+displacements), and the ROM steps with the implicit midpoint rule (symplectic; with
+a potential, Newton on ``J grad H^``). :class:`SceneHamiltonianROM`
 lets the study call it like a second-order ROM: full initial displacement and
 velocity in, ``outputs``, ``q`` (reduced) and ``energy`` (``H^``) out.
 """
