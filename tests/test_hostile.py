@@ -271,3 +271,38 @@ def test_a_mesh_size_gmsh_does_not_honour_is_refused():
         build_mesh(ROOT / "tests" / "data" / "bracket.geo", {"mesh_size": 1e-300})
     mesh = build_mesh(ROOT / "tests" / "data" / "bracket.geo", {"mesh_size": 0.02})    # honoured: accepted
     assert mesh.t.shape[1] > 100
+
+
+def test_a_file_size_limit_while_streaming_keeps_the_committed_snapshots(tmp_path):
+    """RLIMIT_FSIZE below what the run needs (a disk that fills): one SnapshotStoreError naming the
+    limit, no crash at exit (it was a raw HDF5 RuntimeError, then a segmentation fault), and a store
+    that opens afterwards with every committed step equal to an unlimited run's."""
+    script = tmp_path / "limited.py"
+    script.write_text(f"""
+import resource, sys
+import numpy as np, scipy.sparse as sp
+from femrom.integrators import Newmark, integrate
+from femrom.scene import SecondOrderSystem
+from femrom.snapshots import SnapshotStore, SnapshotStoreError
+n = 2000
+K = sp.diags([2.0 * np.ones(n), -np.ones(n - 1), -np.ones(n - 1)], [0, 1, -1], format="csr")
+system = SecondOrderSystem(mass=sp.identity(n, format="csr"), stiffness=K)
+for name, limit in (("free", None), ("limited", 8_000_000)):
+    store = SnapshotStore.create("{tmp_path}/" + name + ".h5", system, dt=0.01, n_steps=1000)
+    if limit:
+        resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
+    try:
+        integrate(system, Newmark(), np.sin(np.arange(n)), np.zeros(n), 0.01, 1000,
+                  consumers=[store.writer(chunk_steps=50)])
+    except SnapshotStoreError as exc:
+        print("ERROR", exc)
+    store.close()
+""")
+    proc = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, (proc.returncode, proc.stderr[-500:])
+    assert "file size limit 8000000 bytes reached (RLIMIT_FSIZE)" in proc.stdout and "committed steps are kept" \
+        in proc.stdout
+    with SnapshotStore.open(tmp_path / "limited.h5") as limited, SnapshotStore.open(tmp_path / "free.h5") as free:
+        kept = limited.length("000")
+        assert 0 < kept < free.length("000") == 1001
+        np.testing.assert_array_equal(limited.read("000", "q"), free.read("000", "q", 0, kept))

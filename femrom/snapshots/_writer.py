@@ -29,6 +29,11 @@ from __future__ import annotations
 import datetime
 import os
 
+try:
+    import resource
+except ImportError:  # pragma: no cover - not on POSIX
+    resource = None
+
 import numpy as np
 from h5py import h5s
 
@@ -41,6 +46,10 @@ from femrom.snapshots._store import trajectory_name
 DEFAULT_CHUNK_BYTES = 4 * 2**20
 #: HDF5 chunks must stay below 4 GiB; keep a margin.
 MAX_CHUNK_BYTES = 2**31
+
+
+#: Bytes a commit may need beyond its chunks (chunk index nodes, object headers, the checkpoint).
+METADATA_MARGIN = 1 << 20
 
 
 def default_chunk_steps(n_dofs: int) -> int:
@@ -255,6 +264,7 @@ class SnapshotWriter:
         k = self._buffered
         if k == 0:
             return
+        self._check_room()
         start, stop = self._length, self._length + k
         for key, ds in self._rows.items():
             ds.resize(stop, axis=0)
@@ -265,6 +275,36 @@ class SnapshotWriter:
         _write_rows(self._committed, 0, np.array([stop, slot], dtype=np.int64))
         self._flush()
         self._length, self._slot, self._buffered = stop, slot, 0
+
+    def _check_room(self) -> None:
+        """Refuse a commit the disk or the file-size limit cannot take, before HDF5 writes any of it.
+
+        A write that fails inside HDF5 leaves its library state broken (measured: a raw
+        ``RuntimeError`` "file write failed ... File too large", then a segmentation fault
+        when the file is closed, and a file cut at the limit that no reader opens). Checked
+        here instead: the whole chunks of this commit (HDF5 allocates chunks whole) plus
+        :data:`METADATA_MARGIN` for its index and headers, against the free space of the
+        file system and ``RLIMIT_FSIZE``. Nothing is written when it does not fit: the
+        committed snapshots stay readable and the store opens afterwards.
+        """
+        need = METADATA_MARGIN + sum(int(buffer[:1].nbytes) * self.chunk_steps for buffer in self._buffers.values())
+        path = self.store.path
+        size = os.path.getsize(path)
+        free = None
+        try:
+            stats = os.statvfs(path)
+            free = stats.f_bavail * stats.f_frsize
+        except OSError:          # pragma: no cover - a file system without statvfs
+            pass
+        limit = resource.getrlimit(resource.RLIMIT_FSIZE)[0] if resource is not None else None
+        if free is not None and free < need:
+            raise SnapshotStoreError(f"{path}: disk full: trajectory {self.trajectory!r} needs {need} bytes for its "
+                                     f"next {self._buffered} steps, {free} are free; its {self._length} committed "
+                                     "steps are kept")
+        if limit is not None and limit != resource.RLIM_INFINITY and size + need > limit:
+            raise SnapshotStoreError(f"{path}: file size limit {limit} bytes reached (RLIMIT_FSIZE): trajectory "
+                                     f"{self.trajectory!r} needs {need} more; its {self._length} committed steps "
+                                     "are kept")
 
     def _write_checkpoint(self, slot: int, result) -> None:
         ck = self._checkpoint
@@ -295,7 +335,11 @@ class SnapshotWriter:
             os.fsync(f.id.get_vfd_handle())
 
     def close(self) -> None:
-        """Commit the buffered partial chunk and release the file (idempotent)."""
+        """Commit the buffered partial chunk and release the file (idempotent).
+
+        When that commit cannot be made (:meth:`_check_room`), the file is released all
+        the same and the error raised after: the committed steps stay readable.
+        """
         if self._closed:
             return
         try:
