@@ -36,7 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from femrom.integrators import newmark_frequencies
-from femrom.post import machine_description, plot_accuracy_cost_groups, table_section
+from femrom.post import machine_description, plot_accuracy_cost_groups, staged_output, table_section
 from femrom.scene import Derivatives, Scene
 from femrom.study import LEARNER_NAMES, extrapolation_scene, frequency_ladder, frequency_section, invariant_drift, \
     natural_frequencies, plot_histories, plot_output_history, rom_table, run_study, scene_run, scored_columns, \
@@ -246,7 +246,8 @@ def main(argv=None) -> int:
                                     main_rank=args.ranks[min(len(args.ranks) - 1, 3)])
     if args.train_window:
         study = dataclasses.replace(study, train_window=args.train_window)
-    metrics = run(args.out, quick=args.quick, rom=study, ladders=not args.no_ladders)
+    with staged_output(args.out) as out:    # the results appear whole, or the old ones stay
+        metrics = run(out, quick=args.quick, rom=study, ladders=not args.no_ladders)
     print(f"beam: {metrics['n_dofs']} dofs, energy drift {metrics['energy_relative_drift']:.1e}, f1 = "
           f"{metrics['frequencies_hz'][0]:.3f} Hz (analytic {metrics['analytic_frequencies_hz'][0]:.3f}); "
           f"report in {args.out / 'report.md'}")

@@ -37,7 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
-from femrom.post import accuracy_cost_table, plot_accuracy_cost
+from femrom.post import accuracy_cost_table, plot_accuracy_cost, staged_output
 from femrom.scene import BasisSpec, Derivatives, InputConfig, LearnerSpec, ReportSpec, RomConfig, RunSpec, \
     Scene, Signal, build
 from femrom.solvers import make_solver
@@ -247,9 +247,10 @@ def main(argv=None) -> int:
     parser.add_argument("--store", type=Path, help="where the snapshot store goes (default OUT/snapshots.h5)")
     args = parser.parse_args(argv)
     ladders = args.level in ("tiny", "small") if args.ladders is None else args.ladders
-    metrics = run(args.out, quick=args.quick, level=args.level, train=args.train, n_inputs=args.inputs,
-                  ranks=args.ranks, ladders=ladders, reverse=args.reverse, keep_snapshots=args.keep_snapshots,
-                  store_path=args.store)
+    with staged_output(args.out) as out:    # the results appear whole, or the old ones stay
+        metrics = run(out, quick=args.quick, level=args.level, train=args.train, n_inputs=args.inputs,
+                      ranks=args.ranks, ladders=ladders, reverse=args.reverse, keep_snapshots=args.keep_snapshots,
+                      store_path=args.store)
     r = max(metrics["ranks"])
     row = next(x for x in metrics["roms"] if x["r"] == r and x["learner"] == "lopinf")
     print(f"fishtail ({args.level}): {metrics['n_dofs']} dofs, FOM {metrics['fom_seconds_per_step'] * 1e3:.1f} "

@@ -36,7 +36,7 @@ from threadpoolctl import threadpool_limits
 from femrom.fem import QuarticPotential
 from femrom.integrators import CanonicalSystem
 from femrom.post import accuracy_cost_table, machine_description, plot_accuracy_cost as plot_points, \
-    plot_time_series, pyplot, write_metrics
+    plot_time_series, pyplot, staged_output, write_metrics
 from femrom.study import CanonicalSpec, canonical_rows, canonical_time_step_ladder, invariant_drift, \
     plot_accuracy_cost, plot_invariant_drifts, run_canonical
 
@@ -243,7 +243,8 @@ def main(argv=None) -> int:
                         help="same windows, 2x coarser step (dt = 4e-3), headline rank only, no Tikhonov "
                              "sweep or FOM time-step ladder (tests)")
     args = parser.parse_args(argv)
-    m = run(args.out, quick=args.quick)
+    with staged_output(args.out) as out:    # the results appear whole, or the old ones stay
+        m = run(out, quick=args.quick)
     print(f"nls: r = {m['rank']}, drifts over the test window; report in {args.out}")
     for name, row in m["headline"].items():
         blowup = "" if row["blowup_time"] is None else f", blows up at t = {row['blowup_time']:.3g}"

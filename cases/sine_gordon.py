@@ -41,7 +41,7 @@ from pathlib import Path
 
 import numpy as np
 
-from femrom.post import accuracy_cost_table, pyplot, save_figure, table_section
+from femrom.post import accuracy_cost_table, pyplot, save_figure, staged_output, table_section
 from femrom.scene import Derivatives, Scene, build
 from femrom.study import HYPER_COLUMNS, LEARNER_NAMES, extrapolation_scene, final_state_ladders, final_state_section, \
     hyper_reduced_rows, invariant_drift, plot_histories, plot_output_history, rom_table, run_study
@@ -236,7 +236,8 @@ def main(argv=None) -> int:
     if args.ranks:
         study = dataclasses.replace(study, ranks=tuple(args.ranks),
                                     main_rank=args.ranks[min(len(args.ranks) - 1, 2)])
-    metrics = run(args.out, study=study)
+    with staged_output(args.out) as out:    # the results appear whole, or the old ones stay
+        metrics = run(out, study=study)
     print(f"sine_gordon: {metrics['n_dofs']} dofs, FOM {metrics['fom']['summary']['stepping_seconds']:.2f} s, "
           f"energy drift {metrics['fom']['energy_drift']:.1e}; report in {args.out}")
     print(accuracy_cost_table(metrics["rows"], ["method", "r", "test_error", "projection_error", "energy_error_max",

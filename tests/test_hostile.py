@@ -306,3 +306,10 @@ for name, limit in (("free", None), ("limited", 8_000_000)):
         kept = limited.length("000")
         assert 0 < kept < free.length("000") == 1001
         np.testing.assert_array_equal(limited.read("000", "q"), free.read("000", "q", 0, kept))
+
+
+def test_a_named_case_into_a_folder_that_is_a_file_is_one_line(tmp_path):
+    out = tmp_path / "out"
+    out.write_text("a file")
+    proc = _femrom("run", "nls", "--quick", "--out", str(out))
+    assert proc.returncode == 2 and proc.stderr.strip().splitlines() == [f"femrom: {out}: exists and is not a folder"]
