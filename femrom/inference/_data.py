@@ -174,6 +174,55 @@ class SecondOrderData:
         return replace(self, velocities=Qd, accelerations=Qdd, diagnostics=d)
 
 
+    def upsampled(self, substeps: int, inputs: np.ndarray | None = None) -> "SecondOrderData":
+        r"""The data on a grid ``substeps`` times finer: reduced states filled in by cubic splines.
+
+        Snapshots saved every k-th step of a solver with step ``dt`` (spacing
+        ``h = k dt``) do not determine a Newmark model at ``h`` when the dynamics are
+        only just resolved at ``dt``: the k-step propagator is out of its reach. A ROM
+        stepping ``dt`` is, and the missing reduced states between the snapshots are
+        smooth functions of time: interpolating them (``scipy.interpolate.CubicSpline``,
+        not-a-knot, per coordinate; its error ``O(h^4)``) gives data on the fine grid for
+        :meth:`integrator_consistent`, whose ROM then steps ``dt``. States, outputs and
+        projected forces are interpolated; the inputs, known at any time, are taken as
+        given on the fine grid (``inputs``, (m, k K') ndarray) or interpolated too.
+
+        Parameters
+        ----------
+        substeps : int
+            ``k``: the fine step is ``diagnostics["dt"] / k``.
+        inputs : (m, (K - 1) k + 1) ndarray, optional
+
+        Returns
+        -------
+        SecondOrderData
+            With ``diagnostics["dt"]`` the fine step and ``upsampled = k``; velocities
+            and accelerations are placeholders (zeros) for :meth:`integrator_consistent`.
+        """
+        from scipy.interpolate import CubicSpline
+
+        k = int(substeps)
+        h = self.diagnostics.get("dt")
+        if k < 1 or h is None or self.diagnostics.get("n_trajectories", 1) != 1 or len(self.starts) > 1:
+            raise ValueError("upsampling needs one trajectory with a known step dt and substeps >= 1")
+        if k == 1:
+            return self
+        coarse = np.arange(self.n_samples) * h
+        fine = np.arange((self.n_samples - 1) * k + 1) * (h / k)
+        spline = lambda X: None if X is None else CubicSpline(coarse, X, axis=1)(fine)  # noqa: E731
+        if inputs is not None:
+            inputs = np.atleast_2d(np.asarray(inputs, dtype=float))
+            if inputs.shape[1] != fine.size:
+                raise ValueError(f"inputs on the fine grid must have {fine.size} columns, got {inputs.shape[1]}")
+        states = spline(self.states)
+        d = {key: v for key, v in self.diagnostics.items()
+             if key not in ("column_residual2", "column_norm2", "velocity_error", "acceleration_error")}
+        d.update(dt=h / k, upsampled=k)
+        return replace(self, states=states, velocities=np.zeros_like(states), accelerations=np.zeros_like(states),
+                       inputs=inputs if inputs is not None else spline(self.inputs),
+                       nonlinear_forces=spline(self.nonlinear_forces), outputs=spline(self.outputs),
+                       times=None if self.times is None else self.times[0] + fine, diagnostics=d)
+
     def integrator_consistent(self) -> "SecondOrderData":
         r"""Data from the displacements alone that the Newmark (average acceleration) ROM reproduces exactly.
 

@@ -7,11 +7,15 @@ at one r from
 
 - the displacements alone, by the integrator-consistent differences at the snapshot
   spacing ``h = k dt`` (:meth:`~femrom.inference.SecondOrderData.integrator_consistent`),
+  the ROM stepping ``h``;
+- the displacements alone filled in to the FOM's ``dt`` by cubic splines
+  (:meth:`~femrom.inference.SecondOrderData.upsampled`, the inputs known at every ``dt``),
+  integrator-consistent at ``dt``, the ROM stepping ``dt`` (``integrator_dt``, k > 1),
 - the stored Newmark ``q'``, ``q''`` at the kept steps (when the store has them),
 - 4th-order finite differences of the kept displacements,
 
-and predicts the first test run on its every-k-th-step grid with the ROM stepping
-``h``; errors against the test run's kept steps (the field error exact, from the
+and predicts the first test run, scored on its every-k-th-step grid (the other models
+step ``h``); errors against the test run's kept steps (the field error exact, from the
 study's projection of that run).
 """
 
@@ -28,8 +32,8 @@ from femrom.rom import SecondOrderROM
 from femrom.study._metrics import Projection, relative_error
 from femrom.study._study import projected_forces
 
-#: The derivative data compared, by label.
-SOURCES = ("integrator", "stored", "fd4")
+#: The derivative data compared, by label (``integrator_dt``: only for k > 1).
+SOURCES = ("integrator", "integrator_dt", "stored", "fd4")
 
 
 def every_kth(source, k: int):
@@ -49,7 +53,7 @@ def every_kth(source, k: int):
 def subsampled_rows(state, every=(1, 2, 5, 10), *, r: int | None = None, learner: str = "lopinf") -> list[dict]:
     """One row per (k, derivative source): the learner at rank ``r`` (default: the study's largest).
 
-    Rows hold ``every``, ``h``, ``learner``, ``derivatives``, ``train_output_error``,
+    Rows hold ``every``, ``h``, ``rom_step``, ``learner``, ``derivatives``, ``train_output_error``,
     ``test_output_error``, ``test_field_error``, ``test_projection_error`` (the basis'
     floor on the kept steps) and ``fit_seconds``; a source the store lacks (stored
     derivatives) is skipped, a prediction that fails gets infinite errors and ``failed``.
@@ -79,6 +83,10 @@ def subsampled_rows(state, every=(1, 2, 5, 10), *, r: int | None = None, learner
                 raise ValueError("learning every k-th step takes stateless nonlinear forces only")
             raw = replace(raw, nonlinear_forces=projected_forces(system.nonlinear, V, q))
         data = {"integrator": raw.integrator_consistent(), "fd4": raw.with_finite_differences(4)}
+        if k > 1:      # filled in to the FOM's dt, the inputs known there: the ROM steps dt
+            fine = (raw.n_samples - 1) * k + 1                  # the FOM steps the kept ones span
+            data["integrator_dt"] = raw.upsampled(k, None if train.U is None else train.U[:, :fine]) \
+                .integrator_consistent()
         if stored:
             data["stored"] = raw
         times = test.times[keep]
@@ -89,14 +97,19 @@ def subsampled_rows(state, every=(1, 2, 5, 10), *, r: int | None = None, learner
             tic = time.perf_counter()
             cls = learner_class(learner)
             rom = SecondOrderROM(basis=V, product=W, learner=cls.for_system(system, basis=V)).fit(data[source])
-            row = {"every": k, "h": h, "learner": learner, "r": r, "derivatives": source,
+            row = {"every": k, "h": h, "rom_step": h if source != "integrator_dt" else train.dt,
+                   "learner": learner, "r": r, "derivatives": source,
                    "fit_seconds": time.perf_counter() - tic,
                    "test_projection_error": floor.projection_error(r)}
+            step = 1 if source == "integrator_dt" else k       # the ROM's step: dt, or the spacing h
+            grid = slice(None, None, k // step)                  # its solution at the kept steps
             try:
                 with np.errstate(all="ignore"):
-                    fit = rom.predict(train.q0, train.times[keep], v0=train.v0, inputs=None if train.U is None
-                                      else train.U[:, keep])
-                    prediction = rom.predict(test.q0, times, v0=test.v0, inputs=test.inputs.sampled(times))
+                    fit = rom.predict(train.q0, train.times[::step], v0=train.v0, inputs=None if train.U is None
+                                      else train.U[:, ::step])
+                    prediction = rom.predict(test.q0, test.times[::step], v0=test.v0,
+                                             inputs=test.inputs.sampled(test.times[::step]))
+                    fit, prediction = _at(fit, grid), _at(prediction, grid)
             except (RuntimeError, np.linalg.LinAlgError) as exc:
                 rows.append(row | {"failed": str(exc), "train_output_error": float("inf"),
                                    "test_output_error": float("inf"), "test_field_error": float("inf")})
@@ -109,6 +122,13 @@ def subsampled_rows(state, every=(1, 2, 5, 10), *, r: int | None = None, learner
     return rows
 
 
+def _at(solution, grid: slice):
+    """A reduced solution's ``q`` and ``outputs`` at the columns ``grid``."""
+    from types import SimpleNamespace
+
+    return SimpleNamespace(q=solution.q[:, grid], outputs=None if solution.outputs is None else solution.outputs[:, grid])
+
+
 def subsampled_section(rows: list[dict], train: str, test: str) -> str:
     """The report's section on ``rows`` (:func:`subsampled_rows`)."""
     from femrom.post import accuracy_cost_table
@@ -116,7 +136,9 @@ def subsampled_section(rows: list[dict], train: str, test: str) -> str:
     return (f"## Learning from snapshots every k-th step (trained on {train}, tested on {test})\n\n"
             "The training run's displacements every k-th step, h = k dt; derivatives: `integrator` (from the "
             "displacements alone, the differences the ROM's Newmark steps reproduce, "
-            "`SecondOrderData.integrator_consistent`), `stored` (the FOM's Newmark q', q'' at the kept steps), "
-            "`fd4` (4th-order differences of the kept displacements); every ROM steps h.\n\n"
-            + accuracy_cost_table(rows, ["every", "h", "r", "derivatives", "train_output_error", "test_output_error",
+            "`SecondOrderData.integrator_consistent`; the ROM steps h), `integrator_dt` (the same, filled in to "
+            "the FOM's dt by cubic splines, `SecondOrderData.upsampled`; the ROM steps dt), `stored` (the FOM's "
+            "Newmark q', q'' at the kept steps; steps h), `fd4` (4th-order differences of the kept displacements; "
+            "steps h).\n\n"
+            + accuracy_cost_table(rows, ["every", "h", "rom_step", "r", "derivatives", "train_output_error", "test_output_error",
                                          "test_field_error", "test_projection_error", "fit_seconds"]))
