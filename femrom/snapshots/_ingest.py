@@ -41,7 +41,6 @@ from femrom import fem
 from femrom.integrators import StepResult
 from femrom.mesh import load_mesh
 from femrom.scene import SecondOrderSystem
-from femrom.snapshots._errors import SnapshotStoreError
 from femrom.snapshots._store import SnapshotStore
 
 

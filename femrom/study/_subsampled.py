@@ -89,7 +89,6 @@ def subsampled_rows(state, every=(1, 2, 5, 10), *, r: int | None = None, learner
                 .integrator_consistent()
         if stored:
             data["stored"] = raw
-        times = test.times[keep]
         floor = Projection(projection.coordinates[:, keep], projection.residual2[keep], projection.norm2[keep])
         for source in SOURCES:
             if source not in data:
