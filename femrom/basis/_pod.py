@@ -212,6 +212,12 @@ class POD:
             if not isinstance(data, np.ndarray):
                 raise TypeError(f"method 'svd' needs an in-memory ndarray, got {type(data).__name__}; "
                                 "use method='randomized' for block sources")
+            # the one path that reads no blocks (those are checked as they are read)
+            if data.dtype.kind not in "fiu":
+                raise ValueError(f"POD: snapshots must be real numbers, got dtype {data.dtype}")
+            if not np.all(np.isfinite(data)):
+                bad = np.argwhere(~np.isfinite(data))[0]
+                raise ValueError(f"POD: snapshot column {bad[1]} is not finite (row {bad[0]})")
             return exact_svd(data, inner)
         if method == "randomized":
             scheme = {} if self.scheme is None else {"scheme": self.scheme}
@@ -258,12 +264,6 @@ class POD:
         if product is None and isinstance(data, StreamingSketch):
             product = data.product.matrix
         inner = InnerProduct(product)
-        if isinstance(data, np.ndarray):     # in-memory data: checked here (streamed blocks: by the SVD)
-            if data.dtype.kind not in "fiu":
-                raise ValueError(f"POD: snapshots must be real numbers, got dtype {data.dtype}")
-            if not np.all(np.isfinite(data)):
-                bad = np.argwhere(~np.isfinite(data))[0]
-                raise ValueError(f"POD: snapshot column {bad[1]} is not finite (row {bad[0]})")
         svd = self._decompose(data, method, inner)
         if not svd.total_energy > 0:
             raise ValueError("POD: every snapshot is zero; there is nothing to build a basis from")
