@@ -312,12 +312,6 @@ class HamiltonianROM(ReducedModel):
             raise ValueError("this model has no basis: full fields cannot be reconstructed")
         return self.basis @ q, self.basis @ p
 
-    def reduce(self, x: np.ndarray) -> np.ndarray:
-        """(r,) or (r, k) ``Phi^T x`` of full (n,) or (n, k) positions or momenta."""
-        if self.basis is None:
-            raise ValueError("a full-order vector needs the basis to be reduced")
-        return self.basis.T @ np.asarray(x, dtype=float)
-
     def predict(self, q0: np.ndarray, p0: np.ndarray, times: np.ndarray,
                 scheme: str | None = None) -> HamiltonianSolution:
         r"""Integrate the ROM on a uniform time grid.

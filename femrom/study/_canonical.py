@@ -79,7 +79,7 @@ class SceneHamiltonianROM:
 
     def __init__(self, rom: HamiltonianROM, product):
         self.rom = rom
-        self.product = product
+        self.product = rom.product = product
 
     @property
     def r(self) -> int:
@@ -93,16 +93,12 @@ class SceneHamiltonianROM:
     def operators_(self) -> HamiltonianOperators:
         return self.rom.operators_
 
-    def reduce(self, x) -> np.ndarray:
-        """(r,) ``V^T M x`` of a full (n,) vector."""
-        return self.basis.T @ (self.product @ np.asarray(x, dtype=float))
-
     def predict(self, q0, times, *, v0=None, inputs=None):
         """Integrate from the full ``(q0, v0)``; ``inputs`` must be absent or zero."""
         if inputs is not None and np.any(np.asarray(inputs) != 0):
             raise ValueError("a canonical Hamiltonian ROM has no inputs")
-        q0 = self.reduce(q0)
-        p0 = np.zeros_like(q0) if v0 is None else self.reduce(v0)
+        q0 = self.rom.reduce(q0)                 # V^T M q0: the ROM's basis is orthonormal in M
+        p0 = np.zeros_like(q0) if v0 is None else self.rom.reduce(v0)
         return self.rom.predict(q0, p0, times)
 
 
@@ -119,6 +115,7 @@ def fit_canonical_rom(system, basis: np.ndarray, product, r: int, spec, data) ->
     # the scene's outputs are displacement probes, y = E q: E^ acts on q^ alone
     learner = learner_class(spec.learner)(regularization=spec.regularization, outputs_of="position")
     rom = HamiltonianROM(basis=V, potential=potential, learner=learner, scheme="midpoint")
+    rom.product = product              # reduce(x) = V^T M x (ReducedModel)
     return SceneHamiltonianROM(rom.fit(canonical_from_second_order(data)), product)
 
 
