@@ -155,10 +155,11 @@ class _Models:
     def __init__(self, system, V, data):
         self.system, self.V, self.data = system, V, data
         self.potential = system.potential
+        self.galerkin = HamiltonianROM.galerkin(system, V)      # projected once per basis
 
     def fit(self, spec: CanonicalSpec, regularization: float):
         if spec.learner == "galerkin":
-            return HamiltonianROM.galerkin(self.system, self.V, scheme=spec.scheme)
+            return HamiltonianROM(self.galerkin.operators_, self.V, self.potential, scheme=spec.scheme)
         if spec.learner == "hopinf":
             learner = HamiltonianOpInf(regularization, shared=spec.shared).fit(self.data)
             rom = HamiltonianROM(learner.operators_, self.V, self.potential, scheme=spec.scheme)
@@ -235,7 +236,7 @@ def canonical_rows(system, run: CanonicalRun, specs, *, ranks, train_window: flo
                                           gradient_data=gradient_data)
         models = _Models(system, V, data)
         y0 = np.concatenate([V.T @ Q[:, 0], V.T @ P[:, 0]])
-        galerkin = HamiltonianROM.galerkin(system, V).operators_
+        galerkin = models.galerkin.operators_
         for spec in specs:
             tic = time.perf_counter()
             weight = spec.regularization
