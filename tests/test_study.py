@@ -257,6 +257,9 @@ def test_learning_from_displacements_alone_every_kth_step(tmp_path):
         q1, q2 = s1.read("step", "q"), s2.read("step", "q")
         assert q2.shape[1] == (q1.shape[1] + 1) // 2
         np.testing.assert_array_equal(q2, q1[:, ::2])     # the same run, every 2nd step kept
+        # each run's own input is stored, not the scene's: the test step is -7e4 from 3.05 ms on
+        t, u = s1.times("step"), s1.read("step", "u")[0]
+        np.testing.assert_array_equal(u, np.where(t >= 0.00305, -7.0e4, 0.0))
     assert m2["fom"]["step"]["snapshot_every"] == 2
     # the FOM's cost per snapshot interval is two of its steps: speedups compare equal spans of time
     row = m2["roms"][0]

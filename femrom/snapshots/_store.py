@@ -225,12 +225,12 @@ class SnapshotStore:
     # -- writing -----------------------------------------------------------
     def writer(self, trajectory=None, *, chunk_steps: int | None = None, every: int = 1,
                n_steps: int | None = None, dt: float | None = None, scheme=None,
-               fsync: bool = False):
+               fsync: bool = False, inputs=None):
         """A consumer that streams a run into a new trajectory; see :class:`SnapshotWriter`."""
         from femrom.snapshots._writer import SnapshotWriter
 
         return SnapshotWriter(self, trajectory, chunk_steps=chunk_steps, every=every,
-                              n_steps=n_steps, dt=dt, scheme=scheme, fsync=fsync)
+                              n_steps=n_steps, dt=dt, scheme=scheme, fsync=fsync, inputs=inputs)
 
     def import_trajectory(self, source, trajectory, name=None, *, attrs: dict | None = None,
                           fsync: bool = False) -> str:

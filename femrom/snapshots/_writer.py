@@ -89,6 +89,10 @@ class SnapshotWriter:
         Continue the existing ``trajectory`` after its declared length instead
         (what :func:`~femrom.snapshots.resume` does); the other options are then
         the trajectory's own.
+    inputs : callable, optional
+        ``u(t) -> (m,)`` of the run written, stored as ``u``; the store's system's
+        by default. A run under other signals than the store's system (a test
+        input) passes its own, or the store records the wrong ``u``.
 
     Notes
     -----
@@ -101,11 +105,12 @@ class SnapshotWriter:
 
     def __init__(self, store, trajectory=None, *, chunk_steps: int | None = None, every: int = 1,
                  n_steps: int | None = None, dt: float | None = None, scheme=None,
-                 fsync: bool = False, append: bool = False):
+                 fsync: bool = False, append: bool = False, inputs=None):
         system = store.system
         if system is None:
             raise SnapshotStoreError(f"{store.path}: open the store with system=... to write to it")
         self.store, self.system, self.fsync = store, system, bool(fsync)
+        self.inputs = system.inputs if inputs is None else inputs
         self._closed = True
 
         def change_layout(f) -> None:  # under the undo journal (store._open_for_writing)
@@ -242,7 +247,7 @@ class SnapshotWriter:
 
     def _value(self, result, key):
         if key == "u":
-            return np.asarray(self.system.inputs(result.t), dtype=float).ravel()
+            return np.asarray(self.inputs(result.t), dtype=float).ravel()
         if key == "y":
             return np.asarray(self.system.outputs(result.q)).ravel()
         value = getattr(result, key)

@@ -109,7 +109,7 @@ def run_fom(model, signals: tuple[Signal, ...] | None = None, *, name: str = "ru
     every = int(every)
     if every < 1 or n_steps % every:
         raise ValueError(f"run {name!r}: every = {every} must be >= 1 and divide the {n_steps} steps")
-    writers = [] if store is None else [store.writer(name, n_steps=n_steps, dt=dt, every=every)]  # closed by the driver
+    writers = [] if store is None else [store.writer(name, n_steps=n_steps, dt=dt, every=every, inputs=u)]  # closed by the driver
     result = simulate(model, dt=dt, t_end=t_end, consumers=writers, progress=None, solver=solver, clock=clock)
     keep = slice(None, None, every)
     pick = lambda x: None if x is None else x[..., keep]  # noqa: E731
