@@ -10,7 +10,8 @@
   every registered term;
 - data: :func:`finite_difference`, :func:`reduce_snapshots` /
   :class:`SecondOrderData`, :func:`reduce_canonical_snapshots` /
-  :class:`CanonicalData`;
+  :class:`CanonicalData`; snapshots every k-th step refined between by the model
+  (:func:`alternating_fill`);
 - learners (``fit(data) -> self``, ``operators_``; :func:`registered_learners` by name):
   :class:`LagrangianOpInf` (structure-preserving, a semidefinite program
   solved by :func:`solve_fast` or the cvxpy reference :func:`solve_conic`),
@@ -31,6 +32,7 @@ from femrom.inference._data import (
     reduced_coordinates,
 )
 from femrom.inference._derivatives import finite_difference, stencil_weights
+from femrom.inference._fill import FillSweep, alternating_fill, fill_between_snapshots, newmark_residual_matrix
 from femrom.inference._fast import FastOptions, solve_fast
 from femrom.inference._hamiltonian import (
     GRADIENT_DATA,
@@ -86,6 +88,7 @@ __all__ = [
     "LagrangianOpInf", "Learner", "LinearTerm", "Mass", "Output", "ProjectedNonlinearForce",
     "ProjectedPotential", "ReducedForces", "ReducedOperators", "ReducedTerm", "Regularization",
     "SecondOrderData", "SecondOrderLearner", "SecondOrderOpInf", "Stiffness", "concatenate",
+    "FillSweep", "alternating_fill", "fill_between_snapshots", "newmark_residual_matrix",
     "finite_difference", "galerkin", "learner_class", "project_columns",
     "project_potential_gradient", "reduce_canonical_snapshots", "reduce_snapshots", "reduced_coordinates",
     "register_learner", "register_term", "registered_learners", "registered_terms", "solve_conic", "solve_fast", "stencil_weights",

@@ -209,7 +209,13 @@ class SecondOrderData:
             return self
         coarse = np.arange(self.n_samples) * h
         fine = np.arange((self.n_samples - 1) * k + 1) * (h / k)
-        spline = lambda X: None if X is None else CubicSpline(coarse, X, axis=1)(fine)  # noqa: E731
+        def spline(X):
+            if X is None:
+                return None
+            Y = CubicSpline(coarse, X, axis=1)(fine)
+            Y[:, ::k] = X                                  # the data themselves, not their round-off
+            return Y
+
         if inputs is not None:
             inputs = np.atleast_2d(np.asarray(inputs, dtype=float))
             if inputs.shape[1] != fine.size:

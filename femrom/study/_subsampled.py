@@ -11,6 +11,9 @@ at one r from
 - the displacements alone filled in to the FOM's ``dt`` by cubic splines
   (:meth:`~femrom.inference.SecondOrderData.upsampled`, the inputs known at every ``dt``),
   integrator-consistent at ``dt``, the ROM stepping ``dt`` (``integrator_dt``, k > 1),
+- the same, the states between the snapshots refined by alternating least squares with
+  the learner (:func:`~femrom.inference.alternating_fill`; ``refined_dt``, k > 1, linear
+  scenes),
 - the stored Newmark ``q'``, ``q''`` at the kept steps (when the store has them),
 - 4th-order finite differences of the kept displacements,
 
@@ -26,14 +29,16 @@ from dataclasses import replace
 
 import numpy as np
 
-from femrom.inference import learner_class, reduce_snapshots
+from femrom.inference import alternating_fill, learner_class, reduce_snapshots
 from femrom.linalg import as_block_source, store_source
 from femrom.rom import SecondOrderROM
 from femrom.study._metrics import Projection, relative_error
 from femrom.study._study import projected_forces
 
-#: The derivative data compared, by label (``integrator_dt``: only for k > 1).
-SOURCES = ("integrator", "integrator_dt", "stored", "fd4")
+#: The derivative data compared, by label (``integrator_dt``, ``refined_dt``: only for k > 1).
+SOURCES = ("integrator", "integrator_dt", "refined_dt", "stored", "fd4")
+#: Sources whose ROM steps the FOM's dt, not the spacing h.
+FINE_SOURCES = ("integrator_dt", "refined_dt")
 
 
 def every_kth(source, k: int):
@@ -83,10 +88,13 @@ def subsampled_rows(state, every=(1, 2, 5, 10), *, r: int | None = None, learner
                 raise ValueError("learning every k-th step takes stateless nonlinear forces only")
             raw = replace(raw, nonlinear_forces=projected_forces(system.nonlinear, V, q))
         data = {"integrator": raw.integrator_consistent(), "fd4": raw.with_finite_differences(4)}
+        fine_inputs = None
         if k > 1:      # filled in to the FOM's dt, the inputs known there: the ROM steps dt
             fine = (raw.n_samples - 1) * k + 1                  # the FOM steps the kept ones span
-            data["integrator_dt"] = raw.upsampled(k, None if train.U is None else train.U[:, :fine]) \
-                .integrator_consistent()
+            fine_inputs = None if train.U is None else train.U[:, :fine]
+            data["integrator_dt"] = raw.upsampled(k, fine_inputs).integrator_consistent()
+            if raw.nonlinear_forces is None:
+                data["refined_dt"] = raw     # fitted by alternating_fill below
         if stored:
             data["stored"] = raw
         floor = Projection(projection.coordinates[:, keep], projection.residual2[keep], projection.norm2[keep])
@@ -94,13 +102,20 @@ def subsampled_rows(state, every=(1, 2, 5, 10), *, r: int | None = None, learner
             if source not in data:
                 continue
             tic = time.perf_counter()
-            cls = learner_class(learner)
-            rom = SecondOrderROM(basis=V, product=W, learner=cls.for_system(system, basis=V)).fit(data[source])
-            row = {"every": k, "h": h, "rom_step": h if source != "integrator_dt" else train.dt,
+            fitter = learner_class(learner).for_system(system, basis=V)
+            extra = {}
+            if source == "refined_dt":
+                _, history = alternating_fill(fitter, data[source], k, inputs=fine_inputs)
+                extra = {"fill_sweeps": history[-1].sweep, "fill_residual": history[-1].residual,
+                         "spline_residual": history[0].residual}
+                rom = SecondOrderROM(fitter.operators_, V, product=W, learner=fitter)
+            else:
+                rom = SecondOrderROM(basis=V, product=W, learner=fitter).fit(data[source])
+            row = {"every": k, "h": h, "rom_step": train.dt if source in FINE_SOURCES else h,
                    "learner": learner, "r": r, "derivatives": source,
                    "fit_seconds": time.perf_counter() - tic,
-                   "test_projection_error": floor.projection_error(r)}
-            step = 1 if source == "integrator_dt" else k       # the ROM's step: dt, or the spacing h
+                   "test_projection_error": floor.projection_error(r)} | extra
+            step = 1 if source in FINE_SOURCES else k          # the ROM's step: dt, or the spacing h
             grid = slice(None, None, k // step)                  # its solution at the kept steps
             try:
                 with np.errstate(all="ignore"):
@@ -136,8 +151,11 @@ def subsampled_section(rows: list[dict], train: str, test: str) -> str:
             "The training run's displacements every k-th step, h = k dt; derivatives: `integrator` (from the "
             "displacements alone, the differences the ROM's Newmark steps reproduce, "
             "`SecondOrderData.integrator_consistent`; the ROM steps h), `integrator_dt` (the same, filled in to "
-            "the FOM's dt by cubic splines, `SecondOrderData.upsampled`; the ROM steps dt), `stored` (the FOM's "
+            "the FOM's dt by cubic splines, `SecondOrderData.upsampled`; the ROM steps dt), `refined_dt` (the "
+            "same fill refined by alternating least squares with the learner, `femrom.inference.alternating_fill`; "
+            "steps dt), `stored` (the FOM's "
             "Newmark q', q'' at the kept steps; steps h), `fd4` (4th-order differences of the kept displacements; "
             "steps h).\n\n"
             + accuracy_cost_table(rows, ["every", "h", "rom_step", "r", "derivatives", "train_output_error", "test_output_error",
-                                         "test_field_error", "test_projection_error", "fit_seconds"]))
+                                         "test_field_error", "test_projection_error", "fill_sweeps",
+                                         "fit_seconds"]))
