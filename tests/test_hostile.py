@@ -51,6 +51,67 @@ def test_a_second_store_object_in_this_process_cannot_take_a_writer(tmp_path):
         assert store.trajectories == ("000", "001", "002")
 
 
+def _store_with_trajectory(path, system, steps=10):
+    store = SnapshotStore.create(path, system, dt=0.1, n_steps=20)
+    integrate(system, Newmark(), np.ones(6), np.zeros(6), 0.1, steps, consumers=[store.writer(chunk_steps=4)])
+    store.close()
+
+
+def _forged_journal(path, *, old_size=0, pid=2**31 - 5, fingerprint=bytes(16), old=bytes(8)):
+    """A journal of a dead process beside ``path``: one record (``old`` at offset 0), old size ``old_size``."""
+    import socket
+    import struct
+
+    from femrom.snapshots import _journal
+
+    host = socket.gethostname().encode()
+    header = _journal._HEADER.pack(_journal.MAGIC, _journal.VERSION, pid, old_size, 0, 0, fingerprint,
+                                   len(host)) + host
+    record = struct.pack("<QQ", 0, len(old)) + old
+    _journal.journal_path(path).write_bytes(header + record)
+    return _journal.journal_path(path)
+
+
+def test_a_forged_journal_changes_nothing_for_a_reader_and_is_discarded_by_a_writer(tmp_path):
+    """A journal of a dead process that does not belong to the file (its fingerprint does not match the
+    file's bytes with the records written back): a reader reads the store as it is and writes nothing (it
+    used to truncate the store to 0 bytes); a writer discards the journal as stale."""
+    system = _chain()
+    path = tmp_path / "s.h5"
+    _store_with_trajectory(path, system)
+    original = path.read_bytes()
+    journal = _forged_journal(path)
+    with SnapshotStore.open(path) as store:
+        assert store.read("000", "q").shape == (6, 11)
+    assert path.read_bytes() == original and journal.exists()
+    store = SnapshotStore.open(path, system=system)
+    integrate(system, Newmark(), np.ones(6), np.zeros(6), 0.1, 4, consumers=[store.writer()])
+    store.close()
+    assert not journal.exists()
+    with SnapshotStore.open(path) as store:
+        assert store.trajectories == ("000", "001") and store.read("000", "q").shape == (6, 11)
+
+
+def test_a_journal_left_beside_a_replaced_store_is_stale(tmp_path):
+    """A crashed store's journal next to another store copied over it (same path, other content): neither
+    the same file nor a copy of the one it protects, so it is not applied."""
+    from femrom.snapshots import _journal, recover
+
+    system = _chain()
+    path, other = tmp_path / "s.h5", tmp_path / "other.h5"
+    _store_with_trajectory(path, system)
+    _store_with_trajectory(other, system, steps=14)
+    data = path.read_bytes()
+    fingerprint = _journal._fingerprint(lambda a, b: data[a:b], len(data))
+    _forged_journal(path, old_size=len(data), fingerprint=fingerprint, old=data[:8])   # s.h5's ...
+    assert _journal.PendingChange.load(path).belongs()                    # (a copy of it would roll back)
+    replacement = other.read_bytes()
+    path.write_bytes(replacement)                                         # ... then another store over it
+    with SnapshotStore.open(path) as store:
+        assert store.read("000", "q").shape == (6, 15)
+    assert recover(path) is False and path.read_bytes() == replacement
+
+
 # -- scene keys: wrong types, non-finite and out-of-range values, valid extremes ------------
 def _beam(**material):
     text = (ROOT / "cases" / "beam.toml").read_text()

@@ -22,8 +22,10 @@
 A kill at any moment is covered: a new store is written under a temporary
 name and renamed into place; adding a trajectory (or trimming one for
 ``resume``) happens under an undo journal (``<store>.journal``) that the next
-reader or writer rolls back if the process died; after that the file is in
-HDF5's SWMR mode, where every committed chunk stays readable.
+writer (or :func:`recover`) rolls back if the process died, also for a copy of
+the store taken with its journal; a reader reads the store as it was before and
+never modifies the file. After that the file is in HDF5's SWMR mode, where every
+committed chunk stays readable.
 
 Fields are named by key or by name: ``q`` / ``displacement``, ``v`` /
 ``velocity``, ``a`` / ``acceleration``, ``u`` / ``inputs``, ``y`` / ``outputs``.
@@ -47,7 +49,7 @@ from femrom.snapshots._ingest import (
 )
 from femrom.snapshots._format import DEFAULT_UNITS, FORMAT_NAME, FORMAT_VERSION
 from femrom.snapshots._resume import model_solver, resume
-from femrom.snapshots._store import SnapshotStore, read_rows
+from femrom.snapshots._store import SnapshotStore, read_rows, recover
 from femrom.snapshots._writer import SnapshotWriter, default_chunk_steps
 
 __all__ = [
@@ -57,6 +59,7 @@ __all__ = [
     "FORMAT_NAME",
     "FORMAT_VERSION",
     "SnapshotStore",
+    "recover",
     "SnapshotStoreError",
     "SnapshotWriter",
     "default_chunk_steps",

@@ -22,7 +22,8 @@ between.
 Journal layout (little-endian)::
 
     header   magic b"FEMROMUJ", version u32, pid u64, old size u64,
-             st_dev u64, st_ino u64, host length u16, host (UTF-8)
+             st_dev u64, st_ino u64, fingerprint (16 bytes), host length u16,
+             host (UTF-8)
     records  offset u64, length u64, the old bytes (length)
 
 A record is complete in the journal before its overwrite starts, so a record
@@ -31,14 +32,26 @@ Rolling back is idempotent: killed during a roll back, the journal stays and
 the next roll back writes the same bytes again. (POSIX: ``os.pread``,
 ``os.pwrite``, ``flock``.) The file identity (device,
 inode) makes a journal left next to a file that has since been replaced
-(``SnapshotStore.create(..., overwrite=True)``) recognisably stale.
+(``SnapshotStore.create(..., overwrite=True)``) recognisably stale. A copy of
+the store taken together with its journal (a backup restored, an rsync) has
+another inode; it is recognised by content instead: the journal holds a
+fingerprint (BLAKE2b) of the file's first and last ``FINGERPRINT_SPAN`` bytes
+when the change began, and the journal belongs to a file whose bytes there,
+with the journal's records written back, give that fingerprint again.
+
+Only writers roll back (:func:`roll_back`). A reader never modifies the file: it
+reads the store as it was before the unfinished change through
+:class:`UndoneView`, the file's bytes with the journal's records laid over them
+(:func:`pending_change`).
 """
 
 from __future__ import annotations
 
+import hashlib
 import io
 import os
 import socket
+import weakref
 import struct
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -55,8 +68,10 @@ except ImportError:  # pragma: no cover - not POSIX: no advisory lock taken
     fcntl = None
 
 MAGIC = b"FEMROMUJ"
-VERSION = 1
-_HEADER = struct.Struct("<8sIQQQQH")
+VERSION = 2
+_HEADER = struct.Struct("<8sIQQQQ16sH")
+#: Bytes at each end of the file that the fingerprint covers.
+FINGERPRINT_SPAN = 65536
 _RECORD = struct.Struct("<QQ")
 
 
@@ -72,6 +87,22 @@ class JournalHeader:
     old_size: int
     device: int
     inode: int
+    fingerprint: bytes
+
+
+def _spans(size: int) -> list[tuple[int, int]]:
+    """The byte ranges ``[start, stop)`` the fingerprint of a file of ``size`` bytes covers."""
+    head = (0, min(size, FINGERPRINT_SPAN))
+    tail = (max(head[1], size - FINGERPRINT_SPAN), size)
+    return [head] + ([tail] if tail[1] > tail[0] else [])
+
+
+def _fingerprint(read: Callable[[int, int], bytes], size: int) -> bytes:
+    """BLAKE2b (16 bytes) of the size and the fingerprinted ranges, read by ``read(start, stop)``."""
+    digest = hashlib.blake2b(size.to_bytes(8, "little"), digest_size=16)
+    for start, stop in _spans(size):
+        digest.update(read(start, stop))
+    return digest.digest()
 
 
 def _lock(fd: int, path: Path) -> None:
@@ -131,8 +162,9 @@ class UndoJournalFile(io.RawIOBase):
             journal = journal_path(self.path)
             self._journal_fd = os.open(journal, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
             host = socket.gethostname().encode()
+            fingerprint = _fingerprint(lambda a, b: os.pread(self._fd, b - a, a), self.old_size)
             header = _HEADER.pack(MAGIC, VERSION, os.getpid(), self.old_size, stat.st_dev,
-                                  stat.st_ino, len(host)) + host
+                                  stat.st_ino, fingerprint, len(host)) + host
             os.write(self._journal_fd, header)
             self._sync_journal()
         except FileExistsError:
@@ -248,46 +280,186 @@ def read_header(journal: Path) -> tuple[JournalHeader, int] | None:
     data = journal.read_bytes()[:_HEADER.size + 2**16]
     if len(data) < _HEADER.size:
         return None
-    magic, version, pid, old_size, device, inode, host_length = _HEADER.unpack_from(data)
+    magic, version, pid, old_size, device, inode, fingerprint, host_length = _HEADER.unpack_from(data)
     if magic != MAGIC or version != VERSION:
-        raise SnapshotStoreError(f"{journal}: not a femrom undo journal")
+        raise SnapshotStoreError(f"{journal}: not a femrom undo journal (version {VERSION})")
     end = _HEADER.size + host_length
     if len(data) < end:
         return None
-    return JournalHeader(pid, data[_HEADER.size:end].decode(), old_size, device, inode), end
+    return JournalHeader(pid, data[_HEADER.size:end].decode(errors="replace"), old_size, device, inode,
+                         fingerprint), end
 
 
-def _undo(path: Path, journal: Path) -> None:
-    """Write the journaled bytes back (last record first), truncate, delete the journal."""
-    parsed = read_header(journal)
-    if parsed is not None:
-        header, position = parsed
-        data = journal.read_bytes()
-        records = []
-        while position + _RECORD.size <= len(data):
-            offset, length = _RECORD.unpack_from(data, position)
-            position += _RECORD.size
-            if position + length > len(data):
-                break  # cut short by a kill: its overwrite never started
-            records.append((offset, data[position:position + length]))
-            position += length
-        fd = os.open(path, os.O_RDWR)
+def _records(data: bytes, position: int) -> tuple:
+    """The complete records of a journal's bytes from ``position``: ``((offset, old bytes), ...)``."""
+    records = []
+    while position + _RECORD.size <= len(data):
+        offset, length = _RECORD.unpack_from(data, position)
+        position += _RECORD.size
+        if position + length > len(data):
+            break  # cut short by a kill: its overwrite never started
+        records.append((offset, data[position:position + length]))
+        position += length
+    return tuple(records)
+
+
+@dataclass(frozen=True)
+class PendingChange:
+    """The journal of an unfinished layout change of the store at ``path``.
+
+    Attributes
+    ----------
+    path, journal : Path
+    header : JournalHeader
+    records : tuple of (int, bytes)
+        The complete records, in journal order: ``(offset, bytes before the overwrite)``.
+    """
+
+    path: Path
+    journal: Path
+    header: JournalHeader
+    records: tuple
+
+    @classmethod
+    def load(cls, path: Path) -> "PendingChange | None":
+        """The journal next to ``path``; ``None`` if there is none or its header was cut short."""
+        journal = journal_path(path)
         try:
-            for offset, old in reversed(records):
+            data = journal.read_bytes()
+        except FileNotFoundError:
+            return None
+        parsed = read_header(journal) if data else None
+        if parsed is None:
+            return None
+        header, position = parsed
+        return cls(Path(path), journal, header, _records(data, position))
+
+    def old_bytes(self, fd: int, start: int, stop: int) -> bytes:
+        """The file's bytes ``[start, stop)`` (within the old size) as they were before the change."""
+        stop = min(stop, self.header.old_size)
+        if stop <= start:
+            return b""
+        data = bytearray(os.pread(fd, stop - start, start).ljust(stop - start, b"\0"))
+        for offset, old in reversed(self.records):      # the first record of a byte holds its oldest value
+            lo, hi = max(offset, start), min(offset + len(old), stop)
+            if lo < hi:
+                data[lo - start:hi - start] = old[lo - offset:hi - offset]
+        return bytes(data)
+
+    def belongs(self) -> bool:
+        """Whether the journal is this file's: the same file (device, inode), or a copy of it
+        (its bytes with the records written back give the journal's fingerprint)."""
+        try:
+            fd = os.open(self.path, os.O_RDONLY)
+        except FileNotFoundError:
+            return False
+        try:
+            stat = os.fstat(fd)
+            if (self.header.device, self.header.inode) == (stat.st_dev, stat.st_ino):
+                return True
+            size = self.header.old_size
+            return _fingerprint(lambda a, b: self.old_bytes(fd, a, b), size) == self.header.fingerprint
+        finally:
+            os.close(fd)
+
+    def view(self) -> "UndoneView":
+        """A read-only file object of the store as it was before the change (the file untouched)."""
+        return UndoneView(self)
+
+    def undo(self) -> None:
+        """Write the old bytes back (last record first), truncate, ``fsync``, delete the journal."""
+        fd = os.open(self.path, os.O_RDWR)
+        try:
+            for offset, old in reversed(self.records):
                 _pwrite_all(fd, old, offset)
-            os.ftruncate(fd, header.old_size)
+            os.ftruncate(fd, self.header.old_size)
             os.fsync(fd)
         finally:
             os.close(fd)
-    journal.unlink()
+        self.journal.unlink()
+
+
+class UndoneView(io.RawIOBase):
+    """The store's bytes before an unfinished change, read-only: the file's bytes with the
+    journal's records laid over them, cut at the old size (for ``h5py.File(view, "r")``)."""
+
+    def __init__(self, change: PendingChange):
+        super().__init__()
+        self.change = change
+        self._fd = os.open(change.path, os.O_RDONLY)
+        self._closer = weakref.finalize(self, os.close, self._fd)
+        self._position = 0
+
+    def readable(self) -> bool:
+        return True
+
+    def seekable(self) -> bool:
+        return True
+
+    def seek(self, offset: int, whence: int = io.SEEK_SET) -> int:
+        base = {io.SEEK_SET: 0, io.SEEK_CUR: self._position, io.SEEK_END: self.change.header.old_size}[whence]
+        self._position = base + offset
+        return self._position
+
+    def tell(self) -> int:
+        return self._position
+
+    def readinto(self, buffer) -> int:
+        data = self.change.old_bytes(self._fd, self._position, self._position + len(buffer))
+        buffer[:len(data)] = data
+        self._position += len(data)
+        return len(data)
+
+    def close(self) -> None:
+        if not self.closed:
+            self._closer()
+        super().close()
+
+
+def _undo(path: Path, journal: Path) -> None:
+    """Undo the change of ``journal`` (a cut-short header: nothing to undo) and delete the journal."""
+    change = PendingChange.load(path)
+    if change is not None:
+        change.undo()
+    else:
+        journal.unlink()
+
+
+def _check_process(path: Path, header: JournalHeader, process_alive, other_host_is_gone: bool) -> None:
+    if header.host == socket.gethostname() and process_alive(header.pid):
+        raise SnapshotStoreError(f"{path}: process {header.pid} is adding or resuming a "
+                                 "trajectory; open it when that is done")
+    if header.host != socket.gethostname() and not other_host_is_gone:
+        raise SnapshotStoreError(f"{path}: process {header.pid} on host {header.host} was "
+                                 "adding or resuming a trajectory and has not finished; open "
+                                 "the store on that host, or for writing, to undo that change")
+
+
+def pending_change(path: Path, process_alive: Callable[[int], bool]) -> PendingChange | None:
+    """For a reader: the unfinished change of a killed process to read around, else ``None``.
+
+    Nothing is written: a journal cut short, or another file's, is left where it is.
+
+    Raises
+    ------
+    SnapshotStoreError
+        The journal's process is still running, or ran on another host.
+    """
+    path = Path(path)
+    change = PendingChange.load(path)
+    if change is None or not change.belongs():
+        return None
+    _check_process(path, change.header, process_alive, other_host_is_gone=False)
+    return change
 
 
 def roll_back(path: Path, process_alive: Callable[[int], bool], *,
               other_host_is_gone: bool = False) -> bool:
     """Undo a change that a killed process left unfinished; ``True`` if there was one.
 
-    A journal without a complete header was cut short before its change
-    wrote anything; a journal from a different file (replaced since) is
+    For writers, who take the file over. A journal without a complete header
+    was cut short before its change wrote anything; a journal of another file
+    (replaced since: neither the same file nor a copy of the one it protects) is
     stale. Both are deleted.
 
     Parameters
@@ -299,36 +471,25 @@ def roll_back(path: Path, process_alive: Callable[[int], bool], *,
     other_host_is_gone : bool
         Whether a change made from another host may be undone (its process
         cannot be checked from here). Writers, who take the file over, say
-        yes, as they do for a killed writer's flags; readers say no.
+        yes, as they do for a killed writer's flags.
 
     Raises
     ------
     SnapshotStoreError
-        The journal's process is still running (or, for a reader, ran on
-        another host), or the file cannot be written.
+        The journal's process is still running (or ran on another host and
+        ``other_host_is_gone`` is false), or the file cannot be written.
     """
     path = Path(path)
     journal = journal_path(path)
     if not journal.exists():
         return False
     try:
-        parsed = read_header(journal)
-        if parsed is None:
+        change = PendingChange.load(path)
+        if change is None or not change.belongs():
             journal.unlink()
             return False
-        header, _ = parsed
-        stat = path.stat()
-        if (header.device, header.inode) != (stat.st_dev, stat.st_ino):
-            journal.unlink()
-            return False
-        if header.host == socket.gethostname() and process_alive(header.pid):
-            raise SnapshotStoreError(f"{path}: process {header.pid} is adding or resuming a "
-                                     "trajectory; open it when that is done")
-        if header.host != socket.gethostname() and not other_host_is_gone:
-            raise SnapshotStoreError(f"{path}: process {header.pid} on host {header.host} was "
-                                     "adding or resuming a trajectory and has not finished; open "
-                                     "the store on that host, or for writing, to undo that change")
-        _undo(path, journal)
+        _check_process(path, change.header, process_alive, other_host_is_gone)
+        change.undo()
     except FileNotFoundError:
         return False  # rolled back by someone else meanwhile
     except PermissionError:

@@ -608,9 +608,34 @@ def read_rows(path, trajectory: str, field: str, start: int, stop: int) -> np.nd
 
 
 def _open_for_reading(path: Path) -> tuple[h5py.File, bool]:
-    """:func:`_format.open_for_reading`, after undoing a killed writer's unfinished layout change."""
-    _journal.roll_back(path, _process_alive)
-    return _format.open_for_reading(path)
+    """:func:`_format.open_for_reading`; the store as it was before a killed writer's unfinished
+    layout change, if one is pending (read through the journal, the file left untouched)."""
+    change = _journal.pending_change(path, _process_alive)
+    if change is None:
+        return _format.open_for_reading(path)
+    try:
+        return h5py.File(change.view(), "r"), False
+    except (OSError, ValueError) as exc:
+        raise SnapshotStoreError(f"{path}: {_format.hdf5_message(exc)} (read as before the unfinished "
+                                 f"change of {change.journal})") from None
+
+
+def recover(path) -> bool:
+    """Undo the unfinished layout change a killed writer left in the store at ``path``.
+
+    Readers never modify a store: they read it as it was before such a change, and
+    the next writer undoes it. This does it now (e.g. before copying the file
+    alone). Returns whether there was a change to undo.
+
+    Raises
+    ------
+    SnapshotStoreError
+        The change's process is still running, or the file cannot be written.
+    """
+    path = Path(path)
+    if not path.exists():
+        raise SnapshotStoreError(f"snapshot store not found: {path}")
+    return _journal.roll_back(path, _process_alive, other_host_is_gone=True)
 
 
 def _live_writer(path: Path) -> int | None:
