@@ -32,16 +32,19 @@ def laws():
 
 
 def drive(law, path, normal_gap=0.0):
-    """Tangential displacements ``path`` (k,) along DIRECTION, committing after each: the traction
-    along DIRECTION at each point and the dissipation of each step."""
-    state = law.initial_state(1)
+    """Tangential displacements ``path`` along DIRECTION, (k,) for one point or (k, s) for s points
+    at once, committing after each row: the tractions along DIRECTION and each step's dissipation,
+    shaped like ``path``."""
+    path = np.asarray(path, dtype=float)
+    rows = path.reshape(len(path), -1)
+    state = law.initial_state(rows.shape[1])
     traction, dissipated = [], []
-    for x in path:
-        gap = np.array([[*(x * DIRECTION), normal_gap]])
-        traction.append(law.traction(gap, state)[0, :2] @ DIRECTION)
-        dissipated.append(law.dissipation(gap, state)[0])
+    for x in rows:
+        gap = np.column_stack([np.outer(x, DIRECTION), np.full(x.size, normal_gap)])
+        traction.append(law.traction(gap, state)[:, :2] @ DIRECTION)
+        dissipated.append(law.dissipation(gap, state))
         state = law.commit(gap, state)
-    return np.array(traction), np.array(dissipated)
+    return np.array(traction).reshape(path.shape), np.array(dissipated).reshape(path.shape)
 
 
 def cycle_dissipation(law, amplitude):
@@ -109,10 +112,10 @@ def test_loading_unloading_reloading_follow_masing_branches(name):
     if name == "jenkins":   # the virgin curve in closed form: k x up to tau_s
         np.testing.assert_allclose(f0_table, np.minimum(law.tangential_stiffness * virgin_x, law.slip_traction),
                                    rtol=1e-14, atol=1e-14 * law.slip_traction)
-    else:                   # the discrete Iwan against Segalman's continuous backbone: 0.25 % measured
+    else:                   # the discrete Iwan against Segalman's continuous backbone
         continuous = law.backbone(virgin_x)
         error = np.abs(f0_table - continuous).max() / law.slip_traction
-        assert 1e-4 < error < 5e-3
+        assert 1e-4 < error < 5e-3                                   # measured 4.1e-3 of F_S
     x1, x2, x3 = 3.0 * scale, -2.0 * scale, 4.0 * scale
     down = x1 - np.linspace(0.0, 1.0, 51)[1:] * (x1 - x2)     # x1 -> x2
     up = x2 + np.linspace(0.0, 1.0, 71)[1:] * (x3 - x2)       # x2 -> x3
@@ -132,29 +135,31 @@ def test_loading_unloading_reloading_follow_masing_branches(name):
 # -- dissipation per cycle ----------------------------------------------------------------------
 def test_jenkins_dissipates_four_slip_traction_times_the_slip_per_cycle():
     """D = 4 tau_s (x_a - tau_s / k_t) above the slip amplitude, 0 below: from the return map's
-    slip increments (exact, round-off) and, independently, from the area of the loop (trapezoid over
-    4000 points a cycle: O(h) at the two corners, measured 2e-4 relative)."""
+    slip increments (exact, round-off: measured 4e-16) and, independently, from the area of the loop
+    (trapezoid over 4000 points a cycle, exact but at the corners: measured 5.6e-7 relative)."""
     law = laws()["jenkins"]
     k, tau = law.tangential_stiffness, law.slip_traction
-    for ratio in (0.5, 0.999, 1.5, 3.0, 10.0):
-        amplitude = ratio * tau / k
-        exact = 4.0 * tau * max(amplitude - tau / k, 0.0)
+    ratios = np.array([0.5, 0.999, 1.5, 3.0, 10.0])
+    amplitudes = ratios * tau / k
+    exact = 4.0 * tau * np.maximum(amplitudes - tau / k, 0.0)
+    for amplitude, expected in zip(amplitudes, exact):
         D, force_amplitude = cycle_dissipation(law, amplitude)
-        assert D == pytest.approx(exact, rel=1e-13, abs=1e-15 * tau * amplitude)
+        assert D == pytest.approx(expected, rel=1e-13, abs=1e-15 * tau * amplitude)
         assert force_amplitude == pytest.approx(min(k * amplitude, tau), rel=1e-14)
-        t = np.linspace(0.0, 1.0, 4001)
-        path = amplitude * np.cos(2 * np.pi * t)
-        f, _ = drive(law, np.concatenate([[0.0], path]))
-        area = np.trapezoid(f[1:], path)       # the loop runs clockwise in (x, f): the integral is its area
-        assert area == pytest.approx(exact, rel=1e-3, abs=1e-12)
+    t = np.linspace(0.0, 1.0, 4001)
+    path = np.outer(np.cos(2 * np.pi * t), amplitudes)           # (4001, 5): the five amplitudes at once
+    f, _ = drive(law, np.vstack([np.zeros(5), path]))
+    area = np.trapezoid(f[1:], path, axis=0)      # the loop runs clockwise in (x, f): the integral is its area
+    np.testing.assert_allclose(area, exact, rtol=1e-5, atol=1e-12)
 
 
 def test_iwan_dissipation_is_a_power_law_of_exponent_three_plus_chi_at_small_amplitude():
     """Segalman's D = 4 R u_a^(3+chi) / ((2+chi)(3+chi)) below phi_max: the discrete element
     (60 geometric intervals, ratio 1.2) within 1.5 % at every amplitude from 1e-4 to 1 phi_max
-    (measured 1.2 %); the log-log slope of D against the force amplitude over the decade
+    (measured 1.04 %); the log-log slope of D against the force amplitude over the decade
     [1e-4, 1e-3] phi_max is 3 + chi = 2.5 up to the continuous element's own finite-amplitude
-    correction (closed form over that decade: 2.5143) and the discretisation (measured 2.5176)."""
+    correction (closed form over that decade: 2.5143) and the discretisation (measured 2.5149;
+    against the displacement amplitude 2.5007)."""
     law = laws()["iwan"]
     p = law.phi_max
     amplitudes = p * np.logspace(-4.0, 0.0, 33)[:-1]
@@ -168,7 +173,7 @@ def test_iwan_dissipation_is_a_power_law_of_exponent_three_plus_chi_at_small_amp
     continuous = np.polyfit(np.log(law.backbone(amplitudes[decade])),
                             np.log(law.cycle_dissipation(amplitudes[decade])), 1)[0]
     assert 3.0 + law.chi < continuous < 3.0 + law.chi + 0.02     # the finite-amplitude correction: +0.014
-    assert abs(slope - continuous) < 0.006                        # the discretisation: 0.0033 measured
+    assert abs(slope - continuous) < 0.006     # the discretisation: 6.5e-4 measured, up to 3.3e-3 on other grids
     # in displacement amplitude the continuous law is an exact power: the discrete one follows it
     slope_u = np.polyfit(np.log(amplitudes[decade]), np.log(D[decade]), 1)[0]
     assert abs(slope_u - (3.0 + law.chi)) < 0.006
@@ -177,7 +182,7 @@ def test_iwan_dissipation_is_a_power_law_of_exponent_three_plus_chi_at_small_amp
 def test_iwan_macroslip_limit():
     """Past phi_max every slider slips: the traction is F_S exactly and the dissipation per cycle
     grows as 4 F_S u_a (round-off), with the offset 4 int phi^2 rho dphi of the continuous element
-    within the discretisation (the discrete sum f_m^2 / k_m <= the integral: measured 0.2 % low)."""
+    within the discretisation (the discrete sum f_m^2 / k_m <= the integral: measured 0.18 % low)."""
     law = laws()["iwan"]
     p, F_S = law.phi_max, law.slip_traction
     D1, f1 = cycle_dissipation(law, 2.0 * p)
@@ -397,11 +402,11 @@ class EnergyLedger:
         self.previous = result.state
 
 
-def ring_down(law, dt, n_steps=None, preload=3.0):
+def ring_down(law, dt, n_steps=None, preload=3.0, duration=0.6):
     """Two 3-dof nodes: a (mass 1, springs 2e3 to ground), b (mass 0.5, springs 50 to ground),
     joined by one interface pair (normal tilted off the axes, area 0.5) and pressed together by
     an equal and opposite preload P = 3 N; b struck tangentially (0.2 m/s) at the preloaded
-    equilibrium. Newmark (average acceleration) over 0.6 s."""
+    equilibrium. Newmark (average acceleration) over ``duration``."""
     normal = np.array([0.2, -0.3, 1.0]) / np.linalg.norm([0.2, -0.3, 1.0])
     joint = JointForce(law, np.array([[0, 1, 2]]), np.array([[3, 4, 5]]), normal[None], np.array([0.5]), 6,
                        name="joint")
@@ -415,9 +420,11 @@ def ring_down(law, dt, n_steps=None, preload=3.0):
     q_eq = np.linalg.solve(tangent, load)
     t1 = joint.frames[0, 0]
     v0 = np.concatenate([np.zeros(3), 0.2 * t1])
-    n_steps = n_steps or int(round(0.6 / dt))
+    n_steps = n_steps or int(round(duration / dt))
     ledger = EnergyLedger(joint, M, K, load)
-    integrate(system, Newmark(newton=Newton(rtol=1e-12)), q_eq, v0, dt, n_steps, consumers=[ledger],
+    # Newton condensed onto the pair's 3 coordinates, as a jointed structure would run it
+    integrate(system, Newmark(newton=Newton(rtol=1e-12, method="condensed")), q_eq, v0, dt, n_steps,
+              consumers=[ledger],
               progress=False)
     mechanical, stored, dissipated, tractions = (np.array(x) for x in zip(*ledger.records))
     return mechanical + stored, np.cumsum(dissipated), tractions
@@ -428,20 +435,20 @@ def test_a_ring_down_loses_exactly_the_energy_its_sliders_dissipate(name):
     """E = kinetic + elastic - P.q + the interface springs' energy: what E loses over the run is the
     friction work the return map dissipates (sum of t . dz), to the trapezoidal rule's error at the
     stick/slip switches, O(dt^2) (Newmark's own balance is exact): the largest difference over the
-    run, measured 3.5e-5 (dt = 2e-4) and 1.2e-5 (dt = 1e-4) of the dissipated energy for dry
-    friction, 2.8e-5 and 7.4e-6 for Iwan (20 sliders); 90 % of the energy is dissipated."""
+    run (0.3 s), measured 1.9e-4 (dt = 4e-4) and 3.9e-5 (dt = 2e-4) of the dissipated energy for
+    dry friction, 1.1e-4 and 2.9e-5 for Iwan (20 sliders); 79 % and 91 % of the energy is dissipated."""
     law = {"dry_friction": DryFrictionLaw(normal_stiffness=2e4, tangential_stiffness=4e3, friction_coefficient=0.3),
            "iwan": IwanLaw(slip_traction=1.8, tangential_stiffness=4e3, chi=-0.5, beta=0.1,
                            normal_stiffness=2e4, n_sliders=20)}[name]
     errors = []
-    for dt in (2e-4, 1e-4):
-        energy, dissipated, tractions = ring_down(law, dt)
+    for dt in (4e-4, 2e-4):
+        energy, dissipated, tractions = ring_down(law, dt, duration=0.3)
         lost = energy[0] - energy
-        assert dissipated[-1] > 0.8 * energy[0]          # the ring-down is real: most of the energy goes
+        assert dissipated[-1] > 0.75 * energy[0]         # the ring-down is real: most of the energy goes
         assert np.all(tractions[:, 2] < 0)                # the contact stays closed throughout
         if name == "dry_friction":                        # ... and friction holds it on the cone
             limit = law.friction_coefficient * -tractions[:, 2]
             assert np.all(np.hypot(tractions[:, 0], tractions[:, 1]) <= limit * (1 + 1e-12))
         errors.append(np.abs(lost - dissipated).max() / dissipated[-1])
-    assert errors[0] < 1e-4
-    assert 2.5 < errors[0] / errors[1] < 6.0              # second order in dt (ratio 4; 3.1 and 3.8 measured)
+    assert errors[0] < 3e-4
+    assert 3.0 < errors[0] / errors[1] < 6.0              # second order in dt (ratio 4; 4.9 and 3.8 measured)

@@ -63,12 +63,18 @@ def interface_law_from_parameters(parameters: dict) -> "InterfaceLaw":
                   for key, value in values.items()})
 
 
-def check_parameter(law: str, name: str, value, valid: str, ok: bool) -> float:
-    """``float(value)``, or one ValueError naming ``law``'s parameter ``name`` and its valid range."""
-    value = float(value)
-    if not (np.isfinite(value) and ok):
-        raise ValueError(f"{law}: {name} must be {valid}, got {value!r}")
-    return value
+def check_parameters(law, rules) -> None:
+    """Validate and coerce the parameters of a frozen dataclass ``law`` in place.
+
+    ``rules``: ``(name, valid, ok)`` triples, ``ok(value) -> bool`` on the float value and
+    ``valid`` the range in words. The first bad one raises one ValueError naming it.
+    """
+    kinds = {f.name: f.type for f in dataclasses.fields(law)}
+    for name, valid, ok in rules:
+        value = float(getattr(law, name))
+        if not (np.isfinite(value) and ok(value)):
+            raise ValueError(f"{type(law).__name__}: {name} must be {valid}, got {value!r}")
+        object.__setattr__(law, name, int(value) if kinds.get(name) in (int, "int") else value)
 
 
 def radial_return(trial: np.ndarray, limit: np.ndarray):

@@ -157,6 +157,9 @@ class JointForce(NonlinearForce):
             self._given["first_tangents"] = np.array(first_tangents, dtype=float)
         self._offset = np.zeros((s, 3))
         self._offset[:, 2] = gap
+        # the block-diagonal pattern of the local tangent, fixed: row 3 i + c holds columns 3 i + (0, 1, 2)
+        self._tangent_indices = np.repeat(np.arange(3 * s).reshape(s, 1, 3), 3, axis=1).ravel()
+        self._tangent_indptr = np.arange(0, 9 * s + 1, 3)
 
     @property
     def n_pairs(self) -> int:
@@ -177,9 +180,9 @@ class JointForce(NonlinearForce):
 
     def local_tangent(self, x, xdot=None, state=None):
         _, D = self.law.evaluate(self.gaps(x), self._state(state), tangent=True)
-        s = self.n_pairs
         blocks = self.areas[:, None, None] * D
-        return sp.bsr_matrix((blocks, np.arange(s), np.arange(s + 1)), shape=(3 * s, 3 * s)).tocsr(), None
+        shape = (3 * self.n_pairs,) * 2
+        return sp.csr_matrix((blocks.ravel(), self._tangent_indices, self._tangent_indptr), shape=shape), None
 
     def initial_state(self):
         return self.law.initial_state(self.n_pairs)

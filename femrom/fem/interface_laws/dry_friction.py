@@ -8,7 +8,7 @@ import numpy as np
 
 from femrom.fem._interface_law import (
     InterfaceLaw,
-    check_parameter,
+    check_parameters,
     radial_return,
     radial_return_tangent,
     register_interface_law,
@@ -55,12 +55,9 @@ class DryFrictionLaw(InterfaceLaw):
     friction_coefficient: float
 
     def __post_init__(self):
-        law = type(self).__name__
-        for key, valid, ok in (("normal_stiffness", "> 0", lambda v: v > 0),
-                               ("tangential_stiffness", "> 0", lambda v: v > 0),
-                               ("friction_coefficient", ">= 0", lambda v: v >= 0)):
-            value = float(getattr(self, key))
-            object.__setattr__(self, key, check_parameter(law, key, value, valid, ok(value)))
+        check_parameters(self, (("normal_stiffness", "> 0", lambda v: v > 0),
+                                ("tangential_stiffness", "> 0", lambda v: v > 0),
+                                ("friction_coefficient", ">= 0", lambda v: v >= 0)))
 
     def initial_state(self, n_points: int) -> np.ndarray:
         return np.zeros((int(n_points), 2))

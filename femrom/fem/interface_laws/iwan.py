@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from femrom.fem._interface_law import ParallelSliderLaw, check_parameter, register_interface_law
+from femrom.fem._interface_law import ParallelSliderLaw, check_parameters, register_interface_law
 
 
 @register_interface_law
@@ -94,17 +94,13 @@ class IwanLaw(ParallelSliderLaw):
     alpha: float = 1.2
 
     def __post_init__(self):
-        law = type(self).__name__
-        for key, valid, ok in (("slip_traction", "> 0", lambda v: v > 0),
-                               ("tangential_stiffness", "> 0", lambda v: v > 0),
-                               ("chi", "> -1", lambda v: v > -1),
-                               ("beta", ">= 0", lambda v: v >= 0),
-                               ("normal_stiffness", ">= 0", lambda v: v >= 0),
-                               ("n_sliders", "an integer >= 1", lambda v: v >= 1 and v == int(v)),
-                               ("alpha", ">= 1", lambda v: v >= 1)):
-            value = float(getattr(self, key))
-            value = check_parameter(law, key, value, valid, ok(value))
-            object.__setattr__(self, key, int(value) if key == "n_sliders" else value)
+        check_parameters(self, (("slip_traction", "> 0", lambda v: v > 0),
+                                ("tangential_stiffness", "> 0", lambda v: v > 0),
+                                ("chi", "> -1", lambda v: v > -1),
+                                ("beta", ">= 0", lambda v: v >= 0),
+                                ("normal_stiffness", ">= 0", lambda v: v >= 0),
+                                ("n_sliders", "an integer >= 1", lambda v: v >= 1 and v == int(v)),
+                                ("alpha", ">= 1", lambda v: v >= 1)))
         F, K, chi, beta = self.slip_traction, self.tangential_stiffness, self.chi, self.beta
         c = (chi + 1.0) / (chi + 2.0)
         phi_max = F * (1.0 + beta) / (K * (beta + c))

@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from femrom.fem._interface_law import ParallelSliderLaw, check_parameter, register_interface_law
+from femrom.fem._interface_law import ParallelSliderLaw, check_parameters, register_interface_law
 
 
 @register_interface_law
@@ -43,11 +43,8 @@ class JenkinsLaw(ParallelSliderLaw):
     normal_stiffness: float = 0.0
 
     def __post_init__(self):
-        law = type(self).__name__
-        for key, valid, ok in (("tangential_stiffness", "> 0", lambda v: v > 0),
-                               ("slip_traction", "> 0", lambda v: v > 0),
-                               ("normal_stiffness", ">= 0", lambda v: v >= 0)):
-            value = float(getattr(self, key))
-            object.__setattr__(self, key, check_parameter(law, key, value, valid, ok(value)))
+        check_parameters(self, (("tangential_stiffness", "> 0", lambda v: v > 0),
+                                ("slip_traction", "> 0", lambda v: v > 0),
+                                ("normal_stiffness", ">= 0", lambda v: v >= 0)))
         object.__setattr__(self, "slider_stiffness", np.array([self.tangential_stiffness]))
         object.__setattr__(self, "slider_strength", np.array([self.slip_traction]))
