@@ -402,11 +402,11 @@ class EnergyLedger:
         self.previous = result.state
 
 
-def ring_down(law, dt, n_steps=None, preload=3.0, duration=0.6):
+def jointed_pair(law, preload=3.0):
     """Two 3-dof nodes: a (mass 1, springs 2e3 to ground), b (mass 0.5, springs 50 to ground),
     joined by one interface pair (normal tilted off the axes, area 0.5) and pressed together by
     an equal and opposite preload P = 3 N; b struck tangentially (0.2 m/s) at the preloaded
-    equilibrium. Newmark (average acceleration) over ``duration``."""
+    equilibrium. Returns the system, the joint, (q0, v0), the load."""
     normal = np.array([0.2, -0.3, 1.0]) / np.linalg.norm([0.2, -0.3, 1.0])
     joint = JointForce(law, np.array([[0, 1, 2]]), np.array([[3, 4, 5]]), normal[None], np.array([0.5]), 6,
                        name="joint")
@@ -416,16 +416,23 @@ def ring_down(law, dt, n_steps=None, preload=3.0, duration=0.6):
     system = SecondOrderSystem(mass=M, stiffness=K, nonlinear=[joint], load=load)
     # the preloaded equilibrium: the contact closed and stuck, linear
     _, D = law.evaluate(np.array([[0.0, 0.0, -1e-9]]), law.initial_state(1))
-    tangent = (K + joint.local_map.T @ sp.csr_matrix(0.5 * D[0]) @ joint.local_map).toarray()
+    tangent = (K + joint.local_map.T @ sp.csr_matrix(joint.areas[0] * D[0]) @ joint.local_map).toarray()
     q_eq = np.linalg.solve(tangent, load)
     t1 = joint.frames[0, 0]
     v0 = np.concatenate([np.zeros(3), 0.2 * t1])
-    n_steps = n_steps or int(round(duration / dt))
+    return system, joint, (q_eq, v0), load
+
+
+def ring_down(law, dt, duration=0.6):
+    """The pair's ring-down under Newmark: total energy (mechanical + interface springs), cumulated
+    dissipation and tractions per step."""
+    system, joint, (q0, v0), load = jointed_pair(law)
+    M, K = system.mass, system.stiffness
+    n_steps = int(round(duration / dt))
     ledger = EnergyLedger(joint, M, K, load)
     # Newton condensed onto the pair's 3 coordinates, as a jointed structure would run it
-    integrate(system, Newmark(newton=Newton(rtol=1e-12, method="condensed")), q_eq, v0, dt, n_steps,
-              consumers=[ledger],
-              progress=False)
+    integrate(system, Newmark(newton=Newton(rtol=1e-12, method="condensed")), q0, v0, dt, n_steps,
+              consumers=[ledger], progress=False)
     mechanical, stored, dissipated, tractions = (np.array(x) for x in zip(*ledger.records))
     return mechanical + stored, np.cumsum(dissipated), tractions
 
@@ -452,3 +459,47 @@ def test_a_ring_down_loses_exactly_the_energy_its_sliders_dissipate(name):
         errors.append(np.abs(lost - dissipated).max() / dissipated[-1])
     assert errors[0] < 3e-4
     assert 3.0 < errors[0] / errors[1] < 6.0              # second order in dt (ratio 4; 4.9 and 3.8 measured)
+
+
+def test_a_joint_run_resumes_from_its_snapshot_store_and_its_rom_term_saves_whole(tmp_path):
+    """The Iwan joint's sliders go into the store's checkpoint under the force's name; a run stopped
+    at step 120 and resumed from the file equals an unbroken one bit for bit. The force's parameters
+    (the law a nested group) go through HDF5 with a projected term and rebuild an equal force."""
+    import h5py
+
+    from femrom.inference import ProjectedNonlinearForce
+    from femrom.snapshots import SnapshotStore, resume
+
+    law = IwanLaw(slip_traction=1.8, tangential_stiffness=4e3, chi=-0.5, beta=0.1, normal_stiffness=2e4,
+                  n_sliders=20)
+    system, joint, (q0, v0), _ = jointed_pair(law)
+    scheme = Newmark(newton=Newton(rtol=1e-12, method="condensed"))
+    kwargs = dict(fields=("q", "v", "a"), scheme=scheme, dt=4e-4, n_steps=240)
+    reference = SnapshotStore.create(tmp_path / "ref.h5", system, **kwargs)
+    integrate(system, scheme, q0, v0, 4e-4, 240, consumers=[reference.writer(chunk_steps=16)], progress=False)
+
+    def stop(result):
+        if result.step == 120:
+            raise KeyboardInterrupt
+
+    store = SnapshotStore.create(tmp_path / "a.h5", system, **kwargs)
+    with pytest.raises(KeyboardInterrupt):
+        integrate(system, scheme, q0, v0, 4e-4, 240, consumers=[store.writer(chunk_steps=16), stop],
+                  progress=False)
+    state = store.checkpoint(0).state
+    assert state.shape == (1, law.slider_stiffness.size, 2) and np.any(state != 0.0)   # the sliders moved
+    store.close()
+    resume(tmp_path / "a.h5", system, scheme)
+    done = SnapshotStore.open(tmp_path / "a.h5")
+    for field in ("q", "v", "a"):
+        np.testing.assert_array_equal(done.read(0, field), reference.read(0, field))
+    done.close()
+    reference.close()
+    basis = np.eye(6)[:, :4]
+    with h5py.File(tmp_path / "term.h5", "w") as file:
+        ProjectedNonlinearForce(joint, basis).save(file.create_group("term"))
+    with h5py.File(tmp_path / "term.h5", "r") as file:
+        loaded = ProjectedNonlinearForce.load(file["term"], basis=basis).force_model
+    assert type(loaded) is JointForce and loaded.law == law and loaded.name == "joint"
+    q = 1e-3 * np.arange(6.0)
+    np.testing.assert_array_equal(loaded.force(q, None, state), joint.force(q, None, state))
