@@ -97,7 +97,7 @@ def test_loading_unloading_reloading_follow_masing_branches(name):
     """Virgin loading to x_1, unloading to x_2 < 0, reloading past x_1: every branch from a reversal
     (x_r, f_r) is f_r + 2 f_0((x - x_r) / 2), with f_0 the virgin curve, and past the old reversal x_1
     the reloading rejoins the virgin curve. Both laws are parallel sets of Jenkins elements, for which
-    Masing holds exactly: the identity is checked to round-off (1e-12 of F_s; measured ~1e-16)."""
+    Masing holds exactly: the identity is checked to round-off (1e-12 of F_s; measured 5.6e-16)."""
     law = laws()[name]
     scale = law.slip_traction / law.tangential_stiffness          # the slip displacement of Jenkins
     virgin_x = np.linspace(0.0, 4.0, 161) * scale
