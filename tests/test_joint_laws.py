@@ -66,6 +66,7 @@ def test_laws_are_found_by_name_and_bad_parameters_name_the_parameter():
            ("dry_friction", dict(normal_stiffness=1.0, tangential_stiffness=1.0, friction_coefficient=-0.1),
             "friction_coefficient must be >= 0"),
            ("jenkins", dict(tangential_stiffness=1.0, slip_traction=np.nan), "slip_traction must be > 0"),
+           ("jenkins", dict(tangential_stiffness="stiff", slip_traction=1.0), "tangential_stiffness must be > 0"),
            ("iwan", dict(slip_traction=1.0, tangential_stiffness=1.0, chi=-1.0, beta=0.0), "chi must be > -1"),
            ("iwan", dict(slip_traction=1.0, tangential_stiffness=1.0, chi=-0.5, beta=-1.0), "beta must be >= 0"),
            ("iwan", dict(slip_traction=1.0, tangential_stiffness=1.0, chi=-0.5, beta=0.0, n_sliders=2.5),

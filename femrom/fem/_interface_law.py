@@ -56,11 +56,8 @@ def interface_law(name: str, **parameters) -> "InterfaceLaw":
 def interface_law_from_parameters(parameters: dict) -> "InterfaceLaw":
     """Inverse of :meth:`InterfaceLaw.parameters` (numbers may come back as 0-d arrays)."""
     values = dict(parameters)
-    name = str(values.pop("name"))
-    cls = INTERFACE_LAWS.get(name)
-    kinds = {f.name: f.type for f in dataclasses.fields(cls) if f.init}
-    return cls(**{key: int(value) if kinds.get(key) in (int, "int") else float(value)
-                  for key, value in values.items()})
+    cls = INTERFACE_LAWS.get(str(values.pop("name")))
+    return cls(**{key: float(value) for key, value in values.items()})   # the law coerces its integers
 
 
 def check_parameters(law, rules) -> None:
@@ -71,9 +68,13 @@ def check_parameters(law, rules) -> None:
     """
     kinds = {f.name: f.type for f in dataclasses.fields(law)}
     for name, valid, ok in rules:
-        value = float(getattr(law, name))
+        given = getattr(law, name)
+        try:
+            value = float(given)
+        except (TypeError, ValueError):
+            value = float("nan")
         if not (np.isfinite(value) and ok(value)):
-            raise ValueError(f"{type(law).__name__}: {name} must be {valid}, got {value!r}")
+            raise ValueError(f"{type(law).__name__}: {name} must be {valid}, got {given!r}")
         object.__setattr__(law, name, int(value) if kinds.get(name) in (int, "int") else value)
 
 
