@@ -11,6 +11,16 @@ from femrom.fem._line import (
     line_mass,
 )
 from femrom.fem._friction import JenkinsForce
+from femrom.fem._interface_law import (
+    INTERFACE_LAWS,
+    InterfaceLaw,
+    ParallelSliderLaw,
+    interface_law,
+    interface_law_from_parameters,
+    radial_return,
+    register_interface_law,
+)
+from femrom.fem._joint import JointForce, interface_frames, relative_displacement_map
 from femrom.fem._nonlinear import (
     FORCES,
     ForceSum,
@@ -31,11 +41,16 @@ from femrom.fem._vector_ops import (
     surface_pressure,
     surface_traction,
 )
+from femrom.fem.interface_laws.dry_friction import DryFrictionLaw
+from femrom.fem.interface_laws.iwan import IwanLaw
+from femrom.fem.interface_laws.jenkins import JenkinsLaw
 
 __all__ = [
-    "DENSITIES", "FORCES", "Condensation", "ForceSum", "JenkinsForce", "LineSpace", "LocalPotential",
-    "NonlinearForce", "QuarticPotential", "SolidSpace", "SpaceError", "force_from_parameters",
-    "register_force", "selection_map", "sum_of_forces",
+    "DENSITIES", "FORCES", "INTERFACE_LAWS", "Condensation", "DryFrictionLaw", "ForceSum", "InterfaceLaw",
+    "IwanLaw", "JenkinsForce", "JenkinsLaw", "JointForce", "LineSpace", "LocalPotential", "NonlinearForce",
+    "ParallelSliderLaw", "QuarticPotential", "SolidSpace", "SpaceError", "force_from_parameters",
+    "interface_frames", "interface_law", "interface_law_from_parameters", "radial_return",
+    "register_force", "register_interface_law", "relative_displacement_map", "selection_map", "sum_of_forces",
     "average_rows", "axial_stiffness", "bending_stiffness", "dirichlet_dofs", "elasticity_stiffness",
     "hrz_lumped", "lame_parameters", "line_basis", "line_mass", "point_load", "probe_rows",
     "rayleigh_damping", "rayleigh_from_damping_ratios", "rigid_body_modes", "surface_pressure",

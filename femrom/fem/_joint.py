@@ -1,0 +1,227 @@
+r"""Zero-thickness interface elements at matching node pairs: the joint force.
+
+Two faces of a joint (side a, side b) meet at ``s`` pairs of matching nodes,
+each with a unit normal ``n_i`` (of side a, pointing towards side b) and a
+tributary area ``A_i``. The pair's relative displacement in its local frame
+``(t1_i, t2_i, n_i)``,
+
+.. math::
+
+    \Delta_i = R_i (u_{b,i} - u_{a,i}) + \Delta_{0,i}, \qquad
+    R_i = [t_{1,i};\ t_{2,i};\ n_i] \ (3, 3),
+
+(``Delta_0`` an initial gap, negative for an interference that stands for a
+preload) goes through an interface law (:data:`femrom.fem.INTERFACE_LAWS`)
+to a traction ``t_i`` (s, 3), and the joint force on the free dofs is
+
+.. math::
+
+    f(q; z) = L^\top g, \qquad g_i = A_i\, t_i(L_i q + \Delta_{0,i}; z_i), \qquad
+    \frac{\partial g}{\partial x} = \operatorname{blockdiag}(A_i\, \partial t_i / \partial \Delta_i),
+
+with ``L`` (3 s, n) the sparse map ``q -> (R_i (u_b - u_a))_i``: a
+:class:`femrom.fem.NonlinearForce` whose local coordinates are the pairs'
+relative displacements, so Newton condenses onto them and a reduced basis
+projects them like any other force.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+
+from femrom.fem._interface_law import InterfaceLaw, interface_law_from_parameters
+from femrom.fem._nonlinear import NonlinearForce, register_force
+
+
+def interface_frames(normals, first_tangents=None) -> np.ndarray:
+    r"""(s, 3, 3) rotations ``R_i`` with rows ``(t1_i, t2_i, n_i)``, right-handed.
+
+    ``n_i`` is the given normal normalised. ``t1_i`` is ``first_tangents``
+    projected onto the tangent plane and normalised when given, else the unit
+    vector of the coordinate axis least aligned with ``n_i``, projected (a
+    deterministic choice; the laws are isotropic in the tangent plane, so it
+    only names the components). ``t2 = n x t1``.
+
+    Parameters
+    ----------
+    normals : (s, 3) array
+    first_tangents : (s, 3) or (3,) array, optional
+    """
+    normals = np.asarray(normals, dtype=float)
+    if normals.ndim != 2 or normals.shape[1] != 3:
+        raise ValueError(f"normals must be (s, 3), got shape {normals.shape}")
+    length = np.linalg.norm(normals, axis=1)
+    if not np.all(length > 0):
+        raise ValueError(f"normals must be nonzero; {int(np.sum(~(length > 0)))} are zero or not finite")
+    n = normals / length[:, None]
+    if first_tangents is None:
+        t = np.zeros_like(n)
+        t[np.arange(n.shape[0]), np.argmin(np.abs(n), axis=1)] = 1.0
+    else:
+        t = np.broadcast_to(np.asarray(first_tangents, dtype=float), n.shape)
+    t = t - np.einsum("si,si->s", t, n)[:, None] * n
+    t_length = np.linalg.norm(t, axis=1)
+    if not np.all(t_length > 1e-12):
+        raise ValueError("first_tangents must not be parallel to the normals")
+    t1 = t / t_length[:, None]
+    t2 = np.cross(n, t1)
+    return np.stack([t1, t2, n], axis=1)
+
+
+def _side(dofs, name: str, n_dofs: int) -> np.ndarray:
+    dofs = np.asarray(dofs)
+    if dofs.ndim != 2 or dofs.shape[1] != 3 or not np.issubdtype(dofs.dtype, np.integer):
+        raise ValueError(f"{name} must be an (s, 3) integer array of dof indices, got shape {dofs.shape} "
+                         f"and dtype {dofs.dtype}")
+    if dofs.size and dofs.max() >= n_dofs:
+        raise ValueError(f"{name} must lie in [0, {n_dofs}) (or be -1 for a fixed component), got {dofs.max()}")
+    return dofs.astype(np.int64)
+
+
+def relative_displacement_map(dofs_a, dofs_b, frames, n_dofs: int) -> sp.csr_matrix:
+    r"""(3 s, n) csr ``L``: ``(L q)[3 i + c] = R_i[c] . (u_b,i - u_a,i)``.
+
+    A negative dof index marks a fixed component (zero displacement: a side
+    clamped or grounded).
+    """
+    s = frames.shape[0]
+    rows = np.repeat(np.arange(3 * s).reshape(s, 3, 1), 3, axis=2)          # (s, c, d)
+    parts = []
+    for dofs, sign in ((dofs_b, 1.0), (dofs_a, -1.0)):
+        cols = np.broadcast_to(dofs[:, None, :], (s, 3, 3))
+        free = cols >= 0
+        parts.append((rows[free], cols[free], sign * frames[free]))
+    r, c, v = (np.concatenate(p) for p in zip(*parts))
+    return sp.csr_matrix((v, (r, c)), shape=(3 * s, n_dofs))
+
+
+@register_force
+class JointForce(NonlinearForce):
+    r"""Interface elements at ``s`` node pairs under one interface law (see the module docstring).
+
+    Parameters
+    ----------
+    law : InterfaceLaw
+        e.g. ``interface_law("iwan", slip_traction=..., ...)``.
+    dofs_a, dofs_b : (s, 3) int arrays
+        The x, y, z dofs of the pairs' nodes on side a and side b (-1: a fixed component).
+    normals : (s, 3) array
+        Normals of side a, pointing towards side b (normalised here).
+    areas : (s,) array
+        Tributary areas ``A_i > 0`` [m^2].
+    n_dofs : int
+        Size of the system.
+    initial_gap : float or (s,) array, optional
+        Normal gap ``g_n`` at ``q = 0`` (default 0); negative: an interference (preload).
+    first_tangents : (s, 3) or (3,) array, optional
+        Direction of the first tangential axis (see :func:`interface_frames`).
+    name : str, optional
+
+    Local coordinates: (3 s,) ``(g_t1, g_t2, g_n)`` of each pair without the
+    initial gap (``L q``). State: the law's, one row per pair; checkpoint keys
+    from :meth:`InterfaceLaw.checkpoint` (``"slip"``).
+    """
+
+    kind = "joint"
+    stateful = True
+
+    def __init__(self, law: InterfaceLaw, dofs_a, dofs_b, normals, areas, n_dofs: int, *, initial_gap=0.0,
+                 first_tangents=None, name: str | None = None):
+        if not isinstance(law, InterfaceLaw):
+            raise ValueError(f"law must be an InterfaceLaw (see femrom.fem.interface_law), got {type(law).__name__}")
+        n_dofs = int(n_dofs)
+        dofs_a, dofs_b = _side(dofs_a, "dofs_a", n_dofs), _side(dofs_b, "dofs_b", n_dofs)
+        if dofs_a.shape != dofs_b.shape:
+            raise ValueError(f"dofs_a and dofs_b must have one shape, got {dofs_a.shape} and {dofs_b.shape}")
+        s = dofs_a.shape[0]
+        if np.any((dofs_a == dofs_b) & (dofs_a >= 0)):
+            raise ValueError("dofs_a and dofs_b must differ component by component (a pair joins two nodes)")
+        normals = np.asarray(normals, dtype=float)
+        if normals.shape != (s, 3):
+            raise ValueError(f"normals must be ({s}, 3) like the dofs, got shape {normals.shape}")
+        areas = np.asarray(areas, dtype=float)
+        if areas.shape != (s,) or not np.all(areas > 0):
+            raise ValueError(f"areas must be ({s},) and > 0, got shape {areas.shape}"
+                             + (f" with minimum {areas.min()!r}" if areas.size else ""))
+        gap = np.broadcast_to(np.asarray(initial_gap, dtype=float), (s,)).copy()
+        if not np.all(np.isfinite(gap)):
+            raise ValueError("initial_gap must be finite")
+        frames = interface_frames(normals, first_tangents)
+        super().__init__(n_dofs, local_map=relative_displacement_map(dofs_a, dofs_b, frames, n_dofs), name=name)
+        self.law, self.dofs_a, self.dofs_b, self.areas = law, dofs_a, dofs_b, areas
+        self.normals, self.frames, self.initial_gap = frames[:, 2].copy(), frames, gap
+        # as given, so that the parameters rebuild the frames bit for bit
+        self._given = {"normals": normals.copy()}
+        if first_tangents is not None:
+            self._given["first_tangents"] = np.array(first_tangents, dtype=float)
+        self._offset = np.zeros((s, 3))
+        self._offset[:, 2] = gap
+        # the block-diagonal pattern of the local tangent, fixed: row 3 i + c holds columns 3 i + (0, 1, 2)
+        self._tangent_indices = np.repeat(np.arange(3 * s).reshape(s, 1, 3), 3, axis=1).ravel()
+        self._tangent_indptr = np.arange(0, 9 * s + 1, 3)
+
+    @property
+    def n_pairs(self) -> int:
+        """Number ``s`` of node pairs."""
+        return self.areas.size
+
+    # -- local law ------------------------------------------------------------------
+    def gaps(self, x: np.ndarray) -> np.ndarray:
+        """(s, 3) local relative displacements ``Delta`` of local coordinates ``x`` (3 s,)."""
+        return x.reshape(self.n_pairs, 3) + self._offset
+
+    def _state(self, state):
+        return self.law.initial_state(self.n_pairs) if state is None else state
+
+    def local_force(self, x, xdot=None, state=None):
+        traction, _ = self.law.evaluate(self.gaps(x), self._state(state), tangent=False)
+        return (self.areas[:, None] * traction).ravel()
+
+    def local_tangent(self, x, xdot=None, state=None):
+        _, D = self.law.evaluate(self.gaps(x), self._state(state), tangent=True)
+        blocks = self.areas[:, None, None] * D
+        shape = (3 * self.n_pairs,) * 2
+        return sp.csr_matrix((blocks.ravel(), self._tangent_indices, self._tangent_indptr), shape=shape), None
+
+    def initial_state(self):
+        return self.law.initial_state(self.n_pairs)
+
+    def local_commit(self, x, xdot, state):
+        return self.law.commit(self.gaps(x), self._state(state))
+
+    def checkpoint(self, state):
+        return self.law.checkpoint(state)
+
+    def restore(self, data):
+        return self.law.restore(data)
+
+    # -- what the interface does ------------------------------------------------------
+    def tractions(self, q: np.ndarray, state=None) -> np.ndarray:
+        """(s, 3) tractions ``(t_t1, t_t2, t_n)`` [Pa] at ``q`` with ``state`` frozen."""
+        return self.law.traction(self.gaps(self.localize(q)), self._state(state))
+
+    def dissipation(self, q: np.ndarray, state=None) -> float:
+        """Energy the sliders dissipate in the step from the committed ``state`` to ``commit(q, ., state)``:
+        ``sum_i A_i D_i`` [J]."""
+        return float(self.areas @ self.law.dissipation(self.gaps(self.localize(q)), self._state(state)))
+
+    def stored_energy(self, q: np.ndarray, state=None) -> float:
+        """Elastic energy in the interface springs at ``q`` with the sliders at ``state`` [J]."""
+        return float(self.areas @ self.law.stored_energy(self.gaps(self.localize(q)), self._state(state)))
+
+    # -- storage ------------------------------------------------------------------------
+    def parameters(self):
+        return {"kind": self.kind, "law": self.law.parameters(), "dofs_a": self.dofs_a, "dofs_b": self.dofs_b,
+                "areas": self.areas, "n_dofs": self.n_dofs, "initial_gap": self.initial_gap, "name": self.name,
+                **self._given}
+
+    @classmethod
+    def from_parameters(cls, parameters):
+        tangents = parameters.get("first_tangents")
+        return cls(interface_law_from_parameters(parameters["law"]), np.asarray(parameters["dofs_a"]),
+                   np.asarray(parameters["dofs_b"]), np.asarray(parameters["normals"]),
+                   np.asarray(parameters["areas"]), int(parameters["n_dofs"]),
+                   initial_gap=np.asarray(parameters["initial_gap"]),
+                   first_tangents=None if tangents is None else np.asarray(tangents),
+                   name=str(parameters.get("name", cls.kind)))

@@ -1,0 +1,1 @@
+"""The built-in interface laws, one module each; :data:`femrom.fem.INTERFACE_LAWS` finds every module here."""
