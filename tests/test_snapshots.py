@@ -34,6 +34,7 @@ from femrom.snapshots import (
     FORMAT_NAME,
     SnapshotStore,
     SnapshotStoreError,
+    read_rows,
     recover,
     resume,
 )
@@ -662,3 +663,39 @@ def test_superblock_checksum_is_lookup3(good_store):
     assert lookup3(b"Four score and seven years ago", 1) == 0xCD628161
     block = read_superblock(good_store)  # raises on a checksum mismatch
     assert block.version == 3 and block.flags == 0
+
+
+@pytest.mark.parametrize("checksums", [True, False])
+def test_a_flipped_byte_in_a_chunk_is_an_error_with_checksums_and_silent_without(tmp_path, checksums):
+    """Fletcher-32 per chunk: silent corruption on disk becomes a SnapshotStoreError on reading."""
+    system = forced_chain()
+    path = tmp_path / "s.h5"
+    store = SnapshotStore.create(path, system, fields=("q",), scheme=Newmark(), dt=0.05, n_steps=20,
+                                 checksums=checksums)
+    writer = store.writer(chunk_steps=7)
+    integrate(system, Newmark(), np.ones(system.n_dofs), np.zeros(system.n_dofs), 0.05, 20,
+              consumers=[writer])
+    good = store.read("000", "q")
+    store.close()
+    with h5py.File(path, "r") as f:  # where the second chunk of q lies in the file
+        dataset = f["trajectories/000/q"]
+        assert (dataset.fletcher32, f.attrs["checksums"]) == (checksums, checksums)
+        info = dataset.id.get_chunk_info(1)
+        offset = info.byte_offset + 8 * system.n_dofs + 3  # inside the chunk's second row
+    with open(path, "r+b") as raw:
+        raw.seek(offset)
+        byte = raw.read(1)
+        raw.seek(offset)
+        raw.write(bytes([byte[0] ^ 0x10]))
+
+    reopened = SnapshotStore.open(path)
+    if checksums:
+        with pytest.raises(SnapshotStoreError, match=r"trajectories/000/q.*checksum does not match"):
+            reopened.read("000", "q")
+        with pytest.raises(SnapshotStoreError, match=r"trajectories/000/q.*checksum does not match"):
+            read_rows(path, "000", "q", 0, 21)
+        assert np.array_equal(reopened.read("000", "q", 0, 7), good[:, :7])  # other chunks still read
+    else:  # no checksum: the changed byte comes back as a wrong number, unnoticed
+        changed = reopened.read("000", "q")
+        assert np.count_nonzero(changed != good) == 1
+    reopened.close()

@@ -64,6 +64,8 @@ def hdf5_message(exc: BaseException) -> str:
         return "not an HDF5 file"
     if "truncated file" in text:
         return f"truncated HDF5 file ({text.split('(', 1)[-1].rstrip(')')})"
+    if "filter returned failure during read" in text:  # Fletcher-32 is the only filter stores use
+        return "a chunk's checksum does not match its bytes (the file changed on disk)"
     return text
 
 

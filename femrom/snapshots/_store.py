@@ -89,7 +89,7 @@ class SnapshotStore:
     @classmethod
     def create(cls, path, model_or_system, *, fields=None, scheme=None, dt: float | None = None,
                n_steps: int | None = None, units: dict | None = None,
-               overwrite: bool = False) -> "SnapshotStore":
+               overwrite: bool = False, checksums: bool = True) -> "SnapshotStore":
         """Create an empty store for a system (or a built scene).
 
         Parameters
@@ -111,6 +111,11 @@ class SnapshotStore:
             Units of the quantities; SI (:data:`DEFAULT_UNITS`) by default.
         overwrite : bool
             Replace an existing file (not one a live process is writing).
+        checksums : bool
+            A Fletcher-32 checksum per chunk of every trajectory's rows (HDF5's filter):
+            a byte changed on disk is an error on reading, not a wrong number. On by
+            default: it costs under 5 % of a streamed run's writing and reading
+            (``benchmarks/store_checksums.py``).
 
         Notes
         -----
@@ -146,6 +151,7 @@ class SnapshotStore:
             "n_outputs": system.n_outputs,
             "output_names": _format.dumps(list(system.output_names)),
             "system": _format.dumps(system.metadata),
+            "checksums": bool(checksums),
         }
         if scheme is not None:
             attrs["scheme"] = getattr(scheme, "name", str(scheme))

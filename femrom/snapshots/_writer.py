@@ -179,11 +179,13 @@ class SnapshotWriter:
             if value is not None:
                 group.attrs[key] = value
         widths = {"q": n, "v": n, "a": n, "u": system.n_inputs, "y": system.n_outputs}
+        checksums = bool(trajectories.file.attrs.get("checksums", False))   # stores made before: none
         for key in _format.stored_fields(trajectories.file):
             w = widths[key]
-            group.create_dataset(key, shape=(0, w), maxshape=(None, w), chunks=(c, w), dtype="f8")
-        group.create_dataset("t", shape=(0,), maxshape=(None,), chunks=(c,), dtype="f8")
-        group.create_dataset("step", shape=(0,), maxshape=(None,), chunks=(c,), dtype="i8")
+            group.create_dataset(key, shape=(0, w), maxshape=(None, w), chunks=(c, w), dtype="f8",
+                                 fletcher32=checksums)
+        group.create_dataset("t", shape=(0,), maxshape=(None,), chunks=(c,), dtype="f8", fletcher32=checksums)
+        group.create_dataset("step", shape=(0,), maxshape=(None,), chunks=(c,), dtype="i8", fletcher32=checksums)
         # fixed-size datasets are given data, so their storage exists now and every
         # later write to them is raw data only (no metadata changes)
         group.create_dataset("committed", data=np.array([0, -1], dtype=np.int64))
