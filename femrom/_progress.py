@@ -1,7 +1,10 @@
-"""Progress of long work: a live line on a terminal, silence in logs and CI.
+"""Progress of long work: a live line on a terminal, a line every 30 s in a log.
 
-Two reports, both on ``stderr`` and only when it is a TTY and neither ``CI``
-nor ``FEMROM_NO_PROGRESS`` is set (otherwise they print nothing):
+Two reports, both on ``stderr``. On a terminal (a TTY, ``CI`` not set) the line
+is redrawn in place; anywhere else (a log file, a pipe, a CI job) a plain line
+is appended once every ``FEMROM_PROGRESS_SECONDS`` seconds (default 30), so a
+log of a long run shows that it is alive and how far it is, and short work
+writes nothing. ``FEMROM_NO_PROGRESS`` silences both.
 
 - :class:`Progress`, for loops of counted steps: steps done, steps per second
   and the estimated time left. Used by the time integrators (one unit per
@@ -24,10 +27,33 @@ import time
 from typing import TextIO
 
 
-def _interactive(stream: TextIO) -> bool:
-    if os.environ.get("CI") or os.environ.get("FEMROM_NO_PROGRESS"):
-        return False
-    return bool(getattr(stream, "isatty", lambda: False)())
+LOG_SECONDS = 30.0
+
+
+def _mode(stream: TextIO) -> str | None:
+    """``"live"`` (redrawn line on a terminal), ``"log"`` (appended lines) or ``None``."""
+    if os.environ.get("FEMROM_NO_PROGRESS"):
+        return None
+    if not os.environ.get("CI") and bool(getattr(stream, "isatty", lambda: False)()):
+        return "live"
+    return "log"
+
+
+def _log_seconds() -> float:
+    text = os.environ.get("FEMROM_PROGRESS_SECONDS", "")
+    try:
+        seconds = float(text) if text else LOG_SECONDS
+    except ValueError:
+        raise ValueError(f"FEMROM_PROGRESS_SECONDS must be a number of seconds, got {text!r}") from None
+    if not seconds >= 0.0:
+        raise ValueError(f"FEMROM_PROGRESS_SECONDS must be >= 0, got {text!r}")
+    return seconds
+
+
+def _resolve(enabled: bool | None, stream: TextIO) -> str | None:
+    if enabled is None:
+        return _mode(stream)
+    return "live" if enabled else None
 
 
 class Progress:
@@ -40,47 +66,60 @@ class Progress:
     label : str
         Text in front of the counter.
     enabled : bool or None
-        Force on or off; ``None`` decides from the stream (TTY and not CI).
+        ``True``: the live line; ``False``: nothing; ``None`` (default): decided
+        from the stream (live on a terminal, a line every ``log_seconds`` otherwise).
     min_interval : float
-        Seconds between two redraws.
+        Seconds between two redraws of the live line.
+    log_seconds : float, optional
+        Seconds between two appended lines in a log (default ``FEMROM_PROGRESS_SECONDS``
+        or 30).
     """
 
     def __init__(self, total: int, label: str = "", *, enabled: bool | None = None,
-                 stream: TextIO | None = None, min_interval: float = 0.25):
+                 stream: TextIO | None = None, min_interval: float = 0.25,
+                 log_seconds: float | None = None):
         self.total = int(total)
         self.label = label
         self.stream = stream if stream is not None else sys.stderr
-        self.enabled = _interactive(self.stream) if enabled is None else enabled
-        self.min_interval = min_interval
+        self.mode = _resolve(enabled, self.stream)
+        self.min_interval = min_interval if self.mode == "live" else (
+            _log_seconds() if log_seconds is None else float(log_seconds))
         self.done = 0
         self._start = time.perf_counter()
-        self._last = -1.0
+        self._last = -1.0 if self.mode == "live" else self._start
+        self._logged = False
+
+    @property
+    def enabled(self) -> bool:
+        return self.mode is not None
 
     def update(self, n: int = 1) -> None:
         self.done += n
-        if not self.enabled:
+        if self.mode is None:
             return
         now = time.perf_counter()
-        if now - self._last < self.min_interval and self.done < self.total:
+        if now - self._last < self.min_interval and (self.done < self.total or self.mode == "log"):
             return
         self._last = now
         elapsed = max(now - self._start, 1e-12)
         rate = self.done / elapsed
         left = (self.total - self.done) / rate if rate > 0 else float("inf")
-        self.stream.write(
-            f"\r{self.label}: {self.done}/{self.total}  {_format_rate(rate)}/s  "
-            f"{_format_seconds(left)} left   "
-        )
+        text = (f"{self.label}: {self.done}/{self.total}  {_format_rate(rate)}/s  "
+                f"{_format_seconds(left)} left")
+        if self.mode == "live":
+            self.stream.write(f"\r{text}   ")
+        else:
+            self.stream.write(f"{text}\n")
+            self._logged = True
         self.stream.flush()
 
     def close(self) -> None:
-        if self.enabled:
-            elapsed = time.perf_counter() - self._start
-            self.stream.write(
-                f"\r{self.label}: {self.done}/{self.total} in {_format_seconds(elapsed)}"
-                + " " * 20 + "\n"
-            )
-            self.stream.flush()
+        if self.mode is None or (self.mode == "log" and not self._logged):
+            return  # a log hears of work that outlived one interval, not of every short loop
+        elapsed = time.perf_counter() - self._start
+        text = f"{self.label}: {self.done}/{self.total} in {_format_seconds(elapsed)}"
+        self.stream.write(f"\r{text}" + " " * 20 + "\n" if self.mode == "live" else f"{text}\n")
+        self.stream.flush()
 
     def __enter__(self) -> "Progress":
         return self
@@ -100,7 +139,9 @@ class Stage:
     label : str
         What is being done.
     enabled : bool or None
-        Force on or off; ``None`` decides from the stream (TTY and not CI).
+        ``True``: the live line; ``False``: nothing; ``None`` (default): decided
+        from the stream (live on a terminal; in a log, one line at the end if the
+        call took longer than a second).
     stream : text stream, optional
         Default ``sys.stderr``.
     """
@@ -109,22 +150,29 @@ class Stage:
                  stream: TextIO | None = None):
         self.label = label
         self.stream = stream if stream is not None else sys.stderr
-        self.enabled = _interactive(self.stream) if enabled is None else enabled
+        self.mode = _resolve(enabled, self.stream)
         self._start = 0.0
+
+    @property
+    def enabled(self) -> bool:
+        return self.mode is not None
 
     def __enter__(self) -> "Stage":
         self._start = time.perf_counter()
-        if self.enabled:
+        if self.mode == "live":
             self.stream.write(f"{self.label} ...")
             self.stream.flush()
         return self
 
     def __exit__(self, exc_type, *exc) -> None:
-        if self.enabled:
-            elapsed = _format_seconds(time.perf_counter() - self._start)
-            outcome = f"failed after {elapsed}" if exc_type is not None else f"done in {elapsed}"
-            self.stream.write(f"\r{self.label}: {outcome}\n")
-            self.stream.flush()
+        seconds = time.perf_counter() - self._start
+        if self.mode is None or (self.mode == "log" and seconds < 1.0 and exc_type is None):
+            return
+        elapsed = _format_seconds(seconds)
+        outcome = f"failed after {elapsed}" if exc_type is not None else f"done in {elapsed}"
+        self.stream.write(f"\r{self.label}: {outcome}\n" if self.mode == "live"
+                          else f"{self.label}: {outcome}\n")
+        self.stream.flush()
 
 
 def _format_rate(rate: float) -> str:

@@ -1,4 +1,4 @@
-"""Progress reports: silent in logs and CI, steps / rate / time left on a terminal."""
+"""Progress reports: steps / rate / time left, redrawn on a terminal, a line every 30 s in a log."""
 
 import io
 import re
@@ -83,20 +83,62 @@ def test_redraws_are_throttled(terminal, clock):
     assert 9 <= stream.getvalue().count("\r") <= 11
 
 
-@pytest.mark.parametrize("env", [{}, {"CI": "true"}, {"FEMROM_NO_PROGRESS": "1"}],
-                         ids=["not-a-tty", "ci", "opt-out"])
-def test_quiet_in_logs_and_ci(monkeypatch, clock, env):
-    monkeypatch.delenv("CI", raising=False)
-    monkeypatch.delenv("FEMROM_NO_PROGRESS", raising=False)
-    for name, value in env.items():
-        monkeypatch.setenv(name, value)
-    stream = io.StringIO() if not env else FakeTTY()  # with CI, even a terminal stays quiet
+def test_opting_out_silences_everything(monkeypatch, clock):
+    monkeypatch.setenv("FEMROM_NO_PROGRESS", "1")
+    stream = FakeTTY()
     bar = run_bar(stream, clock)
     bar.close()
     with Stage("meshing", stream=stream):
         clock.now += 3.0
     assert stream.getvalue() == ""
     assert bar.done == 20  # counting still happens
+
+
+@pytest.mark.parametrize("env", [{}, {"CI": "true"}], ids=["not-a-tty", "ci"])
+def test_a_log_gets_a_plain_line_every_interval_and_nothing_for_short_work(monkeypatch, clock, env):
+    monkeypatch.delenv("CI", raising=False)
+    monkeypatch.delenv("FEMROM_NO_PROGRESS", raising=False)
+    monkeypatch.delenv("FEMROM_PROGRESS_SECONDS", raising=False)
+    for name, value in env.items():
+        monkeypatch.setenv(name, value)
+    stream = io.StringIO() if not env else FakeTTY()  # with CI, even a terminal gets log lines
+    bar = Progress(20, "Newmark", stream=stream)
+    for _ in range(20):  # 20 steps of 0.5 s: 10 s, under one 30 s interval
+        clock.now += 0.5
+        bar.update()
+    bar.close()
+    assert stream.getvalue() == ""
+
+    bar = Progress(200, "Newmark", stream=stream)
+    for _ in range(200):  # 200 steps of 1 s: lines at 30, 60, ..., 180 s, then the final one
+        clock.now += 1.0
+        bar.update()
+    bar.close()
+    lines = stream.getvalue().splitlines()
+    assert "\r" not in stream.getvalue() and stream.getvalue().endswith("\n")
+    assert lines[0] == "Newmark: 30/200  1/s  2:50 left"
+    assert [line.split()[1] for line in lines[:-1]] == [f"{30 * k}/200" for k in range(1, 7)]
+    assert lines[-1] == "Newmark: 200/200 in 3:20"
+
+    stream = io.StringIO() if not env else FakeTTY()
+    with Stage("meshing", stream=stream):
+        clock.now += 0.5  # a short stage says nothing in a log
+    with Stage("assembling", stream=stream):
+        clock.now += 3.0
+    assert stream.getvalue() == "assembling: done in 0:03\n"
+
+
+def test_the_log_interval_comes_from_the_environment(monkeypatch, clock):
+    monkeypatch.setenv("FEMROM_PROGRESS_SECONDS", "5")
+    stream = io.StringIO()
+    bar = Progress(20, "rSVD", stream=stream)
+    for _ in range(20):
+        clock.now += 1.0
+        bar.update()
+    assert len(stream.getvalue().splitlines()) == 4  # at 5, 10, 15, 20 s
+    monkeypatch.setenv("FEMROM_PROGRESS_SECONDS", "often")
+    with pytest.raises(ValueError, match="FEMROM_PROGRESS_SECONDS must be a number of seconds, got 'often'"):
+        Progress(20, "rSVD", stream=stream)
 
 
 def test_stage_reports_start_end_and_failure(terminal, clock):
@@ -159,4 +201,4 @@ def test_scene_assembly_reports_its_stage(terminal, monkeypatch):
     stream = FakeTTY()
     monkeypatch.setattr("sys.stderr", stream)
     build(scene)
-    assert "assembling" not in stream.getvalue()
+    assert "..." not in stream.getvalue() and "\r" not in stream.getvalue()  # a log: no live line
