@@ -166,7 +166,7 @@ class Stage:
 
     def __exit__(self, exc_type, *exc) -> None:
         seconds = time.perf_counter() - self._start
-        if self.mode is None or (self.mode == "log" and seconds < 1.0 and exc_type is None):
+        if self.mode is None or (self.mode == "log" and seconds < 1.0):
             return
         elapsed = _format_seconds(seconds)
         outcome = f"failed after {elapsed}" if exc_type is not None else f"done in {elapsed}"

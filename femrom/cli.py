@@ -18,6 +18,7 @@ import argparse
 import importlib.util
 import sys
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -194,6 +195,8 @@ def main(argv: list[str] | None = None) -> int:
     debug = bool(argv[:1] == ["--debug"])
     if debug:
         argv = argv[1:]
+    shown = warnings.showwarning
+    warnings.showwarning = _one_line_warning
     try:
         return _main(argv)
     except _user_errors() as exc:
@@ -202,6 +205,14 @@ def main(argv: list[str] | None = None) -> int:
         message = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         print(f"femrom: {message}", file=sys.stderr)
         return 2
+    finally:
+        warnings.showwarning = shown
+
+
+def _one_line_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    """A warning on the command line: ``femrom: warning: ...``, one line, no source excerpt."""
+    text = str(message).splitlines()[0] if str(message) else category.__name__
+    print(f"femrom: warning: {text}", file=sys.stderr if file is None else file)
 
 
 def _main(argv: list[str]) -> int:

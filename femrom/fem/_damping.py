@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numpy as np
 import scipy.sparse as sp
 
 
@@ -10,6 +11,10 @@ def rayleigh_damping(mass: sp.spmatrix, stiffness: sp.spmatrix, alpha: float, be
 
     Modal damping ratio ``zeta_i = alpha / (2 omega_i) + beta omega_i / 2``.
     """
+    for name, value in (("alpha", alpha), ("beta", beta)):
+        if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)) \
+                or not np.isfinite(value):
+            raise ValueError(f"Rayleigh {name} must be a finite number, got {value!r}")
     if alpha < 0 or beta < 0:
         raise ValueError(f"Rayleigh coefficients must be non-negative, got alpha={alpha}, beta={beta}")
     if alpha == 0 and beta == 0:

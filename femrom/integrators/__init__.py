@@ -20,6 +20,12 @@ coordinates when it acts on a few dofs (:class:`Newton`, ``method``).
 """
 
 from femrom.integrators._central_difference import CentralDifference
+from femrom.integrators._conditioning import (
+    Conditioning,
+    ConditioningError,
+    ConditioningWarning,
+    check_conditioning,
+)
 from femrom.integrators._consumers import EnergyRecorder, OutputRecorder, StepClock, Trajectory
 from femrom.integrators._driver import (
     Integration,
@@ -44,6 +50,10 @@ from femrom.integrators._simulate import SimulationResult, simulate
 from femrom.integrators._stability import MaxFrequency, bound_max_frequency, estimate_max_frequency
 
 __all__ = [
+    "Conditioning",
+    "ConditioningError",
+    "ConditioningWarning",
+    "check_conditioning",
     "CANONICAL_SCHEMES", "NEWTON_METHODS", "SCHEMES", "CanonicalSystem", "CanonicalTrajectory",
     "CentralDifference", "ConvergenceError", "EnergyRecorder", "GeneralizedAlpha", "ImplicitMidpoint",
     "ImplicitSolve", "Integration", "IntegrationError", "IntegrationSummary", "MaxFrequency", "Newmark",

@@ -7,6 +7,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from femrom.integrators._conditioning import ConditioningError, check_conditioning
 from femrom.integrators._consumers import EnergyRecorder, OutputRecorder, Trajectory
 from femrom.integrators._driver import integrate
 from femrom.integrators._schemes import scheme_for
@@ -43,6 +44,12 @@ def simulate(model, *, dt: float | None = None, t_end: float | None = None, cons
     dt = scene.time.dt if dt is None else float(dt)
     t_end = scene.time.t_end if t_end is None else float(t_end)
     n_steps = int(round(t_end / dt))
+    try:
+        check_conditioning(system, dt)
+    except ConditioningError as exc:
+        material = ", ".join(f"{k} = {v:g}" for k, v in asdict(scene.material).items()
+                             if isinstance(v, (int, float)) and not isinstance(v, bool))
+        raise ConditioningError(f"{scene.name}: {exc} ([material] {material})") from None
     every = scene.outputs.save_every
     kept = []
     outputs = energy = trajectory = None

@@ -12,7 +12,7 @@ import scipy.sparse as sp
 from femrom import fem
 from femrom._progress import Stage
 from femrom.fem import Condensation
-from femrom.mesh import build_mesh
+from femrom.mesh import MeshError, build_mesh
 from femrom.scene._config import Scene
 from femrom.scene._effects import Assembly, registered_effects
 from femrom.scene._errors import SceneError
@@ -58,7 +58,8 @@ def _assemble(scene: Scene, mesh, timings: dict):
     """The system of the listed effects on ``mesh``; fills ``timings`` per stage."""
     with _timed(timings, "space"):
         space = make_space(scene, mesh)
-        condensation = _condensation(scene, space)
+        with _located("boundary"):
+            condensation = _condensation(scene, space)
     build = Assembly(scene=scene, space=space, condensation=condensation, timings=timings)
     known = registered_effects()
     for name in sorted(scene.effect_names, key=lambda name: list(known).index(name)):
@@ -69,7 +70,11 @@ def _assemble(scene: Scene, mesh, timings: dict):
     output_names = ()
     if scene.outputs.probes:
         with _timed(timings, "outputs"):
-            rows = [condensation.columns(space.output_row(p)) for p in scene.outputs.probes]
+            rows = []
+            for i, p in enumerate(scene.outputs.probes):
+                kind = "averages" if p.average else "probes"
+                with _located(f"outputs.{kind}[{i}] ({p.name})"):
+                    rows.append(condensation.columns(space.output_row(p)))
             output_matrix = sp.vstack(rows).tocsr()
             output_names = tuple(p.name for p in scene.outputs.probes)
 
@@ -143,6 +148,15 @@ def _condensation(scene, space) -> Condensation:
     return Condensation.from_fixed(space.n_total, fixed)
 
 
+@contextlib.contextmanager
+def _located(where: str):
+    """A space's or mesh's complaint about one scene entry, as a SceneError naming the entry."""
+    try:
+        yield
+    except (fem.SpaceError, MeshError) as exc:
+        raise SceneError(f"[{where}] {exc}") from None
+
+
 def _initial_state(scene, space, system):
     ic = scene.initial_conditions
     n = system.n_dofs
@@ -150,7 +164,8 @@ def _initial_state(scene, space, system):
     if ic.kind == "zero":
         return np.zeros(n), np.zeros(n)
     if ic.kind == "static_load":
-        f = cond.vector(space.load_vector(ic.load))
+        with _located("initial_conditions.load"):
+            f = cond.vector(space.load_vector(ic.load))
         if not cond.fixed.size:
             raise SceneError("[initial_conditions] static_load needs supports: the model has no [boundary] "
                              "conditions, so its stiffness is singular (rigid-body motion); use kind = 'zero' "

@@ -55,6 +55,31 @@ LOAD_KINDS = ("point_load", "surface_traction", "surface_pressure")
 INITIAL_KINDS = ("zero", "static_load", "mode", "expression")
 
 
+def _number(value, where: str) -> float:
+    """A finite real number (not a bool or a string), or a SceneError naming ``where``."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise SceneError(f"[{where.rsplit('.', 1)[0]}] {where.rsplit('.', 1)[-1]} must be a finite number, "
+                         f"got {value!r}")
+    return float(value)
+
+
+def _vector(value, where: str) -> tuple[float, ...]:
+    """A point or direction: a list of finite numbers."""
+    if isinstance(value, (str, bytes)) or not hasattr(value, "__iter__"):
+        raise SceneError(f"[{where.rsplit('.', 1)[0]}] {where.rsplit('.', 1)[-1]} must be a list of numbers, "
+                         f"got {value!r}")
+    return tuple(_number(x, where) for x in value)
+
+
+def _names(value, where: str) -> tuple[str, ...]:
+    """A list of names (boundaries, fields): a lone string is refused, not split into letters."""
+    if isinstance(value, str) or not isinstance(value, (list, tuple)) or \
+            not all(isinstance(x, str) and x for x in value):
+        raise SceneError(f"[{where.rsplit('.', 1)[0]}] {where.rsplit('.', 1)[-1]} must be a list of names, "
+                         f"got {value!r}")
+    return tuple(value)
+
+
 def _choice(value, valid, what):
     if value not in valid:
         raise SceneError(f"unknown {what} {value!r}; valid: {', '.join(valid)}")
@@ -70,9 +95,13 @@ class StructureConfig:
     @classmethod
     def from_dict(cls, data):
         d = _take(data, "structure", {"geometry": None, "element": "p1", "parameters": {}}, ("geometry",))
+        if not isinstance(d["parameters"], dict):
+            raise SceneError(f"[structure] parameters must be a table of numbers, got {d['parameters']!r}")
         params = _take(d["parameters"], "structure.parameters", dict(d["parameters"] or {}))
-        return cls(str(d["geometry"]), _choice(d["element"], ELEMENTS, "element"),
-                   tuple(sorted((k, float(v)) for k, v in params.items())))
+        if not isinstance(d["geometry"], str) or not d["geometry"]:
+            raise SceneError(f"[structure] geometry must be a geometry name, got {d['geometry']!r}")
+        return cls(d["geometry"], _choice(d["element"], ELEMENTS, "element"),
+                   tuple(sorted((k, _number(v, f"structure.parameters.{k}")) for k, v in params.items())))
 
 
 @dataclass(frozen=True)
@@ -145,11 +174,13 @@ class LoadConfig:
         d = _take(data, where, {"kind": "point_load", "at": None, "component": None,
                                 "direction": None, "magnitude": 1.0}, ("at",))
         _choice(d["kind"], LOAD_KINDS, f"load kind in [{where}]")
-        at = d["at"] if isinstance(d["at"], str) else tuple(float(x) for x in d["at"])
-        direction = None if d["direction"] is None else tuple(float(x) for x in d["direction"])
+        at = d["at"] if isinstance(d["at"], str) else _vector(d["at"], f"{where}.at")
+        direction = None if d["direction"] is None else _vector(d["direction"], f"{where}.direction")
         if d["kind"] == "surface_traction" and direction is None:
             raise SceneError(f"[{where}] a surface_traction needs a 'direction' vector")
-        return cls(d["kind"], at, d["component"], direction, float(d["magnitude"]))
+        if d["component"] is not None and not isinstance(d["component"], str):
+            raise SceneError(f"[{where}] component must be a component name, got {d['component']!r}")
+        return cls(d["kind"], at, d["component"], direction, _number(d["magnitude"], f"{where}.magnitude"))
 
 
 @dataclass(frozen=True)
@@ -198,7 +229,7 @@ class BoundaryConfig:
     @classmethod
     def from_dict(cls, data):
         d = _take(data, "boundary", {"clamped": [], "pinned": []})
-        return cls(tuple(d["clamped"]), tuple(d["pinned"]))
+        return cls(_names(d["clamped"], "boundary.clamped"), _names(d["pinned"], "boundary.pinned"))
 
 
 @dataclass(frozen=True)
@@ -229,9 +260,10 @@ class InitialConfig:
             if d["load"] is None:
                 raise SceneError("[initial_conditions] kind 'static_load' needs a 'load' table")
             load = LoadConfig.from_dict(d["load"], "initial_conditions.load")
-        if int(d["index"]) < 1:
-            raise SceneError(f"[initial_conditions] mode index is 1-based, got {d['index']}")
-        return cls(d["kind"], load, int(d["index"]), float(d["amplitude"]), d["component"],
+        if isinstance(d["index"], bool) or not isinstance(d["index"], int) or d["index"] < 1:
+            raise SceneError(f"[initial_conditions] index must be a mode number (1-based), got {d['index']!r}")
+        return cls(d["kind"], load, d["index"], _number(d["amplitude"], "initial_conditions.amplitude"),
+                   d["component"],
                    str(d["displacement"]), str(d["velocity"]))
 
 
@@ -270,7 +302,11 @@ class TimeConfig:
                              f"({MAX_STEPS:.0e}); raise dt or split the window")
         if not 0 <= float(d["spectral_radius"]) <= 1:
             raise SceneError(f"[time] spectral_radius must lie in [0, 1], got {d['spectral_radius']}")
-        return cls(float(d["t_end"]), float(d["dt"]), d["integrator"], float(d["spectral_radius"]), str(d["solver"]))
+        from femrom.solvers import strategies
+
+        if d["solver"] not in strategies():
+            raise SceneError(f"[time] unknown solver {d['solver']!r}; valid: {', '.join(strategies())}")
+        return cls(float(d["t_end"]), float(d["dt"]), d["integrator"], float(d["spectral_radius"]), d["solver"])
 
     @property
     def n_steps(self) -> int:
@@ -303,16 +339,21 @@ class OutputConfig:
                 where = f"outputs.{kind}[{i}]"
                 key = "at" if kind == "probes" else "over"
                 e = _take(p, where, {"name": f"{kind[:-1]}{i}", key: None, "component": None}, (key,))
-                at = e[key] if isinstance(e[key], str) else tuple(float(x) for x in e[key])
-                probes.append(ProbeConfig(str(e["name"]), at, e["component"], kind == "averages"))
+                at = e[key] if isinstance(e[key], str) else _vector(e[key], f"{where}.{key}")
+                if not isinstance(e["name"], str) or not e["name"]:
+                    raise SceneError(f"[{where}] name must be a non-empty string, got {e['name']!r}")
+                probes.append(ProbeConfig(e["name"], at, e["component"], kind == "averages"))
         names = [p.name for p in probes]
         if len(set(names)) != len(names):
             raise SceneError(f"[outputs] output names must be unique, got {names}")
-        for f in d["fields"]:
+        for f in _names(d["fields"], "outputs.fields"):
             _choice(f, FIELDS, "output field")
-        if int(d["save_every"]) < 1:
-            raise SceneError(f"[outputs] save_every must be >= 1, got {d['save_every']}")
-        return cls(tuple(probes), tuple(d["fields"]), bool(d["energy"]), int(d["save_every"]))
+        every = d["save_every"]
+        if isinstance(every, bool) or not isinstance(every, int) or every < 1:
+            raise SceneError(f"[outputs] save_every must be a whole number >= 1, got {every!r}")
+        if not isinstance(d["energy"], bool):
+            raise SceneError(f"[outputs] energy must be true or false, got {d['energy']!r}")
+        return cls(tuple(probes), tuple(d["fields"]), d["energy"], every)
 
 
 @dataclass(frozen=True)
@@ -348,6 +389,9 @@ class Scene:
                 raise SceneError(f"missing section [{required}]")
         effects = _effects_from_dict(data["effects"])
         inputs = tuple(InputConfig.from_dict(d, i) for i, d in enumerate(data.get("inputs", [])))
+        input_names = [i.name for i in inputs]
+        if len(set(input_names)) != len(input_names):
+            raise SceneError(f"[[inputs]] names must be unique, got {input_names}")
         names = {e.name for e in effects}
         if inputs and "actuation" not in names:
             raise SceneError("the scene lists [[inputs]] but not the 'actuation' effect")
@@ -356,8 +400,11 @@ class Scene:
         if data.get("rom") is not None and not (data.get("outputs") or {}).get("probes") \
                 and not (data.get("outputs") or {}).get("averages"):
             raise SceneError("[rom] compares reduced and full outputs: list probes or averages in [outputs]")
+        name = data.get("name", "scene")
+        if not isinstance(name, str) or not name.strip() or any(c in name for c in "/\\\0"):
+            raise SceneError(f"name must be a non-empty string without path separators, got {name!r}")
         return cls(
-            name=str(data.get("name", "scene")),
+            name=name,
             description=str(data.get("description", "")),
             structure=StructureConfig.from_dict(data["structure"]),
             material=MaterialConfig.from_dict(data["material"]),

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -50,7 +51,14 @@ class Signal:
         params = {**defaults, **data}
         if kind == "array":
             params = _array_parameters(params, where)
-        elif kind in ("sigmoid", "impulse"):
+        else:
+            for key, value in params.items():
+                if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+                    raise SceneError(f"{where}: {key} must be a finite number, got {value!r}")
+            params = {key: float(value) for key, value in params.items()}
+        if kind == "sine" and not params["frequency"] > 0:
+            raise SceneError(f"{where}: frequency must be positive (Hz), got {params['frequency']}")
+        if kind in ("sigmoid", "impulse"):
             positive = "width" if kind == "sigmoid" else "duration"
             if not params[positive] > 0:
                 raise SceneError(f"{where}: {positive} must be positive, got {params[positive]}")
