@@ -185,6 +185,12 @@ class POD:
         given = [v for v in (rank, energy, tolerance) if v is not None]
         if len(given) != 1:
             raise ValueError("give exactly one of rank, energy, tolerance")
+        if rank is not None and (isinstance(rank, bool) or not isinstance(rank, (int, np.integer))):
+            raise ValueError(f"rank must be a whole number, got {rank!r}")
+        for name, value in (("energy", energy), ("tolerance", tolerance)):
+            if value is not None and (isinstance(value, bool) or not isinstance(value, (int, float))
+                                      or not np.isfinite(value)):
+                raise ValueError(f"{name} must be a finite number, got {value!r}")
         self.rank, self.energy, self.tolerance = rank, energy, tolerance
         self.product = product
         self.method = method

@@ -95,6 +95,15 @@ class SecondOrderData:
             A = getattr(self, name)
             if A is not None and (A.ndim != 2 or A.shape[1] != shape[1]):
                 raise ValueError(f"{name} must be (., {shape[1]}), got shape {A.shape}")
+        for name in ("states", "velocities", "accelerations", "nonlinear_forces", "inputs", "outputs"):
+            A = getattr(self, name)
+            if A is None:
+                continue
+            if not np.issubdtype(A.dtype, np.number) or np.iscomplexobj(A):
+                raise ValueError(f"{name} must be real numbers, got dtype {A.dtype}")
+            bad = np.flatnonzero(~np.isfinite(A).all(axis=0))
+            if bad.size:
+                raise ValueError(f"{name}: snapshot column {bad[0]} is not finite")
 
     @property
     def r(self) -> int:

@@ -234,6 +234,14 @@ class SecondOrderLearner(Learner):
                 "data then follow M~^-1 K~, which is not symmetric, so the symmetric K^ >= 0 "
                 "structure argument breaks; pass mass=V^T M V or use a mass-orthonormal basis",
                 UserWarning, stacklevel=3)
+        if not any(np.any(D) for D in blocks_data):
+            raise ValueError(f"{type(self).__name__}: every snapshot of the data is zero: nothing to learn from")
+        unknowns, columns = sum(D.shape[0] for D in blocks_data), Y.shape[1]
+        if columns < unknowns and not any(self.regularization[t.name] > 0 for t in self._learned(data)):
+            warnings.warn(
+                f"{type(self).__name__}: {columns} snapshots for {unknowns} unknowns per reduced equation "
+                f"(r = {data.r}): the data do not determine the operators; give more snapshots, a smaller r "
+                f"or a regularization", UserWarning, stacklevel=3)
         blocks = []
         for term, D in zip(self._learned(data), blocks_data):
             structure = _BLOCKS.get(term.structure) if self.structured else "free"

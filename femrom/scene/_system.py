@@ -64,6 +64,15 @@ class SecondOrderSystem:
             A = getattr(self, name)
             if A is not None and A.shape != (n, n):
                 raise ValueError(f"{name} has shape {A.shape}, expected ({n}, {n})")
+        for name in ("mass", "stiffness", "damping", "input_matrix", "output_matrix"):
+            A = getattr(self, name)
+            if A is None:
+                continue
+            values = A.data if sp.issparse(A) else np.asarray(A)
+            if not np.issubdtype(values.dtype, np.number) or np.iscomplexobj(values):
+                raise ValueError(f"{name} must be a real matrix, got dtype {values.dtype}")
+            if not np.all(np.isfinite(values)):
+                raise ValueError(f"{name} has non-finite entries")
         if (self.input_matrix is None) != (self.inputs is None):
             raise ValueError("input_matrix and inputs must be given together")
         if self.input_matrix is not None and self.input_matrix.shape[0] != n:

@@ -127,6 +127,10 @@ class SnapshotStore:
         path = Path(path)
         model, system = split_model(model_or_system)
         fields = _state_fields(model, system, fields)
+        if path.is_dir():
+            raise SnapshotStoreError(f"{path}: is a folder, not a store file")
+        if not path.parent.is_dir():
+            raise SnapshotStoreError(f"{path}: its folder {path.parent} does not exist")
         if path.exists() and not overwrite:
             raise SnapshotStoreError(f"{path}: file exists (pass overwrite=True to replace it)")
         if path.exists():
@@ -136,6 +140,12 @@ class SnapshotStore:
             scheme = scheme_for(scene.time) if scheme is None else scheme
             dt = scene.time.dt if dt is None else dt
             n_steps = scene.time.n_steps if n_steps is None else n_steps
+        if dt is not None and (isinstance(dt, bool) or not isinstance(dt, (int, float, np.floating))
+                               or not np.isfinite(dt) or dt <= 0):
+            raise SnapshotStoreError(f"{path}: dt must be a positive finite number, got {dt!r}")
+        if n_steps is not None and (isinstance(n_steps, bool) or not isinstance(n_steps, (int, np.integer))
+                                    or n_steps < 0):
+            raise SnapshotStoreError(f"{path}: n_steps must be a whole number >= 0, got {n_steps!r}")
         cond = system.condensation
         attrs = {
             "format": _format.FORMAT_NAME,
@@ -616,6 +626,8 @@ def read_rows(path, trajectory: str, field: str, start: int, stop: int) -> np.nd
 def _open_for_reading(path: Path) -> tuple[h5py.File, bool]:
     """:func:`_format.open_for_reading`; the store as it was before a killed writer's unfinished
     layout change, if one is pending (read through the journal, the file left untouched)."""
+    if path.is_dir():
+        raise SnapshotStoreError(f"{path}: is a folder, not a store file")
     change = _journal.pending_change(path, _process_alive)
     if change is None:
         return _format.open_for_reading(path)
