@@ -1,9 +1,26 @@
 """Post-processing: metrics files, plots of responses and energy, accuracy-vs-cost tables,
 deformed-shape renders and ParaView time series; a ROM's prediction exported on the user's
-mesh (:func:`export_prediction`: ``.pvd`` with the error field, outputs as CSV)."""
+mesh (:func:`export_prediction`: ``.pvd`` with the error field, outputs as CSV); backbone and
+damping-vs-amplitude curves from ring-down signals (:func:`hilbert_backbone`,
+:func:`peak_backbone`) and the jointed-beam impact data (:func:`read_hammer_impact`)."""
 
 from femrom._json import jsonable
+from femrom.post._backbone import (
+    Backbone,
+    default_trim,
+    hilbert_backbone,
+    peak_backbone,
+    plot_backbones,
+    spectral_peaks,
+)
 from femrom.post._export import export_prediction
+from femrom.post._impact import (
+    ImpactRecord,
+    brb_data_dir,
+    measured_backbone,
+    measured_spectral_peaks,
+    read_hammer_impact,
+)
 from femrom.post._output import OutputFolderError, staged_output
 from femrom.post._render import (
     mesh_arrays,
@@ -25,6 +42,10 @@ from femrom.post._report import (
     write_metrics,
 )
 
-__all__ = ["OutputFolderError", "accuracy_cost_table", "export_prediction", "staged_output", "jsonable", "machine_description", "mesh_arrays", "plot_accuracy_cost",
-           "plot_accuracy_cost_groups", "plot_response", "plot_time_series", "pyplot", "render_available",
-           "render_grid", "save_figure", "table_section", "vertex_displacements", "write_metrics", "write_vtu_series"]
+__all__ = ["accuracy_cost_table", "Backbone", "brb_data_dir", "default_trim", "export_prediction",
+           "hilbert_backbone", "ImpactRecord", "jsonable", "machine_description", "measured_backbone",
+           "measured_spectral_peaks", "mesh_arrays", "OutputFolderError", "peak_backbone",
+           "plot_accuracy_cost", "plot_accuracy_cost_groups", "plot_backbones", "plot_response",
+           "plot_time_series", "pyplot", "read_hammer_impact", "render_available", "render_grid",
+           "save_figure", "spectral_peaks", "staged_output", "table_section", "vertex_displacements",
+           "write_metrics", "write_vtu_series"]
