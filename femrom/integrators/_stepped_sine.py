@@ -94,6 +94,9 @@ class Peak:
         Index of the discrete maximum in the sweep.
     interpolated : bool
         Whether the maximum was interior (if not, the sweep may have missed the peak).
+
+    At a jump (a hardening Duffing stepped up) the response drops off a cliff after the
+    maximum and the parabola is no peak shape: read the discrete maximum ``index`` there.
     """
 
     output: str
