@@ -11,6 +11,10 @@ Three separate pieces:
 - the *driver* :func:`iterate` loops and yields :class:`StepResult`;
   :func:`integrate` feeds them to *consumers* (:class:`Trajectory`,
   :class:`OutputRecorder`, :class:`EnergyRecorder`, or any callable);
+- a *stepped sine* (:class:`SteppedSine`) drives a *plant* (:class:`SystemPlant`,
+  :class:`StepperPlant`) frequency by frequency without restarting, whole periods at
+  a time to a tested steady state (:class:`SteadyStateCriterion`), and reports the
+  first-harmonic amplitude and phase of each output (:class:`SteppedSineResult`);
 - a *linear-solver strategy* (:func:`femrom.solvers.make_solver`) factorises
   (or preconditions) an effective matrix once and solves with it every step.
 
@@ -47,7 +51,18 @@ from femrom.integrators._newmark import GeneralizedAlpha, Newmark, NewmarkAverag
 from femrom.integrators._newton import NEWTON_METHODS, ConvergenceError, Newton, solve_newton
 from femrom.integrators._schemes import SCHEMES, register_scheme, scheme_for
 from femrom.integrators._simulate import SimulationResult, simulate
+from femrom.integrators._sine_plants import StepperPlant, SystemPlant
 from femrom.integrators._stability import MaxFrequency, bound_max_frequency, estimate_max_frequency
+from femrom.integrators._steady_state import SteadyStateCriterion, SteadyStateMonitor, first_harmonic
+from femrom.integrators._stepped_sine import (
+    FrequencyResponse,
+    Peak,
+    SteadyStateWarning,
+    SteppedSine,
+    SteppedSineResult,
+    parabolic_peak,
+    prewarped_frequency,
+)
 
 __all__ = [
     "Conditioning",
@@ -60,4 +75,7 @@ __all__ = [
     "NewmarkAverageAcceleration", "Newton", "OutputRecorder", "SimulationResult", "StepClock", "StepResult",
     "Trajectory", "bound_max_frequency", "estimate_max_frequency", "integrate", "integrate_canonical",
     "iterate", "newmark_frequencies", "register_scheme", "scheme_for", "simulate", "solve_newton",
+    "FrequencyResponse", "Peak", "SteadyStateCriterion", "SteadyStateMonitor", "SteadyStateWarning",
+    "SteppedSine", "SteppedSineResult", "StepperPlant", "SystemPlant", "first_harmonic", "parabolic_peak",
+    "prewarped_frequency",
 ]
