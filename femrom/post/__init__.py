@@ -2,7 +2,8 @@
 deformed-shape renders and ParaView time series; a ROM's prediction exported on the user's
 mesh (:func:`export_prediction`: ``.pvd`` with the error field, outputs as CSV); backbone and
 damping-vs-amplitude curves from ring-down signals (:func:`hilbert_backbone`,
-:func:`peak_backbone`) and the jointed-beam impact data (:func:`read_hammer_impact`)."""
+:func:`peak_backbone`), from static solves by quasi-static modal analysis
+(:func:`quasi_static_modal_analysis`), and the jointed-beam impact data (:func:`read_hammer_impact`)."""
 
 from femrom._json import jsonable
 from femrom.post._backbone import (
@@ -22,6 +23,7 @@ from femrom.post._impact import (
     read_hammer_impact,
 )
 from femrom.post._output import OutputFolderError, staged_output
+from femrom.post._qsma import QuasiStaticBackbone, masing_damping, quasi_static_modal_analysis
 from femrom.post._render import (
     mesh_arrays,
     render_available,
@@ -43,9 +45,10 @@ from femrom.post._report import (
 )
 
 __all__ = ["accuracy_cost_table", "Backbone", "brb_data_dir", "default_trim", "export_prediction",
-           "hilbert_backbone", "ImpactRecord", "jsonable", "machine_description", "measured_backbone",
+           "hilbert_backbone", "ImpactRecord", "jsonable", "machine_description", "masing_damping", "measured_backbone",
            "measured_spectral_peaks", "mesh_arrays", "OutputFolderError", "peak_backbone",
            "plot_accuracy_cost", "plot_accuracy_cost_groups", "plot_backbones", "plot_response",
-           "plot_time_series", "pyplot", "read_hammer_impact", "render_available", "render_grid",
+           "plot_time_series", "pyplot", "QuasiStaticBackbone", "quasi_static_modal_analysis",
+           "read_hammer_impact", "render_available", "render_grid",
            "save_figure", "spectral_peaks", "staged_output", "table_section", "vertex_displacements",
            "write_metrics", "write_vtu_series"]
