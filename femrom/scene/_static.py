@@ -58,7 +58,7 @@ class StaticSolution:
     iterations : int
         Newton solves (0: the start already satisfied the test).
     residual : float
-        ``||r||`` on the unsupported dofs over ``||K q|| + ||f|| + ||F||``.
+        ``||r||`` on the unsupported dofs over ``|| |K| |q| || + ||f|| + ||F||``.
     """
 
     displacement: np.ndarray
@@ -93,7 +93,8 @@ def solve_static(system: SecondOrderSystem, load: np.ndarray | None = None, *, s
         be singular. The first iterate is then the linear solution with every pair in
         contact; Newton opens the pairs that pull.
     rtol : float
-        Converged when ``||r|| <= rtol (||K q|| + ||f|| + ||F||)`` on the unsupported dofs.
+        Converged when ``||r|| <= rtol (|| |K| |q| || + ||f|| + ||F||)`` on the unsupported dofs
+        (``|K| |q|``: the entries' magnitudes, the scale of the round-off in ``K q``).
     max_iterations : int
 
     Returns
@@ -122,6 +123,7 @@ def solve_static(system: SecondOrderSystem, load: np.ndarray | None = None, *, s
     if force is not None and state is None:
         state = force.initial_state()
     K = sp.csr_matrix(system.stiffness)
+    K_abs = abs(K)
     q = np.zeros(n) if initial_displacement is None else np.array(initial_displacement, dtype=float)
     q[supports] = 0.0
 
@@ -129,7 +131,8 @@ def solve_static(system: SecondOrderSystem, load: np.ndarray | None = None, *, s
         elastic = K @ q
         nonlinear = np.zeros(n) if force is None else force.force(q, None, state)
         r = elastic + nonlinear - F
-        scale = np.linalg.norm(elastic) + np.linalg.norm(nonlinear) + np.linalg.norm(F)
+        # |K| |q|: the size of the terms summed in K q, so that rtol sits above their round-off
+        scale = np.linalg.norm(K_abs @ np.abs(q)) + np.linalg.norm(nonlinear) + np.linalg.norm(F)
         return r, scale
 
     iteration = 0
