@@ -21,8 +21,10 @@ from femrom.scene._config import (
 )
 from femrom.scene._effects import EFFECTS, Assembly, Effect, effect_class, register_effect, registered_effects
 from femrom.scene._errors import SceneError
+from femrom.scene._modal import BeamModeShape, Modes, beam_mode_shape, linearized_modes, tangent_stiffness
 from femrom.scene._rom import BasisSpec, Derivatives, LearnerSpec, ReportSpec, RomConfig, RunSpec, TimingSpec
 from femrom.scene._signals import Signal, SignalVector
+from femrom.scene._static import Preload, StaticSolution, point_supports, preload, solve_static, with_friction_coefficient
 from femrom.scene._sweep import SweepConfig
 from femrom.scene._system import SecondOrderSystem
 
@@ -33,4 +35,6 @@ __all__ = [
     "InputConfig", "LoadConfig", "MaterialConfig", "OutputConfig", "ProbeConfig", "Scene",
     "SceneError", "SecondOrderSystem", "Signal", "SignalVector", "SweepConfig", "StructureConfig", "TimeConfig", "build",
     "effect_class", "register_effect", "registered_effects",
+    "BeamModeShape", "Modes", "Preload", "StaticSolution", "beam_mode_shape", "linearized_modes",
+    "point_supports", "preload", "solve_static", "tangent_stiffness", "with_friction_coefficient",
 ]
