@@ -55,7 +55,50 @@ def load_case(name: str):
     return module
 
 
-def run_scene_file(path: Path, out_dir: Path) -> dict:
+#: Steps and in-memory fields above which ``femrom run`` asks for ``--yes``.
+CONFIRM_STEPS = 10_000_000
+
+
+def memory_bound_bytes() -> int:
+    """Half the machine's memory, or ``FEMROM_MEMORY_LIMIT_GB``: what a run may hold in fields."""
+    import os
+
+    text = os.environ.get("FEMROM_MEMORY_LIMIT_GB")
+    if text:
+        try:
+            value = float(text)
+        except ValueError:
+            raise ValueError(f"FEMROM_MEMORY_LIMIT_GB must be a number of GB, got {text!r}") from None
+        if not value > 0:
+            raise ValueError(f"FEMROM_MEMORY_LIMIT_GB must be positive, got {text!r}")
+        return int(value * 1e9)
+    try:
+        return int(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") // 2)
+    except (ValueError, OSError, AttributeError):
+        return 8 * 10**9
+
+
+def check_run_size(scene, n_dofs: int, *, confirmed: bool) -> None:
+    """Refuse, unless ``confirmed``, a run of over :data:`CONFIRM_STEPS` steps or whose kept fields
+    exceed :func:`memory_bound_bytes` (``n_dofs x snapshots x fields x 8`` bytes)."""
+    from femrom.scene import SceneError
+
+    if confirmed:
+        return
+    steps = scene.time.n_steps
+    if steps > CONFIRM_STEPS:
+        raise SceneError(f"{scene.name}: {steps:.3g} steps ([time] t_end / dt) is more than {CONFIRM_STEPS:.0e}; "
+                         f"pass --yes to run it anyway")
+    snapshots = steps // scene.outputs.save_every + 1
+    need = 8 * n_dofs * snapshots * len(scene.outputs.fields)
+    bound = memory_bound_bytes()
+    if need > bound:
+        raise SceneError(f"{scene.name}: [outputs] fields would hold {need / 1e9:.3g} GB in memory ({n_dofs} dofs x "
+                         f"{snapshots} snapshots x {len(scene.outputs.fields)} fields), more than {bound / 1e9:.3g} GB; "
+                         f"keep fewer fields, raise save_every, or pass --yes")
+
+
+def run_scene_file(path: Path, out_dir: Path, *, confirmed: bool = False) -> dict:
     """Build and integrate a scene; write outputs.npz, metrics.json and response.png
     (with a ``[rom]`` section: :func:`femrom.study.run_study`, the whole report).
 
@@ -63,14 +106,20 @@ def run_scene_file(path: Path, out_dir: Path) -> dict:
     the run completes (:func:`femrom.post.staged_output`): a failed run leaves the
     previous results, and a second run into the same folder at once is refused.
     """
-    from femrom.post import staged_output
+    from femrom.post import OutputFolderError, staged_output
 
-    with staged_output(out_dir) as staging:
-        metrics = _run_scene_file(path, staging)
+    try:
+        with staged_output(out_dir) as staging:
+            metrics = _run_scene_file(path, staging, confirmed=confirmed)
+    except OSError as exc:
+        if exc.filename is not None and not str(exc.filename).startswith(str(out_dir.parent / f".{out_dir.name}.")):
+            raise   # about a file of its own (an input, the mesh cache): its message names it
+        reason = exc.strerror or str(exc)
+        raise OutputFolderError(f"{out_dir}: {reason} while writing the results; nothing was changed there") from None
     return metrics
 
 
-def _run_scene_file(path: Path, out_dir: Path) -> dict:
+def _run_scene_file(path: Path, out_dir: Path, *, confirmed: bool = False) -> dict:
     from femrom.integrators import scheme_for, simulate
     from femrom.post import plot_response, write_metrics
     from femrom.scene import Scene, SceneError, build
@@ -88,9 +137,12 @@ def _run_scene_file(path: Path, out_dir: Path) -> dict:
         except SceneError as exc:
             raise SceneError(f"{path}: {exc}") from None
         return run_study(scene, out_dir, progress=lambda message: print(f"femrom: {message}", file=sys.stderr))
+    if scene.time.n_steps > CONFIRM_STEPS:   # known before the build
+        check_run_size(scene, 0, confirmed=confirmed)
     tic = time.perf_counter()
     model = build(scene)
     build_seconds = time.perf_counter() - tic
+    check_run_size(scene, model.system.n_dofs, confirmed=confirmed)
     result = simulate(model)
     out_dir.mkdir(parents=True, exist_ok=True)
     arrays = {"t": result.times}
@@ -187,7 +239,8 @@ def _user_errors() -> tuple[type[BaseException], ...]:
     from femrom.scene import SceneError
     from femrom.snapshots import IngestError, SnapshotStoreError
 
-    return SceneError, IngestError, SnapshotStoreError, MeshError, FileNotFoundError, ValueError
+    # OSError: a full disk, a folder without write permission, a missing file (its message names it)
+    return SceneError, IngestError, SnapshotStoreError, MeshError, OSError, ValueError
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -276,11 +329,13 @@ def _main(argv: list[str]) -> int:
     if target.suffix == ".toml":
         opts = argparse.ArgumentParser(prog="femrom run SCENE.toml")
         opts.add_argument("-o", "--out", type=Path, default=Path("results") / target.stem)
+        opts.add_argument("--yes", action="store_true",
+                          help=f"run even above {CONFIRM_STEPS:.0e} steps or half the memory in kept fields")
         o = opts.parse_args(rest)
         from femrom.scene import SceneError
 
         try:
-            metrics = run_scene_file(target, o.out)
+            metrics = run_scene_file(target, o.out, confirmed=o.yes)
         except SceneError as exc:
             print(f"femrom: {exc}", file=sys.stderr)
             return 2

@@ -405,3 +405,48 @@ def test_a_step_that_resolves_nothing_warns_before_the_run():
                                  eigvals_only=True)[-1])
     assert omega_max / 3.0 <= report.omega_diag <= omega_max
     assert 10 < report.omega_dt < 1e3  # measured 153: far below the 1e6 warning threshold
+
+
+def test_a_full_disk_while_the_cli_writes_results_keeps_the_previous_ones(tmp_path):
+    import os
+    import resource
+    import signal
+
+    env = {**os.environ, "FEMROM_CACHE": str(tmp_path / "cache"), "FEMROM_NO_PROGRESS": "1"}
+    out = tmp_path / "out"
+    first = subprocess.run([sys.executable, "-m", "femrom", "run", str(ROOT / "cases" / "beam.toml"), "-o", str(out)],
+                           capture_output=True, text=True, timeout=300, env=env)
+    assert first.returncode == 0, first.stderr
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+
+    def full_disk():  # files may not grow past 50 kB: outputs.npz (240 kB) hits it, as on a full disk
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+        resource.setrlimit(resource.RLIMIT_FSIZE, (50_000, 50_000))
+
+    second = subprocess.run([sys.executable, "-m", "femrom", "run", str(ROOT / "cases" / "beam.toml"), "-o", str(out)],
+                            capture_output=True, text=True, timeout=300, env=env, preexec_fn=full_disk)
+    lines = second.stderr.strip().splitlines()
+    assert second.returncode == 2 and len(lines) == 1, second.stderr
+    assert lines[0] == f"femrom: {out}: File too large while writing the results; nothing was changed there"
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before   # the previous results, untouched
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["cache", "out"]  # no staging folder, no lock left
+
+
+def test_a_run_above_the_step_or_memory_bound_needs_yes(tmp_path, monkeypatch):
+    from femrom.cli import check_run_size
+
+    steps = Scene.from_dict(_beam() | {"time": {"t_end": 2.0, "dt": 1.0e-7}})
+    with pytest.raises(SceneError, match=r"beam: 2e\+07 steps \(\[time\] t_end / dt\) is more than 1e\+07; pass --yes"):
+        check_run_size(steps, 100, confirmed=False)
+    check_run_size(steps, 100, confirmed=True)
+    data = _beam()
+    data["outputs"]["fields"] = ["displacement", "velocity"]
+    fields = Scene.from_dict(data)
+    monkeypatch.setenv("FEMROM_MEMORY_LIMIT_GB", "0.01")   # 100 dofs x 10001 x 2 x 8 B = 0.016 GB
+    with pytest.raises(SceneError, match=r"fields would hold 0.016 GB in memory \(100 dofs x 10001 snapshots x 2 "):
+        check_run_size(fields, 100, confirmed=False)
+    monkeypatch.setenv("FEMROM_MEMORY_LIMIT_GB", "0.02")
+    check_run_size(fields, 100, confirmed=False)
+    monkeypatch.setenv("FEMROM_MEMORY_LIMIT_GB", "lots")
+    with pytest.raises(ValueError, match="FEMROM_MEMORY_LIMIT_GB must be a number of GB, got 'lots'"):
+        check_run_size(fields, 100, confirmed=False)
