@@ -21,6 +21,7 @@ coordinates when it acts on a few dofs (:class:`Newton`, ``method``).
 
 from femrom.integrators._central_difference import CentralDifference
 from femrom.integrators._consumers import EnergyRecorder, OutputRecorder, StepClock, Trajectory
+from femrom.integrators._energy_balance import EnergyBalance
 from femrom.integrators._driver import (
     Integration,
     IntegrationError,
@@ -45,7 +46,7 @@ from femrom.integrators._stability import MaxFrequency, bound_max_frequency, est
 
 __all__ = [
     "CANONICAL_SCHEMES", "NEWTON_METHODS", "SCHEMES", "CanonicalSystem", "CanonicalTrajectory",
-    "CentralDifference", "ConvergenceError", "EnergyRecorder", "GeneralizedAlpha", "ImplicitMidpoint",
+    "CentralDifference", "ConvergenceError", "EnergyBalance", "EnergyRecorder", "GeneralizedAlpha", "ImplicitMidpoint",
     "ImplicitSolve", "Integration", "IntegrationError", "IntegrationSummary", "MaxFrequency", "Newmark",
     "NewmarkAverageAcceleration", "Newton", "OutputRecorder", "SimulationResult", "StepClock", "StepResult",
     "Trajectory", "bound_max_frequency", "estimate_max_frequency", "integrate", "integrate_canonical",

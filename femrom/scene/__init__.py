@@ -19,18 +19,19 @@ from femrom.scene._config import (
     StructureConfig,
     TimeConfig,
 )
+from femrom.scene._craig_bampton import CraigBampton, boundary_dofs_of, craig_bampton
 from femrom.scene._effects import EFFECTS, Assembly, Effect, effect_class, register_effect, registered_effects
 from femrom.scene._errors import SceneError
 from femrom.scene._rom import BasisSpec, Derivatives, LearnerSpec, ReportSpec, RomConfig, RunSpec, TimingSpec
-from femrom.scene._signals import Signal, SignalVector
+from femrom.scene._signals import Signal, SignalVector, half_sine_spectrum
 from femrom.scene._sweep import SweepConfig
 from femrom.scene._system import SecondOrderSystem
 
 __all__ = [
     "MAX_STEPS",
     "EFFECTS", "Assembly", "BasisSpec", "BoundaryConfig", "Derivatives", "LearnerSpec", "ReportSpec",
-    "RomConfig", "RunSpec", "TimingSpec", "Effect", "EffectConfig", "FullOrderModel", "InitialConfig",
+    "RomConfig", "RunSpec", "CraigBampton", "boundary_dofs_of", "craig_bampton", "TimingSpec", "Effect", "EffectConfig", "FullOrderModel", "InitialConfig",
     "InputConfig", "LoadConfig", "MaterialConfig", "OutputConfig", "ProbeConfig", "Scene",
     "SceneError", "SecondOrderSystem", "Signal", "SignalVector", "SweepConfig", "StructureConfig", "TimeConfig", "build",
-    "effect_class", "register_effect", "registered_effects",
+    "effect_class", "half_sine_spectrum", "register_effect", "registered_effects",
 ]
