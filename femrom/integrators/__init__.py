@@ -31,6 +31,7 @@ from femrom.integrators._conditioning import (
     check_conditioning,
 )
 from femrom.integrators._consumers import EnergyRecorder, OutputRecorder, StepClock, Trajectory
+from femrom.integrators._energy_balance import EnergyBalance
 from femrom.integrators._driver import (
     Integration,
     IntegrationError,
@@ -70,7 +71,7 @@ __all__ = [
     "ConditioningWarning",
     "check_conditioning",
     "CANONICAL_SCHEMES", "NEWTON_METHODS", "SCHEMES", "CanonicalSystem", "CanonicalTrajectory",
-    "CentralDifference", "ConvergenceError", "EnergyRecorder", "GeneralizedAlpha", "ImplicitMidpoint",
+    "CentralDifference", "ConvergenceError", "EnergyBalance", "EnergyRecorder", "GeneralizedAlpha", "ImplicitMidpoint",
     "ImplicitSolve", "Integration", "IntegrationError", "IntegrationSummary", "MaxFrequency", "Newmark",
     "NewmarkAverageAcceleration", "Newton", "OutputRecorder", "SimulationResult", "StepClock", "StepResult",
     "Trajectory", "bound_max_frequency", "estimate_max_frequency", "integrate", "integrate_canonical",

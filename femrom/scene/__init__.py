@@ -19,11 +19,12 @@ from femrom.scene._config import (
     StructureConfig,
     TimeConfig,
 )
+from femrom.scene._craig_bampton import CraigBampton, boundary_dofs_of, craig_bampton
 from femrom.scene._effects import EFFECTS, Assembly, Effect, effect_class, register_effect, registered_effects
 from femrom.scene._errors import SceneError
 from femrom.scene._modal import BeamModeShape, Modes, beam_mode_shape, linearized_modes, tangent_stiffness
 from femrom.scene._rom import BasisSpec, Derivatives, LearnerSpec, ReportSpec, RomConfig, RunSpec, TimingSpec
-from femrom.scene._signals import Signal, SignalVector
+from femrom.scene._signals import Signal, SignalVector, half_sine_spectrum
 from femrom.scene._static import Preload, StaticSolution, point_supports, preload, solve_static, with_friction_coefficient
 from femrom.scene._sweep import SweepConfig
 from femrom.scene._system import SecondOrderSystem
@@ -31,10 +32,10 @@ from femrom.scene._system import SecondOrderSystem
 __all__ = [
     "MAX_STEPS",
     "EFFECTS", "Assembly", "BasisSpec", "BoundaryConfig", "Derivatives", "LearnerSpec", "ReportSpec",
-    "RomConfig", "RunSpec", "TimingSpec", "Effect", "EffectConfig", "FullOrderModel", "InitialConfig",
+    "RomConfig", "RunSpec", "CraigBampton", "boundary_dofs_of", "craig_bampton", "TimingSpec", "Effect", "EffectConfig", "FullOrderModel", "InitialConfig",
     "InputConfig", "LoadConfig", "MaterialConfig", "OutputConfig", "ProbeConfig", "Scene",
     "SceneError", "SecondOrderSystem", "Signal", "SignalVector", "SweepConfig", "StructureConfig", "TimeConfig", "build",
-    "effect_class", "register_effect", "registered_effects",
+    "effect_class", "half_sine_spectrum", "register_effect", "registered_effects",
     "BeamModeShape", "Modes", "Preload", "StaticSolution", "beam_mode_shape", "linearized_modes",
     "point_supports", "preload", "solve_static", "tangent_stiffness", "with_friction_coefficient",
 ]

@@ -29,7 +29,10 @@ class Signal:
     - ``sigmoid``: ``a / (1 + exp(-(t - midpoint) / width))``
     - ``sine``: ``a sin(2 pi f (t - start) + phase) H(t - start)``
     - ``impulse``: half-sine pulse of peak ``a`` on ``[start, start + duration]``
-      (a smooth hammer blow; impulse ``2 a duration / pi``)
+      (a smooth hammer blow; impulse ``2 a duration / pi``). Its spectrum is flat
+      within 3 dB up to ``0.594 / duration`` and first vanishes at ``1.5 / duration``
+      (:func:`half_sine_spectrum`): the duration, set by the hammer tip, sets the
+      excited band.
     - ``array``: piecewise-linear through ``times``/``values`` (or an ``.npz``
       ``file`` with arrays ``t`` and ``u``), zero outside.
     """
@@ -88,6 +91,29 @@ class Signal:
             return p["amplitude"] * np.sin(np.pi * s) * ((s >= 0) & (s <= 1))
         times, values = np.asarray(p["times"]), np.asarray(p["values"])
         return np.interp(t, times, values, left=0.0, right=0.0)
+
+
+def half_sine_spectrum(frequency, amplitude: float, duration: float):
+    r"""Magnitude of the Fourier transform of the half-sine pulse (``impulse`` signal), [N s] for a force in N.
+
+    For ``u(t) = a sin(pi t / tau)`` on ``[0, tau]`` (zero elsewhere),
+
+    .. math::
+
+        |U(f)| = \left|\int u(t)\, e^{-2 \pi i f t}\, dt\right|
+               = \frac{2 a \tau}{\pi} \left|\frac{\cos(\pi f \tau)}{1 - (2 f \tau)^2}\right|,
+
+    ``2 a tau / pi`` at ``f = 0`` (the impulse), ``a tau / 2`` at ``f tau = 1/2``
+    (the removable 0/0), 3 dB down at ``f tau = 0.594`` and zero first at
+    ``f tau = 3/2``, then lobes falling as ``f^-2``. ``frequency`` [Hz]: float or
+    ndarray; returns the same shape.
+    """
+    x = np.asarray(frequency, dtype=float) * float(duration)
+    denominator = 1.0 - (2.0 * x) ** 2
+    near = np.abs(denominator) < 1e-8
+    safe = np.where(near, 1.0, denominator)
+    ratio = np.where(near, np.pi / 4.0, np.cos(np.pi * x) / safe)
+    return 2.0 * float(amplitude) * float(duration) / np.pi * np.abs(ratio)
 
 
 class SignalVector:

@@ -1,0 +1,165 @@
+r"""A nonlinear force re-expressed on new coordinates ``q = T q^``: the local map becomes ``L T``.
+
+A force ``f(q, v; s) = L^T g(L q, L v; s)`` seen through a linear change of
+coordinates ``q = T q^`` (``T`` (n, k): a Craig-Bampton transformation, any
+reduced basis) is
+
+.. math::
+
+    f^(q^, v^; s) = T^\top f(T q^, T v^; s) = (L T)^\top g\big((L T) q^, (L T) \dot q^; s\big),
+
+the same local law ``g`` on the same local coordinates with the local map
+``L T`` (s, k). The state, its commit and its checkpoint are the original
+force's, unchanged: a joint keeps its sliders. Only the rows of ``T`` at the
+dofs ``L`` touches matter, so ``L T`` is built from those rows alone; where
+``T`` keeps those dofs as coordinates of their own (the boundary dofs of
+Craig-Bampton, ``T[b] = [I 0]``) ``L T`` is ``L``'s columns moved, exactly
+sparse.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+
+from femrom.fem._nonlinear import NonlinearForce, force_from_parameters, register_force
+
+#: Methods of the original force taking ``(q, state)`` in its own dofs that the transformed force
+#: offers on the new coordinates when the original has them (a joint's energy bookkeeping).
+DELEGATED = ("dissipation", "stored_energy", "tractions")
+
+
+@register_force
+class TransformedForce(NonlinearForce):
+    r"""``T^T f(T q^, T v^; s)`` of a force ``f`` with a local map (see the module docstring).
+
+    Parameters
+    ----------
+    force : NonlinearForce
+        The original force on ``n`` dofs (a :class:`~femrom.fem.ForceSum` is
+        transformed force by force by :func:`transform_force`).
+    transformation : (n, k) ndarray or sparse
+        ``T``; only its rows at ``force.dofs`` are kept.
+    name : str, optional
+        Default: the original force's name.
+
+    Attributes
+    ----------
+    force_model : NonlinearForce
+        The original force.
+    touched_dofs : (t,) int ndarray
+        The original dofs ``L`` touches (its nonzero columns).
+    touched_rows : (t, k) csr
+        ``T[touched_dofs]``.
+
+    The methods ``dissipation``, ``stored_energy`` and ``tractions`` of the
+    original (a :class:`~femrom.fem.JointForce`) are available with ``q^``
+    in place of ``q`` when the original has them.
+    """
+
+    kind = "transformed"
+
+    def __init__(self, force: NonlinearForce, transformation, *, name: str | None = None):
+        if not isinstance(force, NonlinearForce):
+            raise ValueError(f"force must be a NonlinearForce, got {type(force).__name__}")
+        T = transformation
+        if T.ndim != 2 or T.shape[0] != force.n_dofs:
+            raise ValueError(f"transformation must be (n, k) with n = {force.n_dofs} (the force's dofs), "
+                             f"got shape {T.shape}")
+        L = force.local_map.tocsr()
+        touched = np.unique(L.indices[L.data != 0])
+        rows = sp.csr_matrix(T[touched] if not sp.issparse(T) else sp.csr_matrix(T)[touched], dtype=float)
+        local_map = (L[:, touched] @ rows).tocsr()
+        local_map.eliminate_zeros()
+        super().__init__(T.shape[1], local_map=local_map, name=name or force.name)
+        self.force_model = force
+        self.original_dofs = force.n_dofs
+        touched.setflags(write=False)
+        self.touched_dofs, self.touched_rows = touched, rows
+
+    # -- the law is the original's ------------------------------------------------------
+    @property
+    def conservative(self) -> bool:  # type: ignore[override]
+        return self.force_model.conservative
+
+    @property
+    def velocity_dependent(self) -> bool:  # type: ignore[override]
+        return self.force_model.velocity_dependent
+
+    @property
+    def stateful(self) -> bool:  # type: ignore[override]
+        return self.force_model.stateful
+
+    def local_force(self, x, xdot, state):
+        return self.force_model.local_force(x, xdot, state)
+
+    def local_tangent(self, x, xdot, state):
+        return self.force_model.local_tangent(x, xdot, state)
+
+    def local_potential(self, x):
+        return self.force_model.local_potential(x)
+
+    def initial_state(self):
+        return self.force_model.initial_state()
+
+    def local_commit(self, x, xdot, state):
+        return self.force_model.local_commit(x, xdot, state)
+
+    def checkpoint(self, state):
+        return self.force_model.checkpoint(state)
+
+    def restore(self, data):
+        return self.force_model.restore(data)
+
+    # -- the original's own view ---------------------------------------------------------
+    def embed(self, q_hat: np.ndarray) -> np.ndarray:
+        """(n,) ndarray equal to ``T q^`` on the dofs the original force reads (zero elsewhere):
+        what the original's methods of ``q`` need, at ``O(t k)`` instead of ``O(n k)``."""
+        q = np.zeros(self.original_dofs)
+        q[self.touched_dofs] = self.touched_rows @ q_hat
+        return q
+
+    def __getattr__(self, attribute):
+        # only reached when normal lookup fails: offer the original's (q, state) methods on q^
+        if attribute in DELEGATED and "force_model" in self.__dict__:
+            method = getattr(self.force_model, attribute)  # AttributeError when the original has none
+
+            def on_new_coordinates(q_hat, state=None):
+                return method(self.embed(q_hat), state)
+
+            on_new_coordinates.__doc__ = method.__doc__
+            return on_new_coordinates
+        raise AttributeError(f"{type(self).__name__!r} object has no attribute {attribute!r}")
+
+    # -- storage ------------------------------------------------------------------------------
+    def parameters(self):
+        inner = self.force_model.parameters()
+        if inner is None:
+            return None
+        R = self.touched_rows
+        return {"kind": self.kind, "force": inner, "name": self.name, "touched_dofs": self.touched_dofs,
+                "rows_data": R.data, "rows_indices": R.indices, "rows_indptr": R.indptr,
+                "n_coordinates": self.n_dofs}
+
+    @classmethod
+    def from_parameters(cls, parameters):
+        force = force_from_parameters(parameters["force"])
+        touched = np.asarray(parameters["touched_dofs"], dtype=np.int64)
+        k = int(parameters["n_coordinates"])
+        rows = sp.csr_matrix((parameters["rows_data"], parameters["rows_indices"], parameters["rows_indptr"]),
+                             shape=(touched.size, k))
+        T = sp.lil_matrix((force.n_dofs, k))
+        T[touched] = rows
+        return cls(force, T.tocsr(), name=str(parameters["name"]))
+
+
+def transform_force(force: NonlinearForce | None, transformation) -> NonlinearForce | None:
+    """``None``, or ``force`` on the coordinates ``q = T q^``: a :class:`TransformedForce`, or a
+    :class:`~femrom.fem.ForceSum` of them (each summand transformed on its own, with its own state)."""
+    from femrom.fem._nonlinear import ForceSum, sum_of_forces
+
+    if force is None:
+        return None
+    if isinstance(force, ForceSum):
+        return sum_of_forces([TransformedForce(f, transformation) for f in force.forces])
+    return TransformedForce(force, transformation)
