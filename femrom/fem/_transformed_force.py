@@ -9,7 +9,9 @@ reduced basis) is
     f^(q^, v^; s) = T^\top f(T q^, T v^; s) = (L T)^\top g\big((L T) q^, (L T) \dot q^; s\big),
 
 the same local law ``g`` on the same local coordinates with the local map
-``L T`` (s, k). The state, its commit and its checkpoint are the original
+``L T`` (s, k). About a reference state ``q = q_0 + T q^`` (a preloaded
+equilibrium) the law reads ``g(L q_0 + (L T) q^, ...)``: the offset ``L q_0`` is
+added to the local displacements, so ``q^ = 0`` is the reference. The state, its commit and its checkpoint are the original
 force's, unchanged: a joint keeps its sliders. Only the rows of ``T`` at the
 dofs ``L`` touches matter, so ``L T`` is built from those rows alone; where
 ``T`` keeps those dofs as coordinates of their own (the boundary dofs of
@@ -42,6 +44,8 @@ class TransformedForce(NonlinearForce):
         ``T``; only its rows at ``force.dofs`` are kept.
     name : str, optional
         Default: the original force's name.
+    reference : (n,) ndarray, optional
+        ``q_0``: the coordinates are ``q = q_0 + T q^`` (default ``q_0 = 0``).
 
     Attributes
     ----------
@@ -59,7 +63,7 @@ class TransformedForce(NonlinearForce):
 
     kind = "transformed"
 
-    def __init__(self, force: NonlinearForce, transformation, *, name: str | None = None):
+    def __init__(self, force: NonlinearForce, transformation, *, name: str | None = None, reference=None):
         if not isinstance(force, NonlinearForce):
             raise ValueError(f"force must be a NonlinearForce, got {type(force).__name__}")
         T = transformation
@@ -76,6 +80,15 @@ class TransformedForce(NonlinearForce):
         self.original_dofs = force.n_dofs
         touched.setflags(write=False)
         self.touched_dofs, self.touched_rows = touched, rows
+        if reference is None:
+            self.reference, self.local_offset = None, None
+        else:
+            q0 = np.asarray(reference, dtype=float).reshape(-1)
+            if q0.shape != (force.n_dofs,) or not np.all(np.isfinite(q0)):
+                raise ValueError(f"reference must be a finite ({force.n_dofs},) vector, got shape {q0.shape}")
+            self.reference = np.zeros(force.n_dofs)
+            self.reference[touched] = q0[touched]   # only what L reads is kept
+            self.local_offset = np.asarray(L @ q0).reshape(-1)
 
     # -- the law is the original's ------------------------------------------------------
     @property
@@ -90,20 +103,23 @@ class TransformedForce(NonlinearForce):
     def stateful(self) -> bool:  # type: ignore[override]
         return self.force_model.stateful
 
+    def _shifted(self, x):
+        return x if self.local_offset is None else x + self.local_offset
+
     def local_force(self, x, xdot, state):
-        return self.force_model.local_force(x, xdot, state)
+        return self.force_model.local_force(self._shifted(x), xdot, state)
 
     def local_tangent(self, x, xdot, state):
-        return self.force_model.local_tangent(x, xdot, state)
+        return self.force_model.local_tangent(self._shifted(x), xdot, state)
 
     def local_potential(self, x):
-        return self.force_model.local_potential(x)
+        return self.force_model.local_potential(self._shifted(x))
 
     def initial_state(self):
         return self.force_model.initial_state()
 
     def local_commit(self, x, xdot, state):
-        return self.force_model.local_commit(x, xdot, state)
+        return self.force_model.local_commit(self._shifted(x), xdot, state)
 
     def checkpoint(self, state):
         return self.force_model.checkpoint(state)
@@ -113,10 +129,10 @@ class TransformedForce(NonlinearForce):
 
     # -- the original's own view ---------------------------------------------------------
     def embed(self, q_hat: np.ndarray) -> np.ndarray:
-        """(n,) ndarray equal to ``T q^`` on the dofs the original force reads (zero elsewhere):
+        """(n,) ndarray equal to ``q_0 + T q^`` on the dofs the original force reads (zero elsewhere):
         what the original's methods of ``q`` need, at ``O(t k)`` instead of ``O(n k)``."""
-        q = np.zeros(self.original_dofs)
-        q[self.touched_dofs] = self.touched_rows @ q_hat
+        q = np.zeros(self.original_dofs) if self.reference is None else self.reference.copy()
+        q[self.touched_dofs] += self.touched_rows @ q_hat
         return q
 
     def __getattr__(self, attribute):
@@ -137,9 +153,12 @@ class TransformedForce(NonlinearForce):
         if inner is None:
             return None
         R = self.touched_rows
-        return {"kind": self.kind, "force": inner, "name": self.name, "touched_dofs": self.touched_dofs,
-                "rows_data": R.data, "rows_indices": R.indices, "rows_indptr": R.indptr,
-                "n_coordinates": self.n_dofs}
+        parameters = {"kind": self.kind, "force": inner, "name": self.name, "touched_dofs": self.touched_dofs,
+                      "rows_data": R.data, "rows_indices": R.indices, "rows_indptr": R.indptr,
+                      "n_coordinates": self.n_dofs}
+        if self.reference is not None:
+            parameters["reference"] = self.reference
+        return parameters
 
     @classmethod
     def from_parameters(cls, parameters):
@@ -150,16 +169,17 @@ class TransformedForce(NonlinearForce):
                              shape=(touched.size, k))
         T = sp.lil_matrix((force.n_dofs, k))
         T[touched] = rows
-        return cls(force, T.tocsr(), name=str(parameters["name"]))
+        return cls(force, T.tocsr(), name=str(parameters["name"]), reference=parameters.get("reference"))
 
 
-def transform_force(force: NonlinearForce | None, transformation) -> NonlinearForce | None:
-    """``None``, or ``force`` on the coordinates ``q = T q^``: a :class:`TransformedForce`, or a
-    :class:`~femrom.fem.ForceSum` of them (each summand transformed on its own, with its own state)."""
+def transform_force(force: NonlinearForce | None, transformation, *, reference=None) -> NonlinearForce | None:
+    """``None``, or ``force`` on the coordinates ``q = q_0 + T q^`` (``reference`` ``q_0``, default 0): a
+    :class:`TransformedForce`, or a :class:`~femrom.fem.ForceSum` of them (each summand transformed on
+    its own, with its own state)."""
     from femrom.fem._nonlinear import ForceSum, sum_of_forces
 
     if force is None:
         return None
     if isinstance(force, ForceSum):
-        return sum_of_forces([TransformedForce(f, transformation) for f in force.forces])
-    return TransformedForce(force, transformation)
+        return sum_of_forces([TransformedForce(f, transformation, reference=reference) for f in force.forces])
+    return TransformedForce(force, transformation, reference=reference)

@@ -23,6 +23,7 @@ from femrom.scene._craig_bampton import CraigBampton, boundary_dofs_of, craig_ba
 from femrom.scene._effects import EFFECTS, Assembly, Effect, effect_class, register_effect, registered_effects
 from femrom.scene._errors import SceneError
 from femrom.scene._modal import BeamModeShape, Modes, beam_mode_shape, linearized_modes, tangent_stiffness
+from femrom.scene._projection import project_system
 from femrom.scene._rom import BasisSpec, Derivatives, LearnerSpec, ReportSpec, RomConfig, RunSpec, TimingSpec
 from femrom.scene._signals import Signal, SignalVector, half_sine_spectrum
 from femrom.scene._static import Preload, StaticSolution, point_supports, preload, solve_static, with_friction_coefficient
@@ -37,5 +38,5 @@ __all__ = [
     "SceneError", "SecondOrderSystem", "Signal", "SignalVector", "SweepConfig", "StructureConfig", "TimeConfig", "build",
     "effect_class", "half_sine_spectrum", "register_effect", "registered_effects",
     "BeamModeShape", "Modes", "Preload", "StaticSolution", "beam_mode_shape", "linearized_modes",
-    "point_supports", "preload", "solve_static", "tangent_stiffness", "with_friction_coefficient",
+    "point_supports", "preload", "project_system", "solve_static", "tangent_stiffness", "with_friction_coefficient",
 ]
