@@ -97,3 +97,21 @@ def test_bad_loads_are_refused():
         quasi_static_modal_analysis(lambda F: F, np.eye(2), np.ones(2), [0.2, 0.1])
     with pytest.raises(ValueError, match="positive modal mass"):
         quasi_static_modal_analysis(lambda F: F, np.eye(2), np.zeros(2), [0.1, 0.2])
+
+
+def test_rigid_motion_from_the_supports_is_removed_from_the_outputs():
+    # a free two-mass chain held at dof 0: the static deflection under alpha M phi carries the
+    # rigid translation that brings dof 0 to zero; the outputs must read the elastic part alone
+    M = np.diag([1.0, 1.0])
+    K = np.array([[1.0, -1.0], [-1.0, 1.0]])
+    values, modes = sla.eigh(K, M)
+    rigid, phi = modes[:, :1], modes[:, 1]
+
+    def solve(F):  # dof 0 held: K_11 q_1 = F_1
+        return np.array([0.0, F[1] / K[1, 1]])
+
+    alphas = np.array([0.5, 1.0])
+    result = quasi_static_modal_analysis(solve, M, phi, alphas, output_matrix=np.eye(2), rigid_modes=rigid)
+    assert np.allclose((2 * np.pi * result.frequency_hz) ** 2, values[1], rtol=1e-12)
+    # elastic deflection alpha phi / omega^2 at both dofs (with the supports' rigid motion: 0 at dof 0)
+    assert np.allclose(result.output_amplitude, np.abs(np.outer(alphas, phi)) / values[1], rtol=1e-12)

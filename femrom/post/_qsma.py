@@ -120,7 +120,7 @@ class QuasiStaticBackbone:
 
 def quasi_static_modal_analysis(solve: Callable[[np.ndarray], np.ndarray], mass, mode: np.ndarray,
                                 modal_forces, *, reference: np.ndarray | None = None,
-                                output_matrix=None, progress: Callable[[str], None] | None = None
+                                output_matrix=None, rigid_modes: np.ndarray | None = None, progress: Callable[[str], None] | None = None
                                 ) -> QuasiStaticBackbone:
     r"""Load ``F = alpha M phi`` for increasing ``alpha`` and read the backbone (module docstring).
 
@@ -139,6 +139,12 @@ def quasi_static_modal_analysis(solve: Callable[[np.ndarray], np.ndarray], mass,
         ``q_0``, the preloaded state (default zero).
     output_matrix : (p, n) sparse or ndarray, optional
         ``E``: the outputs' amplitudes are reported along.
+    rigid_modes : (n, k) ndarray, optional
+        Mass-orthonormal rigid-body modes ``R`` of a free structure held by statically
+        determinate supports in ``solve``: the supports add a rigid motion to the static
+        deflection (the load ``M phi`` is self-equilibrated, the deflection is fixed at the
+        supports), which the outputs must not see; they read ``(I - R R^T M)(q - q_0)``.
+        The modal amplitude is unaffected (``phi^T M R = 0``).
     progress : callable, optional
         Called with one line per load.
     """
@@ -155,6 +161,8 @@ def quasi_static_modal_analysis(solve: Callable[[np.ndarray], np.ndarray], mass,
     amplitudes, outputs = [], []
     for i, alpha in enumerate(alphas):
         q = np.asarray(solve(alpha * m_phi), dtype=float).reshape(-1) - q0
+        if rigid_modes is not None:
+            q = q - rigid_modes @ (rigid_modes.T @ (mass @ q))
         amplitudes.append(float(phi @ (mass @ q)))
         if output_matrix is not None:
             outputs.append(np.abs(np.asarray(output_matrix @ q).reshape(-1)))
