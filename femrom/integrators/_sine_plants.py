@@ -66,9 +66,14 @@ class SystemPlant:
     solver : str or callable
         Linear-solver strategy or factory, as in :func:`~femrom.integrators.iterate`.
     quantity : {"acceleration", "displacement"}
+    rest : StepResult, optional
+        The state each force level starts from (default zero ``q``, ``v``, ``a`` and the
+        force's initial state): a preloaded equilibrium with its committed joint state,
+        at ``t = 0`` with zero acceleration.
     """
 
-    def __init__(self, system, force_vector, *, scheme=None, solver="auto", quantity: str = "acceleration"):
+    def __init__(self, system, force_vector, *, scheme=None, solver="auto", quantity: str = "acceleration",
+                 rest: StepResult | None = None):
         if system.output_matrix is None:
             raise ValueError("system has no outputs (output_matrix is None): "
                              "a stepped sine reports outputs such as accelerometers")
@@ -83,7 +88,10 @@ class SystemPlant:
         self.solver = solver
         self.quantity = _quantity(quantity)
         self.output_names = tuple(system.output_names) or tuple(f"y{i}" for i in range(system.n_outputs))
-        self._last: StepResult | None = None
+        if rest is not None and (rest.q.shape != (n,) or rest.t != 0.0):
+            raise ValueError(f"rest must be a StepResult at t = 0 on the system's {n} dofs")
+        self.rest = rest
+        self._last: StepResult | None = rest
 
     @property
     def tustin(self) -> bool:
@@ -96,7 +104,7 @@ class SystemPlant:
         return self._last
 
     def reset(self) -> None:
-        self._last = None
+        self._last = self.rest
 
     def periods(self, amplitude: float, frequency_hz: float, steps_per_period: int,
                 max_periods: int) -> Iterator[np.ndarray]:

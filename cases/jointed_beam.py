@@ -1,0 +1,341 @@
+"""Jointed beam: preload, calibrated modes, backbones (QSMA, ring-down, measured) and stepped sine.
+
+The bolted half Brake-Reuss beam of ``jointed_beam.toml`` (free-free, three bolts at
+12 kN, dry-friction interface elements on the lap joint's node pairs), end to end:
+
+1. **Preload and calibration** (``jointed_beam_prestress.py``): frictionless preload,
+   friction on, and the one calibrated parameter, the interface's tangential stiffness
+   ``k_t``, set so that the first bending mode is the measured 80.5 Hz. The next
+   modes are predictions against the measured 221.7 and 297.7 Hz.
+2. **QSMA on the full model** (:func:`femrom.post.quasi_static_modal_analysis`): static
+   loads ``alpha M phi_1`` with the dry-friction joint in Newton on all 24,522 dofs,
+   Masing damping; amplitudes as acc1's acceleration.
+3. **The impact ring-down** on the reduced model: the ``n_modes`` lowest elastic modes
+   of the prestressed beam (Galerkin about the preload, :func:`femrom.scene.project_system`)
+   with the joint nonlinear and stateful on every interface pair through the projected
+   local map (law ``clamped_friction``: the preload's contact status and slip traction
+   ``mu p_0`` frozen, so the contact cannot chatter), linear modal damping from the data
+   (the measured damping at the lowest amplitude), the hammer as a 0.3 ms half-sine;
+   acc1's band-passed backbone (60-100 Hz, Hilbert, 0.2 s windows) with Newmark's
+   period error removed (``f = tan(pi f_h dt) / (pi dt)``, exact for a linear mode).
+4. **The measured backbone** of the same processing (``data/brb/hammer_impact.npz``).
+5. ``--forced``: the stepped-sine forced response of the reduced model at the shaker
+   (``shaker1``), force levels and frequencies as given.
+
+Run ``python -m femrom run jointed_beam [-o results/jointed_beam] [--forced] [--quick]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import importlib.util
+import json
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import scipy.sparse as sp
+
+from femrom.fem import JointForce, clamped_state
+from femrom.integrators import (
+    Newmark,
+    SteadyStateCriterion,
+    SteppedSine,
+    StepResult,
+    SystemPlant,
+    Trajectory,
+    integrate,
+)
+from femrom.post import (
+    Backbone,
+    hilbert_backbone,
+    measured_backbone,
+    plot_backbones,
+    quasi_static_modal_analysis,
+    read_hammer_impact,
+    staged_output,
+    write_metrics,
+)
+from femrom.scene import (
+    Signal,
+    SignalVector,
+    beam_mode_shape,
+    linearized_modes,
+    point_supports,
+    project_system,
+    solve_static,
+)
+
+
+def _prestress_module():
+    path = Path(__file__).with_name("jointed_beam_prestress.py")
+    spec = importlib.util.spec_from_file_location("femrom_case_jointed_beam_prestress", path)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module
+    spec.loader.exec_module(module)
+    return module
+
+
+prestress = _prestress_module()
+BAND, WINDOW = (60.0, 100.0), 0.2
+
+
+@dataclass(frozen=True)
+class JointedBeamCase:
+    """What the case runs (defaults: the default run, a few minutes on 2 cores)."""
+
+    mesh: tuple = ()                            #: geometry parameter overrides, e.g. (("joint_mesh_size", 0.003175),)
+    n_modes: int = 10                           #: elastic modes of the reduced model
+    impact_peak: float = 300.0                  #: hammer peak force [N]
+    impact_width: float = 3.0e-4                #: half-sine width [s]
+    ring_down: float = 3.0                      #: simulated seconds after the blow
+    steps_per_period: int = 128                 #: of mode 1: dt = 1 / (f1 N)
+    qsma_amplitudes: tuple = tuple(np.round(np.logspace(0, np.log10(40.0), 16), 4))  #: acc1 [m/s^2]
+    forced: bool = False
+    forced_levels: tuple = (0.2, 0.5, 1.0, 1.5)   #: shaker force amplitudes [N]
+    forced_frequencies: tuple = tuple(np.round(np.arange(79.0, 81.5 + 1e-9, 0.05), 3))
+    forced_steps_per_period: int = 32
+    forced_tolerance: float = 1e-3
+
+
+def prestressed(config: JointedBeamCase) -> dict:
+    """Build, preload, calibrate k_t, and the modes about the preload (dry-friction joint)."""
+    tic = time.perf_counter()
+    beam = prestress.prestressed_beam(dict(config.mesh))
+    k_t, evaluations = prestress.calibrate(beam)
+    system = prestress.with_tangential_stiffness(beam.fom.system, k_t)
+    modes = linearized_modes(system, beam.preload.displacement, beam.preload.state, n_modes=6 + config.n_modes)
+    points = beam.fom.space.basis.doflocs[:, ::3].T
+    shapes = [beam_mode_shape(points, system.condensation.expand(modes.shapes[:, j]).reshape(-1, 3))
+              for j in range(6, 6 + config.n_modes)]
+    return {"beam": beam, "system": system, "k_t": k_t, "evaluations": evaluations, "modes": modes,
+            "shapes": shapes, "seconds": time.perf_counter() - tic}
+
+
+def qsma(system, amplitudes, *, reference, state, phi, supports=(), rigid_modes=None, progress=print):
+    """QSMA of the mode ``phi`` (output 0 = acc1): acc1 amplitudes -> loads ``alpha = A / |E_0 phi|``.
+
+    ``solve_static`` continues from the previous load's displacement and committed
+    joint state (a monotonic loading path from the preload ``reference``, ``state``)."""
+    E = system.output_matrix
+    current = {"q": reference, "z": state}
+
+    def solve(force):
+        solution = solve_static(system, system.load + force, supports=supports, state=current["z"],
+                                initial_displacement=current["q"], closed_start=False)
+        current["q"], current["z"] = solution.displacement, solution.state
+        return solution.displacement
+
+    alphas = np.asarray(amplitudes, dtype=float) / abs(float(np.asarray(E @ phi).ravel()[0]))
+    tic = time.perf_counter()
+    result = quasi_static_modal_analysis(solve, system.mass, phi, alphas, reference=reference, output_matrix=E,
+                                         rigid_modes=rigid_modes, progress=lambda line: progress(f"  {line}"))
+    return result, time.perf_counter() - tic
+
+
+def clamped_joint(system, q0, dry_state):
+    """The dry-friction joint with its preload frozen: ``(JointForce of law clamped_friction, its state)``."""
+    joint = system.nonlinear
+    law = joint.law.parameters()
+    z0 = clamped_state(joint.gaps(joint.localize(q0)), dry_state, normal_stiffness=law["normal_stiffness"],
+                       friction_coefficient=law["friction_coefficient"])
+    clamped = JointForce.from_parameters({**joint.parameters(), "law": {
+        "name": "clamped_friction", "normal_stiffness": law["normal_stiffness"],
+        "tangential_stiffness": law["tangential_stiffness"]}})
+    return clamped, z0
+
+
+def reduced_model(setup: dict, config: JointedBeamCase, damping_ratio: float):
+    """The modal model about the preload with the clamped-friction joint: ``(system, rest state)``."""
+    beam, system, modes = setup["beam"], setup["system"], setup["modes"]
+    q0 = beam.preload.displacement
+    clamped, z0 = clamped_joint(system, q0, beam.preload.state)
+    hammer = Signal.from_dict({"kind": "impulse", "amplitude": config.impact_peak, "start": 0.0,
+                               "duration": config.impact_width})
+    shaker = Signal.from_dict({"kind": "sine", "amplitude": 0.0, "frequency": 80.5})
+    full = dataclasses.replace(system, nonlinear=clamped, inputs=SignalVector([hammer, shaker]))
+    V = modes.shapes[:, 6:6 + config.n_modes]
+    reduced = project_system(full, V, reference=q0, reference_state=z0, damping_ratios=damping_ratio)
+    return reduced, z0
+
+
+def ring_down(reduced, z0, config: JointedBeamCase, f1: float):
+    """The hammer blow and the free decay: ``(acc (3, k), dt, seconds, newton iterations)``."""
+    r = reduced.n_dofs
+    dt = 1.0 / (f1 * config.steps_per_period)
+    n_steps = int(round(config.ring_down / dt))
+    trajectory = Trajectory(fields=("a",))
+    rest = StepResult(step=0, t=0.0, q=np.zeros(r), v=np.zeros(r), a=np.zeros(r), state=z0)
+    tic = time.perf_counter()
+    summary = integrate(reduced, Newmark(), None, None, dt, n_steps, consumers=[trajectory], start=rest,
+                        progress=None)
+    return np.asarray(reduced.output_matrix @ trajectory.a), dt, time.perf_counter() - tic, summary.newton_iterations
+
+
+def newmark_corrected(backbone: Backbone, dt: float) -> Backbone:
+    """Average acceleration's period elongation removed: ``f = tan(pi f_h dt) / (pi dt)``."""
+    frequency = np.tan(np.pi * backbone.frequency_hz * dt) / (np.pi * dt)
+    return dataclasses.replace(backbone, frequency_hz=frequency)
+
+
+def linear_part(setup: dict) -> dict:
+    frequencies = setup["modes"].frequencies[6:]
+    predictions = []
+    for measured in prestress.MEASURED_NEXT:
+        j = int(np.argmin(np.abs(frequencies - measured)))
+        shape = setup["shapes"][j]
+        predictions.append({"measured_hz": measured, "model_hz": float(frequencies[j]),
+                            "error": float(frequencies[j] / measured - 1),
+                            "shape": f"{shape.kind} bending, {shape.sign_changes} sign changes"
+                            if shape.kind in ("vertical", "in-plane") else shape.kind})
+    return {"linear_frequencies_hz": [float(f) for f in frequencies],
+            "mode_shapes": [f"{s.kind} {s.sign_changes}" for s in setup["shapes"]],
+            "predictions": predictions}
+
+
+def shift_and_damping(backbone: Backbone, low: float = 1.0, high: float = 30.0) -> dict:
+    """Frequency shift and damping ratios between two acc1 amplitudes (inside the backbone's range)."""
+    amplitude = np.asarray(backbone.amplitude)
+    lo, hi = max(low, amplitude.min()), min(high, amplitude.max())
+    if not hi > lo:
+        return {"from_m_s2": lo, "to_m_s2": hi, "frequency_shift_hz": None}
+    f_lo, z_lo = backbone.at_amplitude(lo)
+    f_hi, z_hi = backbone.at_amplitude(hi)
+    return {"from_m_s2": float(lo), "to_m_s2": float(hi), "frequency_shift_hz": float(f_lo - f_hi),
+            "damping_low": float(z_lo), "damping_high": float(z_hi)}
+
+
+def against_measured(model: Backbone, measured: Backbone, low: float = 1.0) -> dict | None:
+    """The model at the measured windows' amplitudes (those inside both ranges, above ``low``): frequency
+    shifts from the lowest such amplitude, damping ratios, and the worst relative damping error."""
+    a = np.asarray(measured.amplitude)
+    inside = (a >= max(low, np.min(model.amplitude))) & (a <= np.max(model.amplitude))
+    if np.count_nonzero(inside) < 2:
+        return None
+    a = np.sort(a[inside])
+    f_model, z_model = model.at_amplitude(a)
+    f_meas, z_meas = measured.at_amplitude(a)
+    return {"amplitudes_m_s2": [float(a[0]), float(a[-1])],
+            "shift_model_hz": float(f_model[0] - f_model[-1]), "shift_measured_hz": float(f_meas[0] - f_meas[-1]),
+            "damping_max_relative_error": float(np.max(np.abs(z_model / z_meas - 1))),
+            "damping_model": [float(z) for z in z_model], "damping_measured": [float(z) for z in z_meas]}
+
+
+def run(config: JointedBeamCase, out: Path, progress=print, data_dir=None) -> dict:
+    tic = time.perf_counter()
+    progress("jointed beam: preload and k_t calibration on f1 = 80.5 Hz ...")
+    setup = prestressed(config)
+    beam, system = setup["beam"], setup["system"]
+    f1 = float(setup["modes"].frequencies[6])
+    linear = linear_part(setup)
+    progress(f"  {system.n_dofs} dofs, k_t = {setup['k_t']:.4g} Pa/m, f1 = {f1:.3f} Hz; predictions "
+             + ", ".join(f"{p['measured_hz']} -> {p['model_hz']:.1f} Hz ({100 * p['error']:+.2f} %)"
+                         for p in linear["predictions"]))
+    backbones, notes = {}, []
+    measured = None
+    try:
+        record = read_hammer_impact(None if data_dir is None else Path(data_dir) / "hammer_impact.npz")
+        measured = measured_backbone(record)
+        backbones["measured"] = measured
+    except FileNotFoundError as exc:
+        notes.append(f"measured data not found ({exc}); the measured backbone is left out")
+    damping = float(measured.damping_ratio[np.argmin(measured.amplitude)]) if measured is not None else 0.0014
+    modes, q0 = setup["modes"], beam.preload.displacement
+    left_face = point_supports(beam.fom.space, system.condensation, prestress.SUPPORTS[:3])  # 3-2-1: no mechanism
+    common = {"reference": q0, "phi": modes.shapes[:, 6], "supports": left_face, "rigid_modes": modes.shapes[:, :6],
+              "progress": progress}
+    qsma_seconds = {}
+    progress(f"jointed beam: QSMA on the full model, dry friction ({len(config.qsma_amplitudes)} static loads) ...")
+    static, qsma_seconds["fom_dry"] = qsma(system, config.qsma_amplitudes, state=beam.preload.state, **common)
+    clamped, z_clamped = clamped_joint(system, q0, beam.preload.state)
+    progress("jointed beam: QSMA on the full model, clamped friction ...")
+    static_clamped, qsma_seconds["fom_clamped"] = qsma(dataclasses.replace(system, nonlinear=clamped),
+                                                      config.qsma_amplitudes, state=z_clamped, **common)
+    reduced, z0 = reduced_model(setup, config, damping)
+    progress(f"jointed beam: QSMA on the {config.n_modes}-mode model, clamped friction ...")
+    phi_hat = np.zeros(reduced.n_dofs)
+    phi_hat[0] = 1.0   # mode 1 is the first reduced coordinate (V^T M V = I)
+    static_reduced, qsma_seconds["reduced_clamped"] = qsma(reduced, config.qsma_amplitudes, reference=np.zeros(
+        reduced.n_dofs), state=z0, phi=phi_hat, progress=progress)
+    # QSMA's damping is the joint's alone: the linear modal damping of the other models adds to it
+    for name, result in (("fom_qsma", static), ("fom_qsma_clamped", static_clamped),
+                         ("reduced_qsma_clamped", static_reduced)):
+        curve = result.backbone(0)
+        backbones[name] = dataclasses.replace(curve, damping_ratio=curve.damping_ratio + damping)
+    progress(f"jointed beam: {config.n_modes}-mode model, {config.impact_peak:g} N blow, "
+             f"{config.ring_down:g} s ring-down ...")
+    acc, dt, ring_seconds, newton = ring_down(reduced, z0, config, f1)
+    transient = newmark_corrected(hilbert_backbone(acc[0], 1.0 / dt, BAND, window=WINDOW), dt)
+    backbones["fom_transient"] = transient
+    forced = None
+    if config.forced:
+        progress(f"jointed beam: stepped sine, {len(config.forced_levels)} levels x "
+                 f"{len(config.forced_frequencies)} frequencies ...")
+        shaker = np.asarray(reduced.input_matrix[:, 1]).ravel()
+        r = reduced.n_dofs
+        plant = SystemPlant(reduced, shaker, rest=StepResult(step=0, t=0.0, q=np.zeros(r), v=np.zeros(r),
+                                                              a=np.zeros(r), state=z0))
+        sweep = SteppedSine(np.asarray(config.forced_frequencies), steps_per_period=config.forced_steps_per_period,
+                            steady_state=SteadyStateCriterion(tolerance=config.forced_tolerance))
+        forced = sweep.run(plant, list(config.forced_levels), progress=lambda line: progress(f"  {line}"))
+
+    out.mkdir(parents=True, exist_ok=True)
+    plot_backbones(out / "backbone.png", backbones, title="jointed beam, mode 1 at acc1",
+                   amplitude_label="acc1 amplitude [m/s^2]")
+    rows = {name: [{"amplitude_m_s2": r["amplitude"], "frequency_hz": r["frequency_hz"],
+                    "damping_ratio": r["damping_ratio"]} for r in b.rows()] for name, b in backbones.items()}
+    metrics = {
+        "case": "jointed_beam", "n_dofs": system.n_dofs, "mesh": dict(beam.fom.scene.structure.parameters),
+        "calibration": {"parameter": "tangential_stiffness", "value_pa_per_m": setup["k_t"], "target_f1_hz": 80.5,
+                        "f1_hz": f1, "eigensolves": setup["evaluations"]},
+        **linear,
+        "joint": {"law_full_model": "dry_friction", "law_reduced_model": "clamped_friction",
+                  **{k: v for k, v in system.nonlinear.law.parameters().items() if k != "name"}},
+        "linear_damping_ratio": damping,
+        "backbone": rows,
+        "shift_1_to_30_m_s2": {name: shift_and_damping(b) for name, b in backbones.items()},
+        "against_measured": {} if measured is None else {
+            name: against_measured(b, measured) for name, b in backbones.items() if name != "measured"},
+        "transient_model": f"{config.n_modes} elastic modes of the prestressed beam (Galerkin about the preload), "
+                           f"the joint on all {system.nonlinear.n_pairs} interface pairs with the law clamped_friction",
+        "reduced_model": {"n_modes": config.n_modes, "dt": dt, "steps": acc.shape[1] - 1,
+                          "seconds": ring_seconds, "ms_per_step": 1e3 * ring_seconds / max(acc.shape[1] - 1, 1),
+                          "newton_iterations": newton, "impact_peak_n": config.impact_peak,
+                          "impact_width_s": config.impact_width},
+        "seconds": {"prestress_and_calibration": setup["seconds"], "qsma": qsma_seconds, "ring_down": ring_seconds,
+                    "total": time.perf_counter() - tic},
+        "notes": notes,
+    }
+    if forced is not None:
+        metrics["forced_response"] = forced.rows()
+    write_metrics(out / "metrics.json", metrics)
+    return metrics
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(prog="femrom run jointed_beam", description=__doc__.split("\n")[0])
+    parser.add_argument("-o", "--out", type=Path, default=Path("results") / "jointed_beam")
+    parser.add_argument("--forced", action="store_true", help="also the stepped-sine forced response")
+    parser.add_argument("--quick", action="store_true", help="short ring-down and few QSMA loads (tests)")
+    parser.add_argument("--data", type=Path, help="the folder of hammer_impact.npz (default: femrom.post.brb_data_dir())")
+    args = parser.parse_args(argv)
+    config = JointedBeamCase(forced=args.forced)
+    if args.quick:
+        config = dataclasses.replace(config, ring_down=1.0, qsma_amplitudes=(1.0, 10.0, 20.0, 30.0),
+                                     forced_levels=(1.5,), forced_frequencies=(80.3, 80.4))
+    with staged_output(args.out) as folder:
+        metrics = run(config, folder, progress=lambda line: print(line, file=sys.stderr, flush=True),
+                      data_dir=args.data)
+    shift = metrics["shift_1_to_30_m_s2"]
+    print(f"jointed beam: f1 {metrics['calibration']['f1_hz']:.3f} Hz (k_t {metrics['calibration']['value_pa_per_m']:.4g}); "
+          + "; ".join(f"{name}: shift {s['frequency_shift_hz']:.3f} Hz" if s["frequency_shift_hz"] is not None
+                      else f"{name}: -" for name, s in shift.items())
+          + f"; results in {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
