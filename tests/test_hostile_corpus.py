@@ -372,6 +372,17 @@ def _store(tmp_path, name="e.h5", **options):
     return SnapshotStore.create(tmp_path / name, _chain(), **options)
 
 
+def _cube_surface(path: Path) -> Path:
+    """The 12 triangles of a unit cube's surface: a solid meshed without its volume."""
+    import meshio
+
+    points = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1]], float)
+    triangles = np.array([[0, 1, 2], [0, 2, 3], [4, 5, 6], [4, 6, 7], [0, 1, 5], [0, 5, 4], [1, 2, 6], [1, 6, 5],
+                          [2, 3, 7], [2, 7, 6], [3, 0, 4], [3, 4, 7]])
+    meshio.write(path, meshio.Mesh(points, [("triangle", triangles)]), file_format="gmsh22", binary=False)
+    return path
+
+
 def _write(path: Path, content) -> Path:
     path.write_bytes(content) if isinstance(content, bytes) else path.write_text(content)
     return path
@@ -404,6 +415,8 @@ FILE_CASES = [
     ("mesh-file-missing", lambda p: load_mesh(p / "nowhere.msh"), FileNotFoundError, "mesh file not found:"),
     ("mesh-file-garbage", lambda p: load_mesh(_write(p / "bad.msh", "garbage")), MeshError,
      "cannot read mesh file"),
+    ("mesh-surface-of-a-solid", lambda p: load_mesh(_cube_surface(p / "cube.msh")), MeshError,
+     "has surface elements (triangle) only, but its points span 3D: a solid without volume elements"),
     ("geometry-unknown", lambda p: generate_mesh("spaceship", {}, cache_dir=p), MeshError,
      "unknown geometry 'spaceship'; available:"),
     ("geometry-parameter-nan", lambda p: generate_mesh("beam_line", {"length": float("nan")}, cache_dir=p),

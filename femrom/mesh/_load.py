@@ -167,6 +167,10 @@ def _check_flat(raw: meshio.Mesh, element_type: str, path: Path) -> None:
     dropped = points[:, dimension:]
     if dropped.size and np.ptp(dropped, axis=0).max() > _FLATNESS_TOLERANCE * extent:
         axes = "y and z" if dimension == 1 else "z"
+        if dimension == 2 and np.ptp(points[:, 2]) > 0.05 * extent:   # a solid's surface, not a tilted sheet
+            raise MeshError(f"mesh '{path}' has surface elements ({element_type}) only, but its points span "
+                            f"3D: a solid without volume elements (mesh it in 3D: gmsh -3, a Physical Volume), "
+                            f"or a 2D mesh off the z = const plane")
         raise MeshError(f"{dimension}D mesh '{path}' is not flat: its {axes} coordinates vary, "
                         f"but scikit-fem keeps only the first {dimension}")
 
