@@ -48,6 +48,7 @@ from femrom.scene._errors import take_table as _take
 from femrom.scene._rom import RomConfig
 from femrom.scene._sweep import SweepConfig, with_parameters
 from femrom.scene._signals import Signal
+from femrom.solvers import strategies
 
 ELEMENTS = ("hermite", "p1", "p2")
 FIELDS = ("displacement", "velocity", "acceleration")
@@ -302,8 +303,6 @@ class TimeConfig:
                              f"({MAX_STEPS:.0e}); raise dt or split the window")
         if not 0 <= float(d["spectral_radius"]) <= 1:
             raise SceneError(f"[time] spectral_radius must lie in [0, 1], got {d['spectral_radius']}")
-        from femrom.solvers import strategies
-
         if d["solver"] not in strategies():
             raise SceneError(f"[time] unknown solver {d['solver']!r}; valid: {', '.join(strategies())}")
         return cls(float(d["t_end"]), float(d["dt"]), d["integrator"], float(d["spectral_radius"]), d["solver"])
