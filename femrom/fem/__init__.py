@@ -43,12 +43,13 @@ from femrom.fem._vector_ops import (
     surface_traction,
 )
 from femrom.fem.interface_laws.clamped_friction import ClampedFrictionLaw, clamped_state
+from femrom.fem.interface_laws.clamped_iwan import ClampedIwanLaw, clamped_iwan_state
 from femrom.fem.interface_laws.dry_friction import DryFrictionLaw
 from femrom.fem.interface_laws.iwan import IwanLaw
 from femrom.fem.interface_laws.jenkins import JenkinsLaw
 
 __all__ = [
-    "DENSITIES", "FORCES", "INTERFACE_LAWS", "ClampedFrictionLaw", "clamped_state", "Condensation", "DryFrictionLaw", "ForceSum", "InterfaceLaw",
+    "DENSITIES", "FORCES", "INTERFACE_LAWS", "ClampedFrictionLaw", "ClampedIwanLaw", "clamped_iwan_state", "clamped_state", "Condensation", "DryFrictionLaw", "ForceSum", "InterfaceLaw",
     "IwanLaw", "JenkinsForce", "JenkinsLaw", "JointForce", "LineSpace", "LocalPotential", "NonlinearForce",
     "ParallelSliderLaw", "QuarticPotential", "SolidSpace", "SpaceError", "TransformedForce", "transform_force", "force_from_parameters",
     "interface_frames", "interface_law", "interface_law_from_parameters", "radial_return",

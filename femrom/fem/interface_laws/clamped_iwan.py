@@ -1,0 +1,183 @@
+r"""Segalman's Iwan element under the pressure a preload left: slip spread, contact status frozen.
+
+:mod:`clamped_friction` gives every closed point one Coulomb slider with slip traction
+``tau_s = mu p_0``: a point sticks until its traction reaches ``tau_s`` and then slips at
+once, so a joint of such points starts to slip where the pressure is lowest and the onset
+is sharp. Measured lap joints dissipate from the lowest amplitudes on, with a power law
+(Segalman 2005; the Brake-Reuss beam's damping rises from 0.14 % at 1 m/s^2). This law
+spreads each closed point's slip over a continuum of Jenkins elements, the 4-parameter
+Iwan element (:class:`femrom.fem.IwanLaw`) whose macro-slip traction is the point's own
+``F_S = tau_s = mu p_0``:
+
+.. math::
+
+    t_t = c \sum_m \operatorname{proj}_{|t| \le \tau_s f_m}\big(k_m (g_t - z_m)\big), \qquad
+    t_n = c\, k_n g_n, \qquad c \in \{0, 1\} \text{ (closed at the preload)}.
+
+The slider stiffnesses ``k_m`` and the unit-traction strengths ``f_m`` are those of
+:class:`~femrom.fem.IwanLaw` with ``F_S = 1`` and ``K_T = k_t``: for the power-law
+density the stiffnesses do not depend on ``F_S`` and the strengths are proportional to
+it (``phi_max ~ F_S``, ``R ~ F_S^{-(chi+1)}``), so every point has the stuck stiffness
+``k_t`` (the calibrated ``f_1`` does not move) and the macro-slip traction ``mu p_0``, and
+``chi``, ``beta`` shape the onset of slip between the two. ``chi -> -1`` puts the slip in
+the weakest sliders (early onset), ``beta`` weighs the delta at ``phi_max`` (the share of
+the traction carried to macro-slip). Like :mod:`clamped_friction`, the law is piecewise
+linear with dissipative sliders, so the average-acceleration step stays energy-stable.
+
+Parameters
+----------
+normal_stiffness : float
+    ``k_n > 0`` [Pa/m].
+tangential_stiffness : float
+    ``k_t > 0`` [Pa/m]: the stuck stiffness ``K_T``.
+chi : float
+    ``-1 < chi`` [-]: the density's exponent (dissipation per cycle ~ amplitude^(3 + chi)).
+beta : float
+    ``beta >= 0`` [-]: the weight of the delta at ``phi_max``.
+n_sliders : int
+    Jenkins elements of the power-law part (default 20; one more for the delta when ``beta > 0``).
+alpha : float
+    ``>= 1``: ratio of successive slip-displacement intervals (default 1.3).
+
+State: (s, N + 1, 2): rows ``0..N-1`` the slider positions ``z_m``, row ``N`` the
+point's ``(tau_s [Pa], c)``; set from a ``dry_friction`` preload by
+:func:`clamped_iwan_state`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from femrom.fem._interface_law import (
+    InterfaceLaw,
+    check_parameters,
+    radial_return,
+    radial_return_tangent,
+    register_interface_law,
+    split_gap,
+)
+from femrom.fem.interface_laws.iwan import IwanLaw
+
+
+@register_interface_law
+@dataclass(frozen=True)
+class ClampedIwanLaw(InterfaceLaw):
+    """Iwan elements of macro-slip traction ``mu p_0`` at the preload's closed points (module docstring)."""
+
+    name = "clamped_iwan"
+    normal_stiffness: float
+    tangential_stiffness: float
+    chi: float
+    beta: float
+    n_sliders: int = 20
+    alpha: float = 1.3
+
+    def __post_init__(self):
+        check_parameters(self, (("normal_stiffness", "> 0", lambda v: v > 0),
+                                ("tangential_stiffness", "> 0", lambda v: v > 0),
+                                ("chi", "> -1", lambda v: v > -1),
+                                ("beta", ">= 0", lambda v: v >= 0),
+                                ("n_sliders", "an integer >= 1", lambda v: v >= 1 and v == int(v)),
+                                ("alpha", ">= 1", lambda v: v >= 1)))
+        unit = IwanLaw(1.0, self.tangential_stiffness, self.chi, self.beta, n_sliders=self.n_sliders,
+                       alpha=self.alpha)
+        object.__setattr__(self, "slider_stiffness", unit.slider_stiffness)
+        object.__setattr__(self, "unit_strength", unit.slider_strength)
+        object.__setattr__(self, "unit_element", unit)
+
+    @property
+    def n_elements(self) -> int:
+        """``N``: Jenkins elements per point (``n_sliders``, + 1 with the delta)."""
+        return self.slider_stiffness.size
+
+    def initial_state(self, n_points: int) -> np.ndarray:
+        """Every point open (no contact): set a preloaded state with :func:`clamped_iwan_state`."""
+        return np.zeros((int(n_points), self.n_elements + 1, 2))
+
+    def _sliders(self, gap, state):
+        g_t, g_n = split_gap(gap)
+        N = self.n_elements
+        if state.ndim != 3 or state.shape[1:] != (N + 1, 2) or state.shape[0] != g_n.size:
+            raise ValueError(f"clamped_iwan state must be ({g_n.size}, {N + 1}, 2), got shape {state.shape}")
+        closed = state[:, N, 1] > 0.5
+        k = self.slider_stiffness[None, :, None]
+        trial = k * (g_t[:, None, :] - state[:, :N])
+        limit = state[:, N, 0][:, None] * self.unit_strength[None, :]
+        t, ratio, direction, slipping = radial_return(trial, np.where(closed[:, None], limit, 0.0))
+        return g_t, g_n, closed, k, trial, t, ratio, direction, slipping
+
+    def evaluate(self, gap, state, tangent=True):
+        _, g_n, closed, _, _, t, ratio, direction, slipping = self._sliders(gap, state)
+        traction = np.empty((g_n.size, 3))
+        traction[:, :2] = t.sum(axis=1)
+        traction[:, 2] = np.where(closed, self.normal_stiffness * g_n, 0.0)
+        if not tangent:
+            return traction, None
+        D = np.zeros((g_n.size, 3, 3))
+        # an open point's sliders all "slip" at zero limit: ratio 0, so its tangent is zero
+        D[:, :2, :2] = np.einsum("m,smij->sij", self.slider_stiffness,
+                                 radial_return_tangent(ratio, direction, slipping))
+        D[:, 2, 2] = np.where(closed, self.normal_stiffness, 0.0)
+        return traction, D
+
+    def commit(self, gap, state):
+        g_t, _, _, k, _, t, *_ = self._sliders(gap, state)
+        new = np.array(state, dtype=float)
+        new[:, :-1] = g_t[:, None, :] - t / k
+        return new
+
+    def dissipation(self, gap, state):
+        _, _, _, k, trial, t, *_ = self._sliders(gap, state)
+        return np.einsum("smi,smi->s", t, (trial - t) / k)
+
+    def stored_energy(self, gap, state):
+        g_t, g_n = split_gap(gap)
+        N = self.n_elements
+        closed = state[:, N, 1] > 0.5
+        slip = g_t[:, None, :] - state[:, :N]
+        return np.where(closed, 0.5 * np.einsum("m,smi,smi->s", self.slider_stiffness, slip, slip)
+                        + 0.5 * self.normal_stiffness * g_n**2, 0.0)
+
+    def backbone(self, u, slip_traction) -> np.ndarray:
+        """The continuous element's virgin traction at tangential displacement ``u`` for a point of
+        macro-slip traction ``slip_traction`` (:meth:`IwanLaw.backbone` scaled: ``F_S t_1(u / F_S)``
+        with ``t_1`` the unit element's)."""
+        F = float(slip_traction)
+        return F * self.unit_element.backbone(np.asarray(u, dtype=float) / F)
+
+    def cycle_dissipation(self, amplitude, slip_traction) -> np.ndarray:
+        """The continuous element's dissipation per cycle at displacement amplitude ``u_a`` for a point of
+        macro-slip traction ``slip_traction`` (``F_S^2 D_1(u_a / F_S)``: dissipation is traction times
+        displacement)."""
+        F = float(slip_traction)
+        return F * F * self.unit_element.cycle_dissipation(np.asarray(amplitude, dtype=float) / F)
+
+
+def clamped_iwan_state(law: ClampedIwanLaw, gap: np.ndarray, clamped: np.ndarray) -> np.ndarray:
+    """(s, N + 1, 2) state of :class:`ClampedIwanLaw` from a :func:`clamped_state` (s, 4).
+
+    Every slider starts where the point's single preload slider is (``z_m = z``), returned
+    onto its own slip limit ``tau_s f_m``: the traction is then the Iwan element's at the
+    preload's tangential displacement, which differs slightly from the dry-friction one
+    where weak sliders are already loaded past their strength. Re-solve the static
+    equilibrium with the new law (``solve_static``) before using the state as a reference.
+
+    Parameters
+    ----------
+    law : ClampedIwanLaw
+    gap : (s, 3) ndarray
+        The local relative displacements at the preload (``JointForce.gaps``).
+    clamped : (s, 4) ndarray
+        ``(z (2), tau_s, c)`` per point from :func:`femrom.fem.clamped_state`.
+    """
+    gap = np.asarray(gap, dtype=float)
+    clamped = np.asarray(clamped, dtype=float)
+    if gap.ndim != 2 or gap.shape[1] != 3 or clamped.shape != (gap.shape[0], 4):
+        raise ValueError(f"gap must be (s, 3) and clamped (s, 4), got {gap.shape} and {clamped.shape}")
+    N = law.n_elements
+    state = np.zeros((gap.shape[0], N + 1, 2))
+    state[:, :N] = clamped[:, None, :2]
+    state[:, N] = clamped[:, 2:4]
+    return law.commit(gap, state)
