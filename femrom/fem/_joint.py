@@ -196,6 +196,37 @@ class JointForce(NonlinearForce):
     def restore(self, data):
         return self.law.restore(data)
 
+    def restricted(self, pairs, weights=None) -> "JointForce":
+        r"""The joint on the pairs ``pairs`` only, each pair's area scaled by its weight.
+
+        ``f_S(q; z_S) = sum_{i in S} w_i L_i^T A_i t_i(L_i q; z_i)``: the sampled force of
+        energy-conserving sampling and weighting (ECSW). A weighted pair is the same
+        interface element with the area ``w_i A_i``, so the sampled force keeps its
+        structure: tractions from the law, dissipation and stored energy summed with the
+        weighted areas. Its state is the original's rows ``z[pairs]``.
+
+        Parameters
+        ----------
+        pairs : (k,) int array_like
+            Distinct pair indices in ``[0, s)``.
+        weights : (k,) array_like, optional
+            ``w_i > 0`` (default 1).
+        """
+        pairs = np.asarray(pairs)
+        if pairs.ndim != 1 or pairs.size == 0 or not np.issubdtype(pairs.dtype, np.integer):
+            raise ValueError(f"pairs must be a non-empty 1-D integer array, got shape {pairs.shape}")
+        if pairs.min() < 0 or pairs.max() >= self.n_pairs or np.unique(pairs).size != pairs.size:
+            raise ValueError(f"pairs must be distinct indices in [0, {self.n_pairs})")
+        w = np.ones(pairs.size) if weights is None else np.asarray(weights, dtype=float)
+        if w.shape != pairs.shape or not np.all(np.isfinite(w) & (w > 0)):
+            raise ValueError(f"weights must be ({pairs.size},) finite and > 0")
+        tangents = self._given.get("first_tangents")
+        if tangents is not None and tangents.ndim == 2:
+            tangents = tangents[pairs]
+        return JointForce(self.law, self.dofs_a[pairs], self.dofs_b[pairs], self._given["normals"][pairs],
+                          w * self.areas[pairs], self.n_dofs, initial_gap=self.initial_gap[pairs],
+                          first_tangents=tangents, name=self.name)
+
     # -- what the interface does ------------------------------------------------------
     def tractions(self, q: np.ndarray, state=None) -> np.ndarray:
         """(s, 3) tractions ``(t_t1, t_t2, t_n)`` [Pa] at ``q`` with ``state`` frozen."""

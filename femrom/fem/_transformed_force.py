@@ -141,6 +141,20 @@ class TransformedForce(NonlinearForce):
         L = self._dense_map
         return sp.csr_matrix(L.T @ np.asarray(local @ L))
 
+    def with_force(self, force: NonlinearForce) -> "TransformedForce":
+        """Another force on the original dofs seen through the same ``q = q_0 + T q^``.
+
+        ``force`` must read only dofs this force reads (e.g. a joint restricted to some of its
+        pairs, :meth:`femrom.fem.JointForce.restricted`): only those rows of ``T`` are kept."""
+        if not isinstance(force, NonlinearForce) or force.n_dofs != self.original_dofs:
+            raise ValueError(f"force must be a NonlinearForce on the original {self.original_dofs} dofs")
+        L = force.local_map.tocsr()
+        if not np.all(np.isin(np.unique(L.indices[L.data != 0]), self.touched_dofs)):
+            raise ValueError("force reads dofs outside the rows of T this transformed force kept")
+        T = sp.lil_matrix((self.original_dofs, self.n_dofs))
+        T[self.touched_dofs] = self.touched_rows
+        return TransformedForce(force, T.tocsr(), name=force.name, reference=self.reference)
+
     # -- the original's own view ---------------------------------------------------------
     def embed(self, q_hat: np.ndarray) -> np.ndarray:
         """(n,) ndarray equal to ``q_0 + T q^`` on the dofs the original force reads (zero elsewhere):

@@ -27,7 +27,10 @@
   training fit and by energy over an extended window;
 - :class:`HyperReducedPotential`, :func:`ecsw_weights`, :func:`sparse_nnls`:
   structure-preserving hyper-reduction of a nodal potential (sampled nodes
-  and non-negative weights; the reduced force stays an exact gradient).
+  and non-negative weights; the reduced force stays an exact gradient);
+- :func:`ecsw_joint`, :func:`hyper_reduced_system`, :class:`JointSampling`: a projected
+  joint sampled on a few weighted interface pairs (the stuck joint kept exact, the
+  slip remainder sampled by ECSW; each sampled pair stays an interface element).
 """
 
 from femrom.rom._base import LazyFields, ReducedModel, uniform_step
@@ -40,6 +43,7 @@ from femrom.rom._hamiltonian import (
     hamiltonian_step_matrix,
 )
 from femrom.rom._hyper import HyperReducedPotential, ecsw_weights, sparse_nnls
+from femrom.rom._hyper_joint import JointSampling, ecsw_joint, hyper_reduced_system
 from femrom.rom._model import ReducedSolution, SecondOrderROM
 from femrom.rom._schemes import (
     REDUCED_SCHEMES,
@@ -57,8 +61,8 @@ from femrom.rom.schemes.verlet import verlet_bound
 
 __all__ = [
     "FIRST_ORDER_SCHEMES", "HAMILTONIAN_SCHEMES", "REDUCED_SCHEMES", "DiscreteStateSpace", "FirstOrderROM", "HamiltonianROM", "HamiltonianSolution", "HamiltonianStepper",
-    "HyperReducedPotential", "LazyFields", "LinearParts", "ReducedModel", "ReducedNewton", "ReducedScheme",
+    "HyperReducedPotential", "JointSampling", "LazyFields", "LinearParts", "ReducedModel", "ReducedNewton", "ReducedScheme",
     "ReducedSolution", "ReducedStepper", "RegularizationScore", "SecondOrderROM", "StateSpaceStepper",
-    "ecsw_weights", "hamiltonian_step_matrix", "reduced_scheme", "register_reduced_scheme",
+    "ecsw_joint", "ecsw_weights", "hamiltonian_step_matrix", "hyper_reduced_system", "reduced_scheme", "register_reduced_scheme",
     "registered_schemes", "run_linear", "select_regularization", "sparse_nnls", "uniform_step", "verlet_bound",
 ]
