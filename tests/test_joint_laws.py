@@ -59,7 +59,7 @@ def test_laws_are_found_by_name_and_bad_parameters_name_the_parameter():
     assert {"dry_friction", "jenkins", "iwan"} <= set(INTERFACE_LAWS)
     law = interface_law("iwan", slip_traction=1.0, tangential_stiffness=10.0, chi=-0.3, beta=0.5)
     assert isinstance(law, IwanLaw) and law.n_sliders == 60
-    with pytest.raises(ValueError, match="unknown interface law 'coulomb'; registered: clamped_friction, dry_friction, iwan, jenkins"):
+    with pytest.raises(ValueError, match="unknown interface law 'coulomb'; registered: clamped_friction, clamped_iwan, dry_friction, iwan, jenkins"):
         interface_law("coulomb")
     bad = [("dry_friction", dict(normal_stiffness=0.0, tangential_stiffness=1.0, friction_coefficient=0.2),
             "normal_stiffness must be > 0"),
