@@ -171,10 +171,13 @@ def test_condensed_newton_gives_the_full_newton_trajectory_with_one_factorisatio
 def test_auto_condenses_a_force_on_few_dofs_and_not_one_on_every_dof():
     system, q0 = jointed_chain()
     summary = integrate(system, Newmark(), q0, np.zeros(40), 0.05, 3, progress=False)
+    assert summary.details["newton"] == "dense"          # 40 dofs: at most dense_max, dense arrays
+    sparse = Newmark(newton=Newton(dense_max=0))         # as if the chain were large
+    summary = integrate(system, sparse, q0, np.zeros(40), 0.05, 3, progress=False)
     assert summary.details["newton"] == "condensed"
     M, K = chain(40)
     everywhere = SecondOrderSystem(mass=M, stiffness=K, nonlinear=LocalPotential.sine_gordon(np.ones(40)))
-    summary = integrate(everywhere, Newmark(), q0, np.zeros(40), 0.05, 3, progress=False)
+    summary = integrate(everywhere, sparse, q0, np.zeros(40), 0.05, 3, progress=False)
     assert summary.details["newton"] == "full"
     with pytest.raises(ValueError, match="unknown Newton method 'schur'"):
         Newton(method="schur")

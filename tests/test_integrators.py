@@ -455,9 +455,22 @@ def test_linear_system_factorises_once_and_never_runs_newton(scheme, monkeypatch
 
 def test_nonlinear_system_runs_newton_with_one_factorisation_per_iteration():
     system, q0, v0 = sine_gordon_chain()
-    summary = integrate(system, Newmark(), q0, v0, 0.05, 20)
+    summary = integrate(system, Newmark(newton=Newton(method="full")), q0, v0, 0.05, 20)
     assert summary.newton_iterations >= 20  # at least one iteration per step
     assert summary.n_factorizations == summary.newton_iterations
+
+
+def test_a_small_system_takes_dense_newton_to_the_same_steps():
+    # auto picks dense arrays up to dense_max dofs: no sparse factorisation in the loop, the same
+    # Newton iterations and tolerance, so the runs agree to the tolerance (measured 1e-15)
+    system, q0, v0 = sine_gordon_chain()
+    assert system.n_dofs <= Newton().dense_max
+    full, dense = Trajectory(), Trajectory()
+    a = integrate(system, Newmark(newton=Newton(method="full", rtol=1e-13)), q0, v0, 0.05, 40, consumers=[full])
+    b = integrate(system, Newmark(newton=Newton(rtol=1e-13)), q0, v0, 0.05, 40, consumers=[dense])
+    assert b.n_factorizations == 0 < a.n_factorizations
+    assert a.newton_iterations == b.newton_iterations
+    assert np.max(np.abs(dense.q - full.q)) < 1e-10 * np.max(np.abs(full.q))
 
 
 # -- nonlinear: sine-Gordon ----------------------------------------------------------

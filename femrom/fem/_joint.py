@@ -184,6 +184,11 @@ class JointForce(NonlinearForce):
         shape = (3 * self.n_pairs,) * 2
         return sp.csr_matrix((blocks.ravel(), self._tangent_indices, self._tangent_indptr), shape=shape), None
 
+    def local_force_and_blocks(self, x, state=None):
+        """``(g (3 s,), A_i dt_i/dDelta_i (s, 3, 3))``: force and tangent blocks from one law evaluation."""
+        traction, D = self.law.evaluate(self.gaps(x), self._state(state), tangent=True)
+        return (self.areas[:, None] * traction).ravel(), self.areas[:, None, None] * D
+
     def initial_state(self):
         return self.law.initial_state(self.n_pairs)
 

@@ -155,6 +155,39 @@ class TransformedForce(NonlinearForce):
         T[self.touched_dofs] = self.touched_rows
         return TransformedForce(force, T.tocsr(), name=force.name, reference=self.reference)
 
+    def dense_force_and_tangent(self, q_hat, v_hat=None, state=None):
+        r"""``(f^ (k,), df^/dq^ (k, k) or None, df^/dv^ (k, k) or None)`` as dense arrays, one law evaluation.
+
+        For the small systems a reduced basis gives (``k <= DENSE_COORDINATES``): the dense
+        Newton of :mod:`femrom.integrators` asks for force and tangent together, so a joint's
+        law runs once per iteration and the tangent ``(L T)^T D (L T)`` is a dense product over
+        the pairs' 3 x 3 blocks, with no sparse matrix built.
+        """
+        if self.n_dofs > DENSE_COORDINATES:
+            raise ValueError(f"dense_force_and_tangent is for at most {DENSE_COORDINATES} coordinates, "
+                             f"this force has {self.n_dofs}")
+        if self.__dict__.get("_dense_map") is None:
+            self._dense_map = self.local_map.toarray()
+        L = self._dense_map
+        x = self._shifted(L @ q_hat)
+        blocks = getattr(self.force_model, "local_force_and_blocks", None)
+        if blocks is not None and not self.force_model.velocity_dependent:
+            g, D = blocks(x, state)
+            s = D.shape[0]
+            LD = np.einsum("sab,sbk->sak", D, L.reshape(s, 3, -1)).reshape(3 * s, -1)
+            return L.T @ g, L.T @ LD, None
+        xdot = None if v_hat is None else L @ v_hat
+        g = self.force_model.local_force(x, xdot, state)
+        parts = []
+        for D in self.force_model.local_tangent(x, xdot, state):
+            if D is None:
+                parts.append(None)
+            elif np.ndim(D) == 1 and not sp.issparse(D):
+                parts.append(L.T @ (D[:, None] * L))
+            else:
+                parts.append(L.T @ np.asarray(D @ L))
+        return (L.T @ g, *parts)
+
     # -- the original's own view ---------------------------------------------------------
     def embed(self, q_hat: np.ndarray) -> np.ndarray:
         """(n,) ndarray equal to ``q_0 + T q^`` on the dofs the original force reads (zero elsewhere):

@@ -13,7 +13,7 @@ the midpoint velocity for the implicit midpoint rule (``S = M + h C / 2 + h^2
 K / 4``, ``w = h / 2``). ``S`` is fixed for a given ``dt``; the state ``s`` of
 a stateful force is frozen during the iterations.
 
-Two ways to solve it (:class:`ImplicitSolve`, chosen by ``Newton.method``):
+Three ways to solve it (:class:`ImplicitSolve`, chosen by ``Newton.method``):
 
 ``"full"``
     Newton on all n unknowns with the tangent ``S + w (c_q df/dq + c_v
@@ -45,7 +45,14 @@ Two ways to solve it (:class:`ImplicitSolve`, chosen by ``Newton.method``):
     costs, not where a step converges; and a step depends on its own inputs
     only, so a resumed run repeats an unbroken one bit for bit.
 
-``"auto"`` condenses when the force has a local map with at most
+``"dense"``
+    Newton on all n unknowns with dense arrays, for a small system (a reduced
+    model): the force's ``dense_force_and_tangent`` (when it has one, e.g. a
+    projected joint, :class:`femrom.fem.TransformedForce`) gives force and
+    tangent from one evaluation of its law per iteration; no sparse matrix is
+    built or factorised in the loop.
+
+``"auto"`` takes the dense path up to ``Newton.dense_max`` dofs; above it, it condenses when the force has a local map with at most
 ``Newton.condense_max`` coordinates and at most ``Newton.condense_fraction``
 of the dofs, and runs the full Newton otherwise (a force on every dof, such
 as the sine-Gordon chain's, gains nothing from condensation).
@@ -62,11 +69,16 @@ import scipy.linalg as sl
 from femrom.integrators._newton import ConvergenceError, Newton, TangentMatrix, solve_newton
 
 
+def dense(system, newton: Newton) -> bool:
+    """Whether ``newton`` asks for (``"dense"``) or allows (``"auto"``, ``n <= dense_max``) dense Newton."""
+    return newton.method == "dense" or (newton.method == "auto" and system.n_dofs <= newton.dense_max)
+
+
 def condensable(system, newton: Newton) -> bool:
     """Whether ``newton`` asks for (``"condensed"``) or allows (``"auto"``) condensation of ``system``."""
     force = system.nonlinear
     L = getattr(force, "local_map", None)
-    if newton.method == "full" or L is None:
+    if newton.method in ("full", "dense") or L is None:
         if newton.method == "condensed":
             raise ValueError(f"Newton(method='condensed') needs a force with a local map; "
                              f"{type(force).__name__} has none")
@@ -108,7 +120,12 @@ class ImplicitSolve:
         self.newton, self.make_solver = newton, make_solver
         self.S = effective_matrix
         self.details: dict = {}
-        if condensable(system, newton):
+        if dense(system, newton):
+            self.method = "dense"
+            self._S_dense = effective_matrix.toarray() if hasattr(effective_matrix, "toarray") \
+                else np.asarray(effective_matrix, dtype=float)
+            self._together = getattr(system.nonlinear, "dense_force_and_tangent", None)
+        elif condensable(system, newton):
             self.method = "condensed"
             self._setup_condensed()
             self.details.update(local_newton_seconds=0.0, local_iterations=0, local_factorizations=0,
@@ -139,6 +156,45 @@ class ImplicitSolve:
             return self.tangent(*force.tangent(q0 + self.c_q * x, v0 + self.c_v * x, state))
 
         return solve_newton(residual, jacobian, guess, self.make_solver, self.newton)
+
+    # -- dense Newton -----------------------------------------------------------------
+    def _force_and_tangent(self, q, v, state):
+        if self._together is not None:
+            return self._together(q, v, state)
+        force = self.system.nonlinear
+        f = force.force(q, v, state)
+        return (f, *(None if D is None else (D.toarray() if hasattr(D, "toarray") else np.asarray(D))
+                     for D in force.tangent(q, v, state)))
+
+    def _dense(self, b, q0, v0, state, guess):
+        """Newton with dense arrays: force and tangent from one evaluation per iteration (a small system)."""
+        S, w, c_q, c_v, options = self._S_dense, self.w, self.c_q, self.c_v, self.newton
+        x = np.array(guess, dtype=float)
+        eps = np.finfo(float).eps
+        for iteration in range(options.max_iterations + 1):
+            f, dfdq, dfdv = self._force_and_tangent(q0 + c_q * x, v0 + c_v * x, state)
+            Sx = S @ x
+            r = Sx - b + w * f
+            norm = float(np.linalg.norm(r))
+            tolerance = options.atol + options.rtol * float(np.linalg.norm(Sx) + np.linalg.norm(b)
+                                                            + w * np.linalg.norm(f))
+            if not np.isfinite(norm):
+                raise ConvergenceError(f"Newton residual is not finite at iteration {iteration}")
+            if norm <= tolerance:
+                return x, iteration
+            if iteration == options.max_iterations:
+                break
+            J = S.copy()
+            for c, D in ((w * c_q, dfdq), (w * c_v, dfdv)):
+                if D is not None:
+                    J += c * D
+            dx = np.linalg.solve(J, r)
+            x = x - dx
+            if np.linalg.norm(dx) <= 4.0 * eps * np.linalg.norm(x):
+                return x, iteration + 1
+        raise ConvergenceError(
+            f"Newton did not converge in {options.max_iterations} iterations: residual "
+            f"{norm:.3g} > tolerance {tolerance:.3g} (atol={options.atol:g}, rtol={options.rtol:g})")
 
     # -- condensed Newton ------------------------------------------------------------
     def _setup_condensed(self):
@@ -274,4 +330,6 @@ class ImplicitSolve:
         """``(x, newton_iterations)`` for the step's ``b``, ``q0``, ``v0``, frozen ``state`` and a guess."""
         if self.method == "condensed":
             return self._condensed(b, q0, v0, state, guess)
+        if self.method == "dense":
+            return self._dense(b, q0, v0, state, guess)
         return self._full(b, q0, v0, state, guess)

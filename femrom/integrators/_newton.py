@@ -28,7 +28,7 @@ class ConvergenceError(RuntimeError):
 
 
 #: How an implicit step's nonlinear equation is solved (:mod:`._implicit`).
-NEWTON_METHODS = ("auto", "full", "condensed")
+NEWTON_METHODS = ("auto", "full", "condensed", "dense")
 
 
 @dataclass(frozen=True)
@@ -43,13 +43,17 @@ class Newton:
         Absolute residual tolerance (in the units of the residual).
     max_iterations : int
         Jacobian solves allowed per step before :class:`ConvergenceError`.
-    method : {"auto", "full", "condensed"}
+    method : {"auto", "full", "condensed", "dense"}
         ``"full"``: Newton on all dofs, the tangent refactorised every
         iteration; ``"condensed"``: Newton on the nonlinear force's own
         coordinates with the linear part condensed once per ``dt``
-        (:mod:`femrom.integrators._implicit`); ``"auto"``: condensed when the
+        (:mod:`femrom.integrators._implicit`); ``"dense"``: Newton on all
+        dofs with dense arrays (a small system: a reduced model);
+        ``"auto"``: dense up to ``dense_max`` dofs, else condensed when the
         force has at most ``condense_max`` coordinates and at most
-        ``condense_fraction`` of the dofs.
+        ``condense_fraction`` of the dofs, else full.
+    dense_max : int
+        Largest system ``"auto"`` solves with dense arrays.
     condense_max : int
         Largest number of condensed coordinates ``"auto"`` takes (a dense
         (s, s) factorisation per iteration: 0.1-0.2 s at 4000).
@@ -73,6 +77,7 @@ class Newton:
     condense_fraction: float = 0.25
     condense_memory: float = 2.0**31
     refactor_ratio: float = 0.1
+    dense_max: int = 64
 
     def __post_init__(self):
         if self.rtol < 0 or self.atol < 0 or (self.rtol == 0 and self.atol == 0):
@@ -83,9 +88,9 @@ class Newton:
         if self.method not in NEWTON_METHODS:
             raise ValueError(f"unknown Newton method {self.method!r}; valid: {', '.join(NEWTON_METHODS)}")
         if not (self.condense_max >= 1 and 0 < self.condense_fraction <= 1 and self.condense_memory >= 0
-                and 0 <= self.refactor_ratio < 1):
+                and 0 <= self.refactor_ratio < 1 and self.dense_max >= 0):
             raise ValueError("Newton needs condense_max >= 1, 0 < condense_fraction <= 1, "
-                             "condense_memory >= 0, 0 <= refactor_ratio < 1")
+                             "condense_memory >= 0, 0 <= refactor_ratio < 1, dense_max >= 0")
 
 
 def solve_newton(residual: Callable, jacobian: Callable, x0: np.ndarray, make_solver: Callable,
