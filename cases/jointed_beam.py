@@ -4,26 +4,30 @@ The bolted half Brake-Reuss beam of ``jointed_beam.toml`` (free-free, three bolt
 12 kN, dry-friction interface elements on the lap joint's node pairs), end to end:
 
 1. **Preload and calibration** (``jointed_beam_prestress.py``): frictionless preload,
-   friction on, and the one calibrated parameter, the interface's tangential stiffness
+   friction on, and the one calibrated stiffness, the interface's tangential stiffness
    ``k_t``, set so that the first bending mode is the measured 80.5 Hz. The next
    modes are predictions against the measured 221.7 and 297.7 Hz.
-2. **QSMA on the full model** (:func:`femrom.post.quasi_static_modal_analysis`): static
-   loads ``alpha M phi_1`` with the dry-friction joint in Newton on all 24,522 dofs,
-   Masing damping; amplitudes as acc1's acceleration.
-3. **The impact ring-down** on the reduced model: the ``n_modes`` lowest elastic modes
-   of the prestressed beam (Galerkin about the preload, :func:`femrom.scene.project_system`)
-   with the joint nonlinear and stateful on every interface pair through the projected
-   local map (law ``clamped_friction``: the preload's contact status and slip traction
-   ``mu p_0`` frozen, so the contact cannot chatter), linear modal damping from the data
-   (the measured damping at the lowest amplitude), the hammer as a 0.3 ms half-sine;
-   acc1's band-passed backbone (60-100 Hz, Hilbert, 0.2 s windows) with Newmark's
-   period error removed (``f = tan(pi f_h dt) / (pi dt)``, exact for a linear mode).
-4. **The measured backbone** of the same processing (``data/brb/hammer_impact.npz``).
-5. The stepped-sine forced response of the reduced model at the shaker (``shaker1``):
+2. **QSMA on the full model with dry friction** (:func:`femrom.post.quasi_static_modal_analysis`):
+   static loads ``alpha M phi_1`` in Newton on all 24,522 dofs, Masing damping; amplitudes
+   as acc1's acceleration. No joint parameter is fitted for this curve.
+3. **The Iwan joint** (law ``clamped_iwan``: the preload's contact status and slip traction
+   ``mu p_0`` frozen, slip spread over Segalman's Iwan element): ``mu`` the textbook 0.6,
+   ``chi`` and ``beta`` fitted on the measured backbone by QSMA of the 10-mode model
+   (``--no-fit`` keeps the defaults, the fit's result on the default mesh); QSMA of the full
+   and the 10-mode model under it.
+4. **Hyper-reduction** (:func:`femrom.rom.ecsw_joint`): short ring-downs of the 10-mode model
+   with all pairs at two blows train ECSW, which samples the joint's slip remainder on a few
+   weighted pairs (the stuck joint stays exact); validated against all pairs.
+5. **The impact ring-down** on the hyper-reduced model: the hammer as a 0.3 ms half-sine,
+   linear modal damping from the data (the measured damping at the lowest amplitude),
+   acc1's band-passed backbone (60-100 Hz, Hilbert, 0.2 s windows) with Newmark's period
+   error removed (``f = tan(pi f_h dt) / (pi dt)``, exact for a linear mode).
+6. **The measured backbone** of the same processing (``data/brb/hammer_impact.npz``).
+7. The stepped-sine forced response of the hyper-reduced model at the shaker (``shaker1``):
    by default 0.2 and 1.5 N at 80.0-80.6 Hz in 0.1 Hz steps; ``--full-sweep`` the
-   issue's 0.2, 0.5, 1 and 1.5 N at 79-81.5 Hz in 0.05 Hz steps (about 40 minutes).
+   issue's 0.2, 0.5, 1 and 1.5 N at 79-81.5 Hz in 0.05 Hz steps.
 
-Run ``python -m femrom run jointed_beam [-o results/jointed_beam] [--full-sweep] [--quick]``.
+Run ``python -m femrom run jointed_beam [-o results/jointed_beam] [--full-sweep] [--quick] [--no-fit]``.
 """
 
 from __future__ import annotations
@@ -39,8 +43,9 @@ from pathlib import Path
 
 import numpy as np
 import scipy.sparse as sp
+from scipy.optimize import minimize
 
-from femrom.fem import JointForce, clamped_state
+from femrom.fem import ClampedIwanLaw, JointForce, clamped_iwan_state, clamped_state
 from femrom.integrators import (
     Newmark,
     SteadyStateCriterion,
@@ -60,6 +65,7 @@ from femrom.post import (
     staged_output,
     write_metrics,
 )
+from femrom.rom import ecsw_joint, hyper_reduced_system
 from femrom.scene import (
     Signal,
     SignalVector,
@@ -100,6 +106,15 @@ class JointedBeamCase:
     forced_frequencies: tuple = tuple(np.round(np.arange(80.0, 80.6 + 1e-9, 0.1), 3))  #: (--full-sweep: 79-81.5 by 0.05)
     forced_steps_per_period: int = 32
     forced_tolerance: float = 1e-2
+    friction_coefficient: float = 0.6           #: mu of the Iwan joint's macro-slip traction mu p_0 (textbook)
+    # chi, beta: the fit's result on the default mesh (-0.499, 0.943), the fit's start, or used as is
+    iwan_chi: float = -0.5                      #: the Iwan density's exponent
+    iwan_beta: float = 0.94                     #: the weight of its delta
+    fit_iwan: bool = True                       #: fit chi and beta on the measured backbone (when the data are there)
+    fit_evaluations: int = 50                   #: Nelder-Mead budget of the fit (one 10-mode QSMA each)
+    training_impacts: tuple = (300.0, 1500.0)   #: blows [N] of the all-pair ring-downs ECSW trains on
+    training_window: float = 0.15               #: their length [s]
+    ecsw_tolerance: float = 3e-3                #: relative residual of the sampled slip remainder
 
 
 def prestressed(config: JointedBeamCase) -> dict:
@@ -137,43 +152,107 @@ def qsma(system, amplitudes, *, reference, state, phi, supports=(), rigid_modes=
     return result, time.perf_counter() - tic
 
 
-def clamped_joint(system, q0, dry_state):
-    """The dry-friction joint with its preload frozen: ``(JointForce of law clamped_friction, its state)``."""
-    joint = system.nonlinear
+def iwan_joint(setup: dict, supports, *, mu: float, chi: float, beta: float):
+    """The full model with the ``clamped_iwan`` joint about the preload: ``(system, q0, z0)``.
+
+    The Iwan points start from the dry-friction preload (status, ``mu p_0``, slider positions);
+    the static equilibrium is re-solved under the new law (its weakest sliders carry less of the
+    preload's tangential traction), so that ``q0`` is an equilibrium of the model that runs."""
+    beam, system = setup["beam"], setup["system"]
+    joint, q0 = system.nonlinear, beam.preload.displacement
     law = joint.law.parameters()
-    z0 = clamped_state(joint.gaps(joint.localize(q0)), dry_state, normal_stiffness=law["normal_stiffness"],
-                       friction_coefficient=law["friction_coefficient"])
-    clamped = JointForce.from_parameters({**joint.parameters(), "law": {
-        "name": "clamped_friction", "normal_stiffness": law["normal_stiffness"],
-        "tangential_stiffness": law["tangential_stiffness"]}})
-    return clamped, z0
+    gaps = joint.gaps(joint.localize(q0))
+    clamped = clamped_state(gaps, beam.preload.state, normal_stiffness=law["normal_stiffness"],
+                            friction_coefficient=mu)
+    iwan = ClampedIwanLaw(law["normal_stiffness"], law["tangential_stiffness"], chi, beta)
+    force = JointForce.from_parameters({**joint.parameters(), "law": iwan.parameters()})
+    model = dataclasses.replace(system, nonlinear=force)
+    static = solve_static(model, system.load, supports=supports, state=clamped_iwan_state(iwan, gaps, clamped),
+                          initial_displacement=q0, closed_start=False)
+    q = static.displacement
+    return model, q, force.commit(q, None, static.state)
 
 
-def reduced_model(setup: dict, config: JointedBeamCase, damping_ratio: float):
-    """The modal model about the preload with the clamped-friction joint: ``(system, rest state)``."""
-    beam, system, modes = setup["beam"], setup["system"], setup["modes"]
-    q0 = beam.preload.displacement
-    clamped, z0 = clamped_joint(system, q0, beam.preload.state)
+def reduced_model(setup: dict, config: JointedBeamCase, model, q0, z0, damping_ratio: float):
+    """The ``n_modes`` elastic modes of the prestressed beam about ``q0``, the joint on every pair;
+    inputs: the hammer (peak ``impact_peak``) and the shaker (amplitude set by the stepped sine)."""
     hammer = Signal.from_dict({"kind": "impulse", "amplitude": config.impact_peak, "start": 0.0,
                                "duration": config.impact_width})
     shaker = Signal.from_dict({"kind": "sine", "amplitude": 0.0, "frequency": 80.5})
-    full = dataclasses.replace(system, nonlinear=clamped, inputs=SignalVector([hammer, shaker]))
-    V = modes.shapes[:, 6:6 + config.n_modes]
-    reduced = project_system(full, V, reference=q0, reference_state=z0, damping_ratios=damping_ratio)
-    return reduced, z0
+    full = dataclasses.replace(model, inputs=SignalVector([hammer, shaker]))
+    V = setup["modes"].shapes[:, 6:6 + config.n_modes]
+    return project_system(full, V, reference=q0, reference_state=z0, damping_ratios=damping_ratio)
 
 
-def ring_down(reduced, z0, config: JointedBeamCase, f1: float):
-    """The hammer blow and the free decay: ``(acc (3, k), dt, seconds, newton iterations)``."""
+def with_blow(system, peak: float, width: float):
+    """``system`` with the hammer's peak set to ``peak`` [N] (the shaker silent)."""
+    hammer = Signal.from_dict({"kind": "impulse", "amplitude": float(peak), "start": 0.0, "duration": width})
+    return dataclasses.replace(system, inputs=SignalVector([hammer, system.inputs.signals[1]]))
+
+
+def ring_down(reduced, z0, duration: float, dt: float, keep_every: int = 0):
+    """The hammer blow and the free decay: ``(acc (3, k), seconds, newton iterations, kept (q^, state))``."""
     r = reduced.n_dofs
-    dt = 1.0 / (f1 * config.steps_per_period)
-    n_steps = int(round(config.ring_down / dt))
+    n_steps = int(round(duration / dt))
     trajectory = Trajectory(fields=("a",))
+    kept = []
+
+    def keep(result):
+        if keep_every and result.step % keep_every == 0:
+            kept.append((result.q.copy(), result.state))
+
     rest = StepResult(step=0, t=0.0, q=np.zeros(r), v=np.zeros(r), a=np.zeros(r), state=z0)
     tic = time.perf_counter()
-    summary = integrate(reduced, Newmark(), None, None, dt, n_steps, consumers=[trajectory], start=rest,
+    summary = integrate(reduced, Newmark(), None, None, dt, n_steps, consumers=[trajectory, keep], start=rest,
                         progress=None)
-    return np.asarray(reduced.output_matrix @ trajectory.a), dt, time.perf_counter() - tic, summary.newton_iterations
+    acc = np.asarray(reduced.output_matrix @ trajectory.a)
+    return acc, time.perf_counter() - tic, summary.newton_iterations, kept
+
+
+def reduced_qsma(reduced, z0, amplitudes, damping_ratio: float):
+    """QSMA of the first reduced coordinate (mode 1: ``V^T M V = I``), linear damping added: ``(Backbone, s)``."""
+    phi = np.zeros(reduced.n_dofs)
+    phi[0] = 1.0
+    result, seconds = qsma(reduced, amplitudes, reference=np.zeros(reduced.n_dofs), state=z0, phi=phi,
+                           progress=lambda line: None)
+    curve = result.backbone(0)
+    return dataclasses.replace(curve, damping_ratio=curve.damping_ratio + damping_ratio), seconds
+
+
+def fit_iwan(setup: dict, config: JointedBeamCase, supports, measured: Backbone, damping_ratio: float,
+             progress=print) -> dict:
+    """``chi`` and ``beta`` of the Iwan joint fitted on the measured backbone (``mu`` fixed).
+
+    Each evaluation re-equilibrates the full model under the law, projects it on the modes and
+    runs QSMA on the 10-mode model (a fraction of a second). The misfit at the measured windows
+    between 1 and 24 m/s^2: the frequency drop from the first window over the measured total drop,
+    and the log of the damping ratios' quotient, in one sum of squares (Nelder-Mead on
+    ``logit(chi + 1)``, ``log beta``)."""
+    a = np.asarray(measured.amplitude)
+    a = np.sort(a[(a >= 1.0) & (a <= 24.0)])
+    f_measured, z_measured = measured.at_amplitude(a)
+    drop = f_measured[0] - f_measured
+    history = []
+
+    def misfit(p):
+        chi, beta = -1.0 + 1.0 / (1.0 + np.exp(-p[0])), float(np.exp(p[1]))
+        model, q0, z0 = iwan_joint(setup, supports, mu=config.friction_coefficient, chi=chi, beta=beta)
+        reduced = reduced_model(setup, config, model, q0, z0, damping_ratio)
+        curve, _ = reduced_qsma(reduced, z0, config.qsma_amplitudes, damping_ratio)
+        f, z = curve.at_amplitude(a)
+        residual = np.concatenate([(f[0] - f - drop) / drop[-1], np.log(z / z_measured)])
+        value = float(residual @ residual)
+        history.append((value, chi, beta))
+        progress(f"  fit {len(history)}: chi {chi:+.3f}, beta {beta:.3f}, misfit {value:.4f}")
+        return value
+
+    tic = time.perf_counter()
+    start = [np.log((config.iwan_chi + 1.0) / -config.iwan_chi), np.log(config.iwan_beta)]
+    minimize(misfit, start, method="Nelder-Mead",
+             options={"xatol": 1e-2, "fatol": 1e-4, "maxfev": config.fit_evaluations})
+    value, chi, beta = min(history)
+    return {"chi": chi, "beta": beta, "misfit": value, "evaluations": len(history),
+            "seconds": time.perf_counter() - tic, "fitted_on": f"measured backbone at acc1, {a[0]:.3g}-{a[-1]:.3g} m/s^2"}
 
 
 def newmark_corrected(backbone: Backbone, dt: float) -> Backbone:
@@ -260,42 +339,75 @@ def run(config: JointedBeamCase, out: Path, progress=print, data_dir=None) -> di
     damping = float(measured.damping_ratio[np.argmin(measured.amplitude)]) if measured is not None else 0.0014
     modes, q0 = setup["modes"], beam.preload.displacement
     left_face = point_supports(beam.fom.space, system.condensation, prestress.SUPPORTS[:3])  # 3-2-1: no mechanism
-    common = {"reference": q0, "phi": modes.shapes[:, 6], "supports": left_face, "rigid_modes": modes.shapes[:, :6],
+    common = {"phi": modes.shapes[:, 6], "supports": left_face, "rigid_modes": modes.shapes[:, :6],
               "progress": progress}
-    qsma_seconds = {}
+    seconds = {}
     progress(f"jointed beam: QSMA on the full model, dry friction ({len(config.qsma_amplitudes)} static loads) ...")
-    static, qsma_seconds["fom_dry"] = qsma(system, config.qsma_amplitudes, state=beam.preload.state, **common)
-    clamped, z_clamped = clamped_joint(system, q0, beam.preload.state)
-    progress("jointed beam: QSMA on the full model, clamped friction ...")
-    static_clamped, qsma_seconds["fom_clamped"] = qsma(dataclasses.replace(system, nonlinear=clamped),
-                                                      config.qsma_amplitudes, state=z_clamped, **common)
-    reduced, z0 = reduced_model(setup, config, damping)
-    progress(f"jointed beam: QSMA on the {config.n_modes}-mode model, clamped friction ...")
-    phi_hat = np.zeros(reduced.n_dofs)
-    phi_hat[0] = 1.0   # mode 1 is the first reduced coordinate (V^T M V = I)
-    static_reduced, qsma_seconds["reduced_clamped"] = qsma(reduced, config.qsma_amplitudes, reference=np.zeros(
-        reduced.n_dofs), state=z0, phi=phi_hat, progress=progress)
+    static, seconds["qsma_fom_dry"] = qsma(system, config.qsma_amplitudes, reference=q0, state=beam.preload.state,
+                                          **common)
+
+    # the Iwan joint: chi and beta fitted on the measured backbone (mu the textbook value)
+    iwan = {"mu": config.friction_coefficient, "chi": config.iwan_chi, "beta": config.iwan_beta, "fitted": False}
+    if config.fit_iwan and measured is not None:
+        progress("jointed beam: fitting the Iwan joint's chi and beta on the measured backbone (10-mode QSMA) ...")
+        fit = fit_iwan(setup, config, left_face, measured, damping, progress=progress)
+        iwan.update(chi=fit["chi"], beta=fit["beta"], fitted=True, fit=fit)
+        seconds["fit"] = fit["seconds"]
+    model, q_iwan, z_iwan = iwan_joint(setup, left_face, mu=iwan["mu"], chi=iwan["chi"], beta=iwan["beta"])
+    progress(f"jointed beam: QSMA on the full model, Iwan joint (chi {iwan['chi']:+.3f}, beta {iwan['beta']:.3f}) ...")
+    static_iwan, seconds["qsma_fom_iwan"] = qsma(model, config.qsma_amplitudes, reference=q_iwan, state=z_iwan,
+                                                **common)
+    reduced = reduced_model(setup, config, model, q_iwan, z_iwan, damping)
+    curve_reduced, seconds["qsma_reduced_iwan"] = reduced_qsma(reduced, z_iwan, config.qsma_amplitudes, damping)
     # QSMA's damping is the joint's alone: the linear modal damping of the other models adds to it
-    for name, result in (("fom_qsma", static), ("fom_qsma_clamped", static_clamped),
-                         ("reduced_qsma_clamped", static_reduced)):
+    for name, result in (("fom_qsma", static), ("fom_qsma_iwan", static_iwan)):
         curve = result.backbone(0)
         backbones[name] = dataclasses.replace(curve, damping_ratio=curve.damping_ratio + damping)
-    progress(f"jointed beam: {config.n_modes}-mode model, {config.impact_peak:g} N blow, "
-             f"{config.ring_down:g} s ring-down ...")
-    acc, dt, ring_seconds, newton = ring_down(reduced, z0, config, f1)
-    transient = newmark_corrected(hilbert_backbone(acc[0], 1.0 / dt, BAND, window=WINDOW), dt)
-    backbones["fom_transient"] = transient
+    backbones["reduced_qsma_iwan"] = curve_reduced
+
+    # hyper-reduction: ECSW trained on short all-pair ring-downs
+    dt = 1.0 / (f1 * config.steps_per_period)
+    snapshots, training = [], {}
+    for peak in config.training_impacts:
+        progress(f"jointed beam: all {system.nonlinear.n_pairs} pairs, {peak:g} N blow, "
+                 f"{config.training_window:g} s (ECSW training) ...")
+        acc, sec, newton, kept = ring_down(with_blow(reduced, peak, config.impact_width), z_iwan,
+                                           config.training_window, dt, keep_every=4)
+        snapshots += kept
+        training[peak] = acc
+        seconds[f"training_{peak:g}_n"] = sec
+        seconds.setdefault("all_pairs_ms_per_step", 1e3 * sec / max(acc.shape[1] - 1, 1))
+    sampling = ecsw_joint(reduced, snapshots, z_iwan, tolerance=config.ecsw_tolerance)
+    hyper, z_hyper = hyper_reduced_system(reduced, sampling, z_iwan)
+    progress(f"  {sampling.pairs.size} of {sampling.n_pairs} pairs, training residual {sampling.residual:.2g}")
+    validation = {}
+    for peak, acc in training.items():
+        acc_hyper, *_ = ring_down(with_blow(hyper, peak, config.impact_width), z_hyper, config.training_window, dt)
+        validation[f"{peak:g}_n_acc1_max_error"] = float(np.max(np.abs(acc_hyper[0] - acc[0])) / np.max(np.abs(acc[0])))
+    curve_hyper, _ = reduced_qsma(hyper, z_hyper, config.qsma_amplitudes, damping)
+    backbones["hyper_qsma_iwan"] = curve_hyper
+    validation["qsma_max_frequency_difference_hz"] = float(np.max(np.abs(curve_hyper.frequency_hz
+                                                                         - curve_reduced.frequency_hz)))
+    validation["qsma_max_damping_difference"] = float(np.max(np.abs(curve_hyper.damping_ratio
+                                                                    - curve_reduced.damping_ratio)))
+    progress(f"jointed beam: hyper-reduced model, {config.impact_peak:g} N blow, {config.ring_down:g} s ring-down ...")
+    acc, ring_seconds, newton, _ = ring_down(with_blow(hyper, config.impact_peak, config.impact_width), z_hyper,
+                                             config.ring_down, dt)
+    seconds["ring_down"] = ring_seconds
+    backbones["transient"] = newmark_corrected(hilbert_backbone(acc[0], 1.0 / dt, BAND, window=WINDOW), dt)
     forced = None
     if config.forced:
         progress(f"jointed beam: stepped sine, {len(config.forced_levels)} levels x "
                  f"{len(config.forced_frequencies)} frequencies ...")
-        shaker = np.asarray(reduced.input_matrix[:, 1]).ravel()
-        r = reduced.n_dofs
-        plant = SystemPlant(reduced, shaker, rest=StepResult(step=0, t=0.0, q=np.zeros(r), v=np.zeros(r),
-                                                              a=np.zeros(r), state=z0))
+        shaker = np.asarray(hyper.input_matrix[:, 1]).ravel()
+        r = hyper.n_dofs
+        plant = SystemPlant(hyper, shaker, rest=StepResult(step=0, t=0.0, q=np.zeros(r), v=np.zeros(r),
+                                                            a=np.zeros(r), state=z_hyper))
         sweep = SteppedSine(np.asarray(config.forced_frequencies), steps_per_period=config.forced_steps_per_period,
                             steady_state=SteadyStateCriterion(tolerance=config.forced_tolerance))
+        tic_forced = time.perf_counter()
         forced = sweep.run(plant, list(config.forced_levels), progress=lambda line: progress(f"  {line}"))
+        seconds["stepped_sine"] = time.perf_counter() - tic_forced
 
     out.mkdir(parents=True, exist_ok=True)
     plot_backbones(out / "backbone.png", backbones, title="jointed beam, mode 1 at acc1",
@@ -307,30 +419,34 @@ def run(config: JointedBeamCase, out: Path, progress=print, data_dir=None) -> di
         "calibration": {"parameter": "tangential_stiffness", "value_pa_per_m": setup["k_t"], "target_f1_hz": 80.5,
                         "f1_hz": f1, "eigensolves": setup["evaluations"]},
         **linear,
-        "joint": {"law_full_model": "dry_friction", "law_reduced_model": "clamped_friction",
-                  **{k: v for k, v in system.nonlinear.law.parameters().items() if k != "name"}},
+        "joint": {"law_dry_model": "dry_friction", "law_dynamics": "clamped_iwan",
+                  **{k: v for k, v in system.nonlinear.law.parameters().items() if k != "name"},
+                  "iwan": {k: v for k, v in iwan.items()}},
         "linear_damping_ratio": damping,
         "backbone": rows,
         "shift_1_to_30_m_s2": {name: shift_and_damping(b) for name, b in backbones.items()},
         "against_measured": {} if measured is None else {
             name: against_measured(b, measured) for name, b in backbones.items() if name != "measured"},
+        "hyper_reduction": {**sampling.describe(), "training_impacts_n": list(config.training_impacts),
+                            "training_window_s": config.training_window, "validation": validation},
         "transient_model": f"{config.n_modes} elastic modes of the prestressed beam (Galerkin about the preload), "
-                           f"the joint on all {system.nonlinear.n_pairs} interface pairs with the law clamped_friction",
+                           f"the clamped_iwan joint sampled on {sampling.pairs.size} of {sampling.n_pairs} "
+                           "interface pairs (ECSW, the stuck joint exact)",
         "reduced_model": {"n_modes": config.n_modes, "dt": dt, "steps": acc.shape[1] - 1,
                           "seconds": ring_seconds, "ms_per_step": 1e3 * ring_seconds / max(acc.shape[1] - 1, 1),
+                          "all_pairs_ms_per_step": seconds["all_pairs_ms_per_step"],
                           "newton_iterations": newton, "impact_peak_n": config.impact_peak,
                           "impact_width_s": config.impact_width},
-        "seconds": {"prestress_and_calibration": setup["seconds"], "qsma": qsma_seconds, "ring_down": ring_seconds,
-                    "total": time.perf_counter() - tic},
+        "seconds": {**seconds, "total": time.perf_counter() - tic},
         "notes": notes,
     }
     if forced is not None:
         # next to each measured point, the stuck joint's (linear) response at that force: the nonlinearity
         # is their difference; at small forces they agree to the steady-state tolerance
-        per_newton = linear_accelerance(reduced, z0, shaker, config.forced_frequencies)
+        per_newton = linear_accelerance(hyper, z_hyper, shaker, config.forced_frequencies)
         levels = forced.rows()
         for level in levels:
-            for i, name in enumerate(reduced.output_names):
+            for i, name in enumerate(hyper.output_names):
                 for j, point in enumerate(level["outputs"][name]):
                     point["linear_amplitude_m_s2"] = float(level["force_n"] * per_newton[i, j])
         metrics["forced_response"] = levels
@@ -345,14 +461,16 @@ def main(argv=None) -> int:
                         help="the stepped sine at 0.2, 0.5, 1, 1.5 N over 79-81.5 Hz by 0.05 Hz (about 40 min)")
     parser.add_argument("--no-forced", action="store_true", help="skip the stepped sine")
     parser.add_argument("--quick", action="store_true", help="short ring-down and few QSMA loads (tests)")
+    parser.add_argument("--no-fit", action="store_true", help="the Iwan joint's chi and beta as given, not fitted")
     parser.add_argument("--data", type=Path, help="the folder of hammer_impact.npz (default: femrom.post.brb_data_dir())")
     args = parser.parse_args(argv)
-    config = JointedBeamCase(forced=not args.no_forced)
+    config = JointedBeamCase(forced=not args.no_forced, fit_iwan=not args.no_fit)
     if args.full_sweep:
         config = dataclasses.replace(config, forced_levels=(0.2, 0.5, 1.0, 1.5),
                                      forced_frequencies=tuple(np.round(np.arange(79.0, 81.5 + 1e-9, 0.05), 3)))
     if args.quick:
-        config = dataclasses.replace(config, ring_down=1.0, qsma_amplitudes=(1.0, 10.0, 20.0, 30.0),
+        config = dataclasses.replace(config, ring_down=1.0, qsma_amplitudes=(1.0, 3.0, 10.0, 30.0), fit_iwan=False,
+                                     training_impacts=(300.0,), training_window=0.1,
                                      forced_levels=(1.5,), forced_frequencies=(80.3, 80.4))
     with staged_output(args.out) as folder:
         metrics = run(config, folder, progress=lambda line: print(line, file=sys.stderr, flush=True),
