@@ -35,14 +35,12 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import importlib.util
-import json
 import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-import scipy.sparse as sp
 from scipy.optimize import minimize
 
 from femrom.fem import ClampedIwanLaw, JointForce, clamped_iwan_state, clamped_state
