@@ -13,6 +13,11 @@
   nonlinear step;
 - :class:`DiscreteStateSpace`: ``z+ = A z + B u``, ``y = C z + D u``, with
   ``simulate``, a stepper and HDF5 (the form of identified first-order models);
+- :class:`StateSpaceROM`: an identified first-order model
+  (``StateSpaceROM(learner=DMDc(...) | ERA(...) | OKID(...)).fit(data)``) with
+  ``predict`` (:class:`StateSpaceSolution`), a stepper, ``to_state_space`` at its
+  identified ``dt`` and HDF5 ``save``/``load`` (a DiscreteStateSpace file plus the
+  state basis);
 - :class:`HamiltonianROM`: canonical Hamiltonian ROMs, intrusive
   (:meth:`HamiltonianROM.galerkin`) or learned (``fit`` on
   :class:`~femrom.inference.CanonicalData` through
@@ -39,6 +44,7 @@ from femrom.rom._hamiltonian import (
     HamiltonianStepper,
     hamiltonian_step_matrix,
 )
+from femrom.rom._identified import StateSpaceROM, StateSpaceSolution
 from femrom.rom._hyper import HyperReducedPotential, ecsw_weights, sparse_nnls
 from femrom.rom._model import ReducedSolution, SecondOrderROM
 from femrom.rom._schemes import (
@@ -58,7 +64,8 @@ from femrom.rom.schemes.verlet import verlet_bound
 __all__ = [
     "FIRST_ORDER_SCHEMES", "HAMILTONIAN_SCHEMES", "REDUCED_SCHEMES", "DiscreteStateSpace", "FirstOrderROM", "HamiltonianROM", "HamiltonianSolution", "HamiltonianStepper",
     "HyperReducedPotential", "LazyFields", "LinearParts", "ReducedModel", "ReducedNewton", "ReducedScheme",
-    "ReducedSolution", "ReducedStepper", "RegularizationScore", "SecondOrderROM", "StateSpaceStepper",
+    "ReducedSolution", "ReducedStepper", "RegularizationScore", "SecondOrderROM", "StateSpaceROM",
+    "StateSpaceSolution", "StateSpaceStepper",
     "ecsw_weights", "hamiltonian_step_matrix", "reduced_scheme", "register_reduced_scheme",
     "registered_schemes", "run_linear", "select_regularization", "sparse_nnls", "uniform_step", "verlet_bound",
 ]
