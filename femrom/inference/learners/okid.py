@@ -35,8 +35,13 @@ class OKID(Learner):
         ``l``: ``l p >= n`` for noise-free data; larger with noise (the Kalman
         observer's ``Abar^l`` must be negligible). ``m + l (m + p)`` unknowns per output.
     rows, columns : int, optional
-        ERA's block rows and columns (default both ``max(l, ceil(2 n / min(p, m)))``);
-        ``rows + columns + 1`` Markov parameters are recovered.
+        ERA's block rows and columns; ``rows + columns + 1`` Markov parameters are
+        recovered. Default both ``max(l, ceil(2 n / min(p, m)), K_min // 10)``, ``K_min``
+        the shortest trajectory: the Hankel matrix must span the slow dynamics, not
+        only the observer's ``l`` samples (``benchmarks/identification_fit.py``: a
+        lightly damped system whose slowest mode has a period of 333 samples gave
+        unstable realisations with ``a + b <= 50`` and stable ones from ``a + b = 200``).
+        Cost: one SVD of an (a p, b m) matrix (``docs/identification.md``).
     feedthrough : bool
         Fit ``D`` (default); else ``D = 0``.
     at_rest : bool
@@ -65,9 +70,9 @@ class OKID(Learner):
         self.feedthrough, self.at_rest, self.output_directions = bool(feedthrough), bool(at_rest), output_directions
         self.operators_ = None
 
-    def blocks(self, n_outputs: int, n_inputs: int) -> tuple[int, int]:
-        """ERA's block rows and columns for ``p`` outputs and ``m`` inputs."""
-        default = max(self.observer_order, math.ceil(2 * self.order / min(n_outputs, n_inputs)))
+    def blocks(self, n_outputs: int, n_inputs: int, shortest: int) -> tuple[int, int]:
+        """ERA's block rows and columns for ``p`` outputs, ``m`` inputs and trajectories of ``>= shortest`` samples."""
+        default = max(self.observer_order, math.ceil(2 * self.order / min(n_outputs, n_inputs)), shortest // 10)
         rows = default if self.rows is None else int(self.rows)
         columns = default if self.columns is None else int(self.columns)
         return hankel_blocks(rows + columns + 1, rows, columns)
@@ -78,7 +83,8 @@ class OKID(Learner):
             raise TypeError(f"OKID.fit takes InputOutputData, got {type(data).__name__}")
         if data.outputs is None:
             raise ValueError("OKID needs outputs: the input-output data have none")
-        rows, columns = self.blocks(data.n_outputs, data.n_inputs)
+        shortest = min(window.stop - window.start for window in data.trajectories())
+        rows, columns = self.blocks(data.n_outputs, data.n_inputs, shortest)
         tic = time.perf_counter()
         markov = okid_markov_parameters(data, self.observer_order, rows + columns + 1,
                                         feedthrough=self.feedthrough, at_rest=self.at_rest)
