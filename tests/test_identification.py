@@ -6,6 +6,8 @@ python-control's ``eigensys_realization`` and ``markov``.
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 import scipy.sparse as sp
@@ -27,6 +29,7 @@ from femrom.inference import (
     registered_learners,
     system_impulse_response,
 )
+from femrom.integrators import Newmark, iterate
 from femrom.rom import DiscreteStateSpace, SecondOrderROM, StateSpaceROM
 from femrom.scene import SecondOrderSystem
 
@@ -271,6 +274,33 @@ def test_impulse_responses_of_the_full_order_system_and_its_state_space_agree():
     assert eigenvalue_mismatch(ops.eigenvalues(), state_space.poles()) < 1e-9
 
 
+def test_okid_on_full_order_runs_recovers_the_newmark_state_space():
+    system = small_structure()
+    dt, K = 0.02, 400
+    rng = np.random.default_rng(18)
+    samples = np.hstack([np.zeros((2, 1)), rng.standard_normal((2, K - 1))])   # u_0 = 0: the run is from rest
+    driven = dataclasses.replace(system, inputs=lambda t: np.array(
+        [np.interp(t, dt * np.arange(K), row) for row in samples]))
+    run = iterate(driven, Newmark(), np.zeros(3), np.zeros(3), dt, K - 1, progress=False)
+    Y = np.column_stack([system.output_matrix @ result.q for result in run])
+    data = InputOutputData(samples, Y, dt)
+    state_space = SecondOrderROM.galerkin(system, np.eye(3)).to_state_space(dt)
+    exact = markov_parameters(state_space, 40)
+    # a deadbeat observer of order l exists iff [C; C A; ...; C A^(l-1)] has rank n: displacement
+    # outputs of the two end masses need l = 4 here, although l p = 6 >= n already at l = 3
+    observability = lambda l: np.linalg.matrix_rank(  # noqa: E731
+        np.vstack([state_space.C @ np.linalg.matrix_power(state_space.A, i) for i in range(l)]))
+    assert (observability(3), observability(4)) == (5, 6)
+    learner = OKID(6, 4, at_rest=True).fit(data)
+    # the sampled FOM is exactly an order-6 state space with feedthrough D = C E (Newmark's
+    # end-of-step input): OKID recovers it from the run's inputs and outputs alone, to round-off
+    # amplified by the lightly damped poles (|z| ~ 0.99 over 40 steps: 1e-8 leaves a margin)
+    assert learner.markov_.relative_error(exact, 40) < 1e-8
+    assert learner.operators_.markov_parameters(40).relative_error(exact) < 1e-8
+    # lower side: l = 3, below the observability index, leaves no exact observer
+    assert okid_markov_parameters(data, 3, 40, at_rest=True).relative_error(exact) > 0.1
+
+
 # -- OKID ---------------------------------------------------------------------------------
 
 def test_okid_recovers_markov_parameters_from_noise_free_data_with_a_deadbeat_observer():
@@ -280,8 +310,9 @@ def test_okid_recovers_markov_parameters_from_noise_free_data_with_a_deadbeat_ob
     Y, _ = simulate(A, B, C, D, U, rng.standard_normal(6))    # unknown initial state
     data = InputOutputData(U, Y, DT)
     truth = markov_parameters(StateSpaceOperators(A, B, C, D, DT), 40)
-    # l p = 12 >= n = 6: a deadbeat observer exists and the regression is exact (round-off;
-    # the recursion runs 40 steps through the observer's poles: 1e-10 leaves a margin)
+    # l = 3 is above the observability index of a random (A, C) with p = 4, n = 6 (2): a deadbeat
+    # observer exists and the regression is exact (round-off; the recursion runs 40 steps through
+    # the observer's poles: 1e-10 leaves a margin)
     assert okid_markov_parameters(data, 3, 40).relative_error(truth) < 1e-10
     learner = OKID(6, 3).fit(data)
     assert eigenvalue_mismatch(learner.operators_.eigenvalues(), np.linalg.eigvals(A)) < 1e-9

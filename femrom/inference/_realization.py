@@ -55,8 +55,10 @@ Markov parameters follow from the observer's,
 
 as many as ERA asks for. The regression has ``m + l (m + p)`` unknowns per
 output row; noise-free data of an order-``n`` model are fitted exactly once
-``l p >= n`` (a deadbeat observer exists), and every exact solution gives the
-same ``Y_k``.
+``l`` reaches the observability index of ``(A, C)`` (the smallest ``l`` with
+``rank [C; C A; ...; C A^{l-1}] = n``: a deadbeat observer exists; ``l p >= n``
+is necessary, and enough for a generic ``C``, not for displacement outputs of a
+structure), and every exact solution gives the same ``Y_k``.
 """
 
 from __future__ import annotations

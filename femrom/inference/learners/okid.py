@@ -32,7 +32,9 @@ class OKID(Learner):
     order : int
         ``n``.
     observer_order : int
-        ``l``: ``l p >= n`` for noise-free data; larger with noise (the Kalman
+        ``l``: at least the observability index of ``(A, C)`` for noise-free data
+        (``l p >= n`` is necessary; displacement outputs of a structure need more:
+        a velocity is not seen in one sample); larger with noise (the Kalman
         observer's ``Abar^l`` must be negligible). ``m + l (m + p)`` unknowns per output.
     rows, columns : int, optional
         ERA's block rows and columns; ``rows + columns + 1`` Markov parameters are
