@@ -27,7 +27,8 @@
   control on the states), :class:`ERA` (balanced realisation of Markov
   parameters, :func:`era_realization`, :func:`block_hankel`), :class:`OKID`
   (observer Markov parameters by least squares, :func:`okid_markov_parameters`,
-  then ERA); Markov parameters of a model (:func:`markov_parameters`), a stepper
+  then ERA, and the identified observer's gain, :func:`okid_observer_gain`);
+  Markov parameters of a model (:func:`markov_parameters`), a stepper
   (:func:`impulse_response`) or a full-order system (:func:`system_impulse_response`);
 - :class:`ErrorSplit`, :class:`HamiltonianErrorSplit`: projection, derivative
   and optimisation errors of a fit.
@@ -72,8 +73,10 @@ from femrom.inference._problem import Block, GramProblem
 from femrom.inference._realization import (
     block_hankel,
     era_realization,
+    markov_from_observer,
     observer_markov_parameters,
     okid_markov_parameters,
+    okid_observer_gain,
     system_markov_from_observer,
 )
 from femrom.inference._sdp import CONIC_SOLVERS, solve_conic
@@ -118,5 +121,6 @@ __all__ = [
     "symmetric_lyapunov_fit", "term_class",
     "DMDc", "ERA", "InputOutputData", "MarkovParameters", "OKID", "STATE_LAYOUTS", "StateSpaceOperators",
     "block_hankel", "era_realization", "impulse_response", "markov_parameters", "observer_markov_parameters",
-    "okid_markov_parameters", "system_impulse_response", "system_markov_from_observer",
+    "markov_from_observer", "okid_markov_parameters", "okid_observer_gain", "system_impulse_response",
+    "system_markov_from_observer",
 ]

@@ -282,6 +282,41 @@ def system_markov_from_observer(coefficients: np.ndarray, n_inputs: int, n_outpu
     return Y
 
 
+def okid_observer_gain(coefficients: np.ndarray, n_inputs: int, n_outputs: int, observer_order: int,
+                       A: np.ndarray, C: np.ndarray, horizon: int, *, feedthrough: bool = True) -> np.ndarray:
+    r"""(n, p) gain ``L`` of the observer ``z^+ = A z^ + B u + L (y - C z^ - D u)`` identified with the model.
+
+    The observer's own Markov parameters ``Y^o_k = C A^{k-1} G`` (``G = -L``) follow
+    from ``Ybar_i^(2) = -C Abar^{i-1} G`` by the recursion
+
+    .. math::
+
+        Y^o_k = -\bar Y_k^{(2)} + \sum_{i=1}^{\min(k-1, l)} \bar Y_i^{(2)} Y^o_{k-i}
+        \quad (\bar Y_k^{(2)} = 0 \text{ for } k > l),
+
+    (from ``C (zI - A)^{-1} G = -ybar + ybar C (zI - A)^{-1} G``), and
+    ``G = O_s^+ [Y^o_1; ...; Y^o_s]`` in the realisation's coordinates, ``O_s``
+    the observability matrix of ``(A, C)`` with ``s = horizon`` blocks (Juang et
+    al. 1993). With noisy data the least-squares observer tends to the Kalman
+    filter's one-step predictor.
+    """
+    m, p, l = n_inputs, n_outputs, observer_order
+    offset = m if feedthrough else 0
+    second = coefficients[:, offset:].reshape(p, l, m + p)[:, :, m:]      # Ybar_i^(2), (p, l, p)
+    h = []
+    for k in range(1, horizon + 1):
+        hk = -second[:, k - 1].copy() if k <= l else np.zeros((p, p))
+        for i in range(1, min(k - 1, l) + 1):
+            hk += second[:, i - 1] @ h[k - i - 1]
+        h.append(hk)
+    blocks, CAk = [], np.asarray(C, dtype=float)
+    for _ in range(horizon):
+        blocks.append(CAk)
+        CAk = CAk @ A
+    G = np.linalg.lstsq(np.vstack(blocks), np.vstack(h), rcond=None)[0]
+    return -G
+
+
 def okid_markov_parameters(data: InputOutputData, observer_order: int, count: int, *, feedthrough: bool = True,
                            at_rest: bool = False, progress: bool | None = None) -> MarkovParameters:
     r"""The system's Markov parameters ``Y_0 ... Y_{count-1}`` estimated from input-output data by OKID.
@@ -294,8 +329,15 @@ def okid_markov_parameters(data: InputOutputData, observer_order: int, count: in
         raise ValueError(f"count must be at least 2, got {count}")
     coefficients, diagnostics = observer_markov_parameters(data, observer_order, feedthrough=feedthrough,
                                                            at_rest=at_rest, progress=progress)
-    Y = system_markov_from_observer(coefficients, data.n_inputs, data.n_outputs, int(observer_order), count,
+    return markov_from_observer(data, coefficients, diagnostics, int(observer_order), count,
+                                feedthrough=feedthrough, at_rest=at_rest)
+
+
+def markov_from_observer(data: InputOutputData, coefficients: np.ndarray, diagnostics: dict, observer_order: int,
+                         count: int, *, feedthrough: bool, at_rest: bool) -> MarkovParameters:
+    """:class:`MarkovParameters` of the system from the observer's coefficients and the regression's diagnostics."""
+    Y = system_markov_from_observer(coefficients, data.n_inputs, data.n_outputs, observer_order, count,
                                     feedthrough=feedthrough)
-    return MarkovParameters(Y, dt=data.dt, metadata={"source": "okid", "observer_order": int(observer_order),
+    return MarkovParameters(Y, dt=data.dt, metadata={"source": "okid", "observer_order": observer_order,
                                                       "feedthrough": feedthrough, "at_rest": at_rest,
                                                       **{f"regression_{k}": v for k, v in diagnostics.items()}})

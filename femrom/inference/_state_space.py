@@ -36,6 +36,9 @@ class StateSpaceOperators:
         ``z = U_r^T x`` of the data's state ``x`` (DMDc's output space), so an
         initial ``x_0`` maps to ``z_0 = U_r^T x_0``; ``None`` when the state has no
         such meaning (ERA, OKID: balanced coordinates).
+    observer_gain : (n_z, p) ndarray or None
+        ``L`` of the state estimator ``z^_{k+1} = A z^_k + B u_k + L (y_k - C z^_k - D u_k)``
+        identified with the model (OKID), or ``None``.
     metadata : dict
         What fitted them (method, orders, Hankel sizes, singular values).
     """
@@ -46,6 +49,7 @@ class StateSpaceOperators:
     D: np.ndarray
     dt: float
     state_basis: np.ndarray | None = None
+    observer_gain: np.ndarray | None = None
     metadata: dict = field(default_factory=dict)
 
     def __post_init__(self):
@@ -68,6 +72,11 @@ class StateSpaceOperators:
             if V.shape[1] != n:
                 raise ValueError(f"state_basis has {V.shape[1]} columns, the model has {n} states")
             object.__setattr__(self, "state_basis", V)
+        if self.observer_gain is not None:
+            L = _real_finite("observer_gain", self.observer_gain, 2)
+            if L.shape != (n, C.shape[0]):
+                raise ValueError(f"observer_gain has shape {L.shape}, expected ({n}, {C.shape[0]})")
+            object.__setattr__(self, "observer_gain", L)
 
     @property
     def n_states(self) -> int:

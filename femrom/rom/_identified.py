@@ -178,6 +178,42 @@ class StateSpaceROM:
         """A :class:`~femrom.rom.StateSpaceStepper`: ``y_{k+1} = stepper.step(u_{k+1})``."""
         return self.state_space.stepper(self.initial_state(z0, x0), u0)
 
+    def estimate_states(self, inputs, outputs, z0=None) -> np.ndarray:
+        r"""(n_z, K + 1) state estimates ``z^_0 ... z^_K`` from measured samples, by the identified observer.
+
+        .. math::
+
+            \hat z_{k+1} = A \hat z_k + B u_k + L (y_k - C \hat z_k - D u_k),
+
+        ``L = operators_.observer_gain`` (OKID). ``z^_k`` uses ``y_0 ... y_{k-1}``;
+        the last column is the estimate to start a prediction from after the data.
+
+        Parameters
+        ----------
+        inputs : (m, K) ndarray
+        outputs : (p, K) ndarray
+        z0 : (n_z,) ndarray, optional
+            Default rest.
+        """
+        ops = self._ops()
+        if ops.observer_gain is None:
+            raise ValueError(f"this model ({ops.metadata.get('method', 'identified')}) has no observer gain: "
+                             "OKID identifies one")
+        U = np.atleast_2d(np.asarray(inputs, dtype=float))
+        Y = np.atleast_2d(np.asarray(outputs, dtype=float))
+        if U.shape[0] != ops.n_inputs or Y.shape != (ops.n_outputs, U.shape[1]):
+            raise ValueError(f"inputs {U.shape} and outputs {Y.shape} do not match the model's "
+                             f"({ops.n_inputs}, K) and ({ops.n_outputs}, K)")
+        if not (np.all(np.isfinite(U)) and np.all(np.isfinite(Y))):
+            raise ValueError("inputs or outputs are not finite")
+        A, B, C, D, L = ops.A, ops.B, ops.C, ops.D, ops.observer_gain
+        Z = np.empty((ops.n_states, U.shape[1] + 1))
+        Z[:, 0] = self.initial_state(z0)
+        for k in range(U.shape[1]):
+            z = Z[:, k]
+            Z[:, k + 1] = A @ z + B @ U[:, k] + L @ (Y[:, k] - C @ z - D @ U[:, k])
+        return Z
+
     def to_state_space(self, dt: float | None = None) -> DiscreteStateSpace:
         """The model's :class:`~femrom.rom.DiscreteStateSpace` (``dt`` must be the identified one)."""
         if dt is not None and not np.isclose(float(dt), self.dt, rtol=1e-9, atol=0.0):
@@ -186,7 +222,7 @@ class StateSpaceROM:
 
     # -- storage -----------------------------------------------------------------------
     def save(self, path) -> None:
-        """An HDF5 file that :meth:`DiscreteStateSpace.load` reads too, plus the state basis.
+        """An HDF5 file that :meth:`DiscreteStateSpace.load` reads too, plus the state basis and observer gain.
 
         Written to a temporary file beside ``path`` and moved into place, so a
         failed write leaves no half file.
@@ -204,6 +240,8 @@ class StateSpaceROM:
                 f.attrs["operators_metadata"] = dumps(ops.metadata)
                 if ops.state_basis is not None:
                     f.create_dataset("state_basis", data=ops.state_basis)
+                if ops.observer_gain is not None:
+                    f.create_dataset("observer_gain", data=ops.observer_gain)
             os.replace(tmp, path)
         except BaseException:
             if os.path.exists(tmp):
@@ -221,8 +259,9 @@ class StateSpaceROM:
                              "not an identified model")
         with h5py.File(path, "r") as f:
             basis = f["state_basis"][()] if "state_basis" in f else None
+            gain = f["observer_gain"][()] if "observer_gain" in f else None
             metadata = json.loads(f.attrs["operators_metadata"]) if "operators_metadata" in f.attrs \
                 else dict(model.metadata)
         ops = StateSpaceOperators(A=model.A, B=model.B, C=model.C, D=model.D, dt=model.dt,
-                                  state_basis=basis, metadata=metadata)
+                                  state_basis=basis, observer_gain=gain, metadata=metadata)
         return cls(ops)

@@ -7,7 +7,17 @@ import time
 
 from femrom.inference._io_data import InputOutputData
 from femrom.inference._learner import Learner, register_learner
-from femrom.inference._realization import era_realization, hankel_blocks, okid_markov_parameters
+from dataclasses import replace
+
+import numpy as np
+
+from femrom.inference._realization import (
+    era_realization,
+    hankel_blocks,
+    markov_from_observer,
+    observer_markov_parameters,
+    okid_observer_gain,
+)
 
 
 @register_learner("okid")
@@ -57,6 +67,12 @@ class OKID(Learner):
     markov_ : MarkovParameters
         The recovered system Markov parameters (``metadata``: the regression's
         ``residual``, ``rank``, ``shape``, ``seconds``).
+
+    The identified observer comes with the model: ``operators_.observer_gain``
+    ``L`` (:func:`~femrom.inference.okid_observer_gain`) estimates the state from
+    measured outputs, ``z^+ = A z^ + B u + L (y - C z^ - D u)``; with noisy data it
+    approximates the Kalman filter's one-step predictor. ``describe()`` reports
+    the spectral radius of ``A - L C``.
     """
 
     method = "okid"
@@ -88,10 +104,15 @@ class OKID(Learner):
         shortest = min(window.stop - window.start for window in data.trajectories())
         rows, columns = self.blocks(data.n_outputs, data.n_inputs, shortest)
         tic = time.perf_counter()
-        markov = okid_markov_parameters(data, self.observer_order, rows + columns + 1,
-                                        feedthrough=self.feedthrough, at_rest=self.at_rest)
+        coefficients, diagnostics = observer_markov_parameters(data, self.observer_order,
+                                                               feedthrough=self.feedthrough, at_rest=self.at_rest)
+        markov = markov_from_observer(data, coefficients, diagnostics, self.observer_order, rows + columns + 1,
+                                      feedthrough=self.feedthrough, at_rest=self.at_rest)
         ops = era_realization(markov, self.order, rows=rows, columns=columns,
                               output_directions=self.output_directions)
+        gain = okid_observer_gain(coefficients, data.n_inputs, data.n_outputs, self.observer_order, ops.A, ops.C,
+                                  rows, feedthrough=self.feedthrough)
+        ops = replace(ops, observer_gain=gain)
         ops.metadata.update(method=self.method, observer_order=self.observer_order, feedthrough=self.feedthrough,
                             at_rest=self.at_rest, regression_residual=markov.metadata["regression_residual"],
                             regression_shape=markov.metadata["regression_shape"],
@@ -105,8 +126,11 @@ class OKID(Learner):
                "at_rest": self.at_rest, "output_directions": self.output_directions}
         if self.is_fitted:
             meta = self.operators_.metadata
+            ops = self.operators_
+            observer = ops.A - ops.observer_gain @ ops.C
             out.update(rows=meta["rows"], columns=meta["columns"], hankel_shape=meta["hankel_shape"],
-                       spectral_radius=self.operators_.spectral_radius,
+                       spectral_radius=ops.spectral_radius,
+                       observer_spectral_radius=float(np.max(np.abs(np.linalg.eigvals(observer)))),
                        regression_residual=meta["regression_residual"], regression_shape=meta["regression_shape"],
                        hankel_singular_values=meta["hankel_singular_values"][:self.order + 1],
                        fit_seconds=meta["fit_seconds"])
