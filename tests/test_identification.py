@@ -22,7 +22,6 @@ from femrom.inference import (
     SecondOrderData,
     StateSpaceOperators,
     block_hankel,
-    era_realization,
     impulse_response,
     markov_parameters,
     okid_markov_parameters,

@@ -16,8 +16,8 @@
 - :class:`StateSpaceROM`: an identified first-order model
   (``StateSpaceROM(learner=DMDc(...) | ERA(...) | OKID(...)).fit(data)``) with
   ``predict`` (:class:`StateSpaceSolution`), a stepper, ``to_state_space`` at its
-  identified ``dt`` and HDF5 ``save``/``load`` (a DiscreteStateSpace file plus the
-  state basis);
+  identified ``dt``, OKID's observer (``estimate_states``) and HDF5 ``save``/``load``
+  (a DiscreteStateSpace file plus the state basis and observer gain);
 - :class:`HamiltonianROM`: canonical Hamiltonian ROMs, intrusive
   (:meth:`HamiltonianROM.galerkin`) or learned (``fit`` on
   :class:`~femrom.inference.CanonicalData` through
