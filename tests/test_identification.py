@@ -243,7 +243,7 @@ def test_era_errors_name_the_culprit():
         MarkovParameters(np.where(truth.parameters > 0, np.nan, 0.0))
 
 
-# -- Markov parameters from impulse responses ------------------------------------------------
+# -- full-order (Newmark) systems: impulse responses and runs ------------------------------
 
 def small_structure(n: int = 3):
     """A damped chain of n masses, 2 force inputs, 2 displacement outputs (order 2 n)."""
@@ -273,15 +273,47 @@ def test_impulse_responses_of_the_full_order_system_and_its_state_space_agree():
     assert eigenvalue_mismatch(ops.eigenvalues(), state_space.poles()) < 1e-9
 
 
-def test_okid_on_full_order_runs_recovers_the_newmark_state_space():
-    system = small_structure()
-    dt, K = 0.02, 400
-    rng = np.random.default_rng(18)
-    samples = np.hstack([np.zeros((2, 1)), rng.standard_normal((2, K - 1))])   # u_0 = 0: the run is from rest
+def newmark_run(system, dt, K, seed):
+    """(inputs, [q; v], outputs) of a Newmark run from rest under random input samples (u_0 = 0)."""
+    rng = np.random.default_rng(seed)
+    samples = np.hstack([np.zeros((2, 1)), rng.standard_normal((2, K - 1))])
     driven = dataclasses.replace(system, inputs=lambda t: np.array(
         [np.interp(t, dt * np.arange(K), row) for row in samples]))
-    run = iterate(driven, Newmark(), np.zeros(3), np.zeros(3), dt, K - 1, progress=False)
-    Y = np.column_stack([system.output_matrix @ result.q for result in run])
+    results = list(iterate(driven, Newmark(), np.zeros(3), np.zeros(3), dt, K - 1, progress=False))
+    Q, V = np.column_stack([r.q for r in results]), np.column_stack([r.v for r in results])
+    return samples, np.vstack([Q, V]), np.asarray(system.output_matrix @ Q)
+
+
+def test_dmdc_with_both_input_samples_recovers_the_newmark_state_space(tmp_path):
+    system = small_structure()
+    dt = 0.02
+    U, X, Y = newmark_run(system, dt, 300, seed=19)
+    exact = markov_parameters(SecondOrderROM.galerkin(system, np.eye(3)).to_state_space(dt), 100)
+    both = DMDc(input_samples="both").fit(InputOutputData(U, Y, dt, states=X))
+    # Newmark's [q; v] obey x+ = A x + B_0 u_k + B_1 u_k+1 exactly: with both samples DMDc is
+    # exact, D = C B_1 included (round-off through 100 steps of poles |z| ~ 0.99: 1e-9)
+    assert both.operators_.markov_parameters(100).relative_error(exact) < 1e-9
+    rom = StateSpaceROM(both.operators_)
+    prediction = rom.predict(dt * np.arange(U.shape[1]), U, x0=X[:, 0])
+    assert np.linalg.norm(prediction.outputs - Y) / np.linalg.norm(Y) < 1e-9
+    rom.save(tmp_path / "dmdc.h5")                          # the shifted state survives the file
+    loaded = StateSpaceROM.load(tmp_path / "dmdc.h5")
+    np.testing.assert_array_equal(loaded.operators_.input_offset, both.operators_.input_offset)
+    np.testing.assert_array_equal(loaded.predict(dt * np.arange(U.shape[1]), U, x0=X[:, 0]).outputs,
+                                  prediction.outputs)
+    # lower side: Proctor's form (u_k only) cannot represent the u_k+1 term: B is O(1) wrong
+    start = DMDc(feedthrough=True).fit(InputOutputData(U, Y, dt, states=X))
+    assert start.operators_.markov_parameters(100).relative_error(exact) > 0.1
+    with pytest.raises(ValueError, match="unknown input_samples 'end'"):
+        DMDc(input_samples="end")
+
+
+# -- OKID ---------------------------------------------------------------------------------
+
+def test_okid_on_full_order_runs_recovers_the_newmark_state_space():
+    system = small_structure()
+    dt = 0.02
+    samples, _, Y = newmark_run(system, dt, 400, seed=18)       # u_0 = 0: the run is from rest
     data = InputOutputData(samples, Y, dt)
     state_space = SecondOrderROM.galerkin(system, np.eye(3)).to_state_space(dt)
     exact = markov_parameters(state_space, 40)
@@ -299,8 +331,6 @@ def test_okid_on_full_order_runs_recovers_the_newmark_state_space():
     # lower side: l = 3, below the observability index, leaves no exact observer
     assert okid_markov_parameters(data, 3, 40, at_rest=True).relative_error(exact) > 0.1
 
-
-# -- OKID ---------------------------------------------------------------------------------
 
 def test_okid_recovers_markov_parameters_from_noise_free_data_with_a_deadbeat_observer():
     A, B, C, D = random_system(6, 3, 4, 0.9, seed=11)

@@ -36,6 +36,9 @@ class StateSpaceOperators:
         ``z = U_r^T x`` of the data's state ``x`` (DMDc's output space), so an
         initial ``x_0`` maps to ``z_0 = U_r^T x_0``; ``None`` when the state has no
         such meaning (ERA, OKID: balanced coordinates).
+    input_offset : (n_z, m) ndarray or None
+        ``E`` when the state is shifted, ``z = U_r^T x - E u`` (DMDc fitted with the
+        input at both ends of a step); ``None``: ``z = U_r^T x``.
     observer_gain : (n_z, p) ndarray or None
         ``L`` of the state estimator ``z^_{k+1} = A z^_k + B u_k + L (y_k - C z^_k - D u_k)``
         identified with the model (OKID), or ``None``.
@@ -49,6 +52,7 @@ class StateSpaceOperators:
     D: np.ndarray
     dt: float
     state_basis: np.ndarray | None = None
+    input_offset: np.ndarray | None = None
     observer_gain: np.ndarray | None = None
     metadata: dict = field(default_factory=dict)
 
@@ -72,6 +76,11 @@ class StateSpaceOperators:
             if V.shape[1] != n:
                 raise ValueError(f"state_basis has {V.shape[1]} columns, the model has {n} states")
             object.__setattr__(self, "state_basis", V)
+        if self.input_offset is not None:
+            E = _real_finite("input_offset", self.input_offset, 2)
+            if E.shape != B.shape:
+                raise ValueError(f"input_offset has shape {E.shape}, expected {B.shape}")
+            object.__setattr__(self, "input_offset", E)
         if self.observer_gain is not None:
             L = _real_finite("observer_gain", self.observer_gain, 2)
             if L.shape != (n, C.shape[0]):

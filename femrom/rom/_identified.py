@@ -12,7 +12,8 @@ exists at its training step only: ``dt`` is part of it.
 
 The state ``z`` is abstract for ERA and OKID (balanced coordinates; ``z_0 = 0``
 is rest) and a projection ``z = U_r^T x`` of the data's state ``x`` for DMDc
-(``x0=`` gives ``z_0 = U_r^T x_0``).
+(``x0=`` gives ``z_0 = U_r^T x_0``, less ``E u_0`` when the input of a step's end
+is part of the model: ``input_offset``).
 """
 
 from __future__ import annotations
@@ -29,7 +30,7 @@ import numpy as np
 from femrom._json import dumps
 from femrom.inference import StateSpaceOperators
 from femrom.rom._base import uniform_step
-from femrom.rom._statespace import DiscreteStateSpace, StateSpaceStepper
+from femrom.rom._statespace import DiscreteStateSpace, StateSpaceStepper, input_sample
 
 
 @dataclass(frozen=True, eq=False)
@@ -99,7 +100,7 @@ class StateSpaceROM:
         if self._state_space is None:
             ops = self._ops()
             self._state_space = DiscreteStateSpace(A=ops.A, B=ops.B, C=ops.C, D=ops.D, dt=ops.dt,
-                                                   metadata=dict(ops.metadata))
+                                                   input_offset=ops.input_offset, metadata=dict(ops.metadata))
         return self._state_space
 
     @property
@@ -114,8 +115,12 @@ class StateSpaceROM:
     def spectral_radius(self) -> float:
         return self._ops().spectral_radius
 
-    def initial_state(self, z0=None, x0=None) -> np.ndarray:
-        """(n_z,) ``z_0``: given, from the data's state ``x_0`` (``U_r^T x_0``), or rest (zeros)."""
+    def initial_state(self, z0=None, x0=None, u0=None) -> np.ndarray:
+        """(n_z,) ``z_0``: given, from the data's state ``x_0`` (``U_r^T x_0 - E u_0``), or rest (zeros).
+
+        ``u0`` (default zeros) is the input sample at ``t_0``, needed with ``x0`` when
+        the state is shifted (``input_offset = E``, DMDc with ``input_samples="both"``).
+        """
         ops = self._ops()
         if z0 is not None and x0 is not None:
             raise ValueError("give z0 (the model's state) or x0 (the data's state), not both")
@@ -127,6 +132,8 @@ class StateSpaceROM:
             if x0.size != ops.state_basis.shape[0]:
                 raise ValueError(f"x0 has {x0.size} entries, the data's state has {ops.state_basis.shape[0]}")
             z0 = ops.state_basis.T @ x0
+            if ops.input_offset is not None:
+                z0 = z0 - ops.input_offset @ input_sample(u0, ops.n_inputs)
         if z0 is None:
             return np.zeros(ops.n_states)
         z0 = np.asarray(z0, dtype=float).ravel()
@@ -165,7 +172,7 @@ class StateSpaceROM:
         if not np.isclose(h, ops.dt, rtol=1e-9, atol=0.0):
             raise ValueError(f"times have step {h:g}, the model was identified at dt = {ops.dt:g}")
         U = self._samples(inputs, times)
-        z = self.initial_state(z0, x0)
+        z = self.initial_state(z0, x0, U[:, 0])
         tic = time.perf_counter()
         outputs, states = self.state_space.simulate(U, z)
         seconds = time.perf_counter() - tic
@@ -176,7 +183,7 @@ class StateSpaceROM:
 
     def stepper(self, z0=None, *, x0=None, u0=None) -> StateSpaceStepper:
         """A :class:`~femrom.rom.StateSpaceStepper`: ``y_{k+1} = stepper.step(u_{k+1})``."""
-        return self.state_space.stepper(self.initial_state(z0, x0), u0)
+        return self.state_space.stepper(self.initial_state(z0, x0, u0), u0)
 
     def estimate_states(self, inputs, outputs, z0=None) -> np.ndarray:
         r"""(n_z, K + 1) state estimates ``z^_0 ... z^_K`` from measured samples, by the identified observer.
@@ -250,18 +257,15 @@ class StateSpaceROM:
 
     @classmethod
     def load(cls, path) -> "StateSpaceROM":
-        """Read a model written by :meth:`save` (or any DiscreteStateSpace file without input offset)."""
+        """Read a model written by :meth:`save` (or any DiscreteStateSpace file: then ``z0`` only)."""
         import h5py
 
         model = DiscreteStateSpace.load(path)
-        if model.input_offset is not None:
-            raise ValueError(f"{path} holds a state space with an input offset (a second-order ROM's export), "
-                             "not an identified model")
         with h5py.File(path, "r") as f:
             basis = f["state_basis"][()] if "state_basis" in f else None
             gain = f["observer_gain"][()] if "observer_gain" in f else None
             metadata = json.loads(f.attrs["operators_metadata"]) if "operators_metadata" in f.attrs \
                 else dict(model.metadata)
-        ops = StateSpaceOperators(A=model.A, B=model.B, C=model.C, D=model.D, dt=model.dt,
-                                  state_basis=basis, observer_gain=gain, metadata=metadata)
+        ops = StateSpaceOperators(A=model.A, B=model.B, C=model.C, D=model.D, dt=model.dt, state_basis=basis,
+                                  input_offset=model.input_offset, observer_gain=gain, metadata=metadata)
         return cls(ops)
