@@ -165,7 +165,8 @@ class StateSpaceROM:
         inputs : (m, K) ndarray or callable
             The samples ``u(t_k)``, or ``u(t) -> (m,)``.
         z0, x0 : ndarray, optional
-            The model's initial state, or the data's (DMDc); default rest.
+            The model's initial state, or the data's (DMDc); default ``z_0 = 0``,
+            rest (for a shifted state, ``x_0 = E u_0``: give ``x0`` for ``x_0 = 0``).
         """
         ops = self._ops()
         times, h = uniform_step(times)
