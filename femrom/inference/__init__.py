@@ -19,6 +19,17 @@
   :class:`HamiltonianOpInf` (symmetric ``D^_q``, ``D^_p`` by Lyapunov
   equations), :class:`CanonicalOpInf` (an unconstrained first-order ``A^`` on
   canonical data, H-OpInf's baseline), :class:`GalerkinProjection` (the intrusive reference);
+- identified first-order models (``model = "state_space"``, ``operators_`` a
+  :class:`StateSpaceOperators` ``z+ = A z + B u``, ``y = C z + D u``) from
+  :class:`InputOutputData` (sampled inputs, outputs and optionally states of
+  several trajectories; :meth:`InputOutputData.from_second_order` reads the data
+  L-OpInf learns from) and :class:`MarkovParameters`: :class:`DMDc` (DMD with
+  control on the states), :class:`ERA` (balanced realisation of Markov
+  parameters, :func:`era_realization`, :func:`block_hankel`), :class:`OKID`
+  (observer Markov parameters by least squares, :func:`okid_markov_parameters`,
+  then ERA, and the identified observer's gain, :func:`okid_observer_gain`);
+  Markov parameters of a model (:func:`markov_parameters`), a stepper
+  (:func:`impulse_response`) or a full-order system (:func:`system_impulse_response`);
 - :class:`ErrorSplit`, :class:`HamiltonianErrorSplit`: projection, derivative
   and optimisation errors of a fit.
 """
@@ -32,6 +43,8 @@ from femrom.inference._data import (
     reduced_coordinates,
 )
 from femrom.inference._derivatives import finite_difference, stencil_weights
+from femrom.inference._impulse import impulse_response, system_impulse_response
+from femrom.inference._io_data import STATE_LAYOUTS, InputOutputData, MarkovParameters
 from femrom.inference._fill import FillSweep, alternating_fill, fill_between_snapshots, newmark_residual_matrix
 from femrom.inference._fast import FastOptions, solve_fast
 from femrom.inference._hamiltonian import (
@@ -57,8 +70,18 @@ from femrom.inference._learner import (
 )
 from femrom.inference._operators import ReducedForces, ReducedOperators, galerkin
 from femrom.inference._problem import Block, GramProblem
+from femrom.inference._realization import (
+    block_hankel,
+    era_realization,
+    markov_from_observer,
+    observer_markov_parameters,
+    okid_markov_parameters,
+    okid_observer_gain,
+    system_markov_from_observer,
+)
 from femrom.inference._sdp import CONIC_SOLVERS, solve_conic
 from femrom.inference._second_order import SOLVERS, ErrorSplit, SecondOrderLearner
+from femrom.inference._state_space import StateSpaceOperators, markov_parameters
 from femrom.inference._terms import (
     TERMS,
     VARIABLES,
@@ -68,10 +91,13 @@ from femrom.inference._terms import (
     registered_terms,
     term_class,
 )
+from femrom.inference.learners.dmdc import DMDc
+from femrom.inference.learners.era import ERA
 from femrom.inference.learners.galerkin import GalerkinProjection
 from femrom.inference.learners.hopinf import HamiltonianOpInf
 from femrom.inference.learners.canonical_opinf import CanonicalOpInf
 from femrom.inference.learners.lopinf import LagrangianOpInf
+from femrom.inference.learners.okid import OKID
 from femrom.inference.learners.opinf import SecondOrderOpInf
 from femrom.inference.terms.damping import Damping
 from femrom.inference.terms.input import Input
@@ -93,4 +119,8 @@ __all__ = [
     "project_potential_gradient", "reduce_canonical_snapshots", "reduce_snapshots", "reduced_coordinates",
     "register_learner", "register_term", "registered_learners", "registered_terms", "solve_conic", "solve_fast", "stencil_weights",
     "symmetric_lyapunov_fit", "term_class",
+    "DMDc", "ERA", "InputOutputData", "MarkovParameters", "OKID", "STATE_LAYOUTS", "StateSpaceOperators",
+    "block_hankel", "era_realization", "impulse_response", "markov_parameters", "observer_markov_parameters",
+    "markov_from_observer", "okid_markov_parameters", "okid_observer_gain", "system_impulse_response",
+    "system_markov_from_observer",
 ]

@@ -3,10 +3,11 @@
 A learner is an estimator: ``learner.fit(data) -> learner`` leaves the fitted
 operators in ``learner.operators_`` (a :class:`ReducedOperators` for
 second-order models, a :class:`HamiltonianOperators` for canonical ones, a
-discrete state space for identified first-order models) and
-``learner.describe()`` says what was fitted how. A ROM of :mod:`femrom.rom`
-takes any learner (``SecondOrderROM(learner=...).fit(data)``) and adds
-``predict``, ``stepper`` and ``save``/``load``.
+:class:`StateSpaceOperators` for identified first-order models: DMDc, ERA,
+OKID) and ``learner.describe()`` says what was fitted how. A ROM of
+:mod:`femrom.rom` takes a learner of its kind (``SecondOrderROM(learner=...)``,
+``StateSpaceROM(learner=...)``, ``.fit(data)``) and adds ``predict``,
+``stepper`` and ``save``/``load``.
 
 Learners are registered by short name (:func:`register_learner`): the
 built-in ones are the modules of the package ``femrom.inference.learners``

@@ -13,6 +13,11 @@
   nonlinear step;
 - :class:`DiscreteStateSpace`: ``z+ = A z + B u``, ``y = C z + D u``, with
   ``simulate``, a stepper and HDF5 (the form of identified first-order models);
+- :class:`StateSpaceROM`: an identified first-order model
+  (``StateSpaceROM(learner=DMDc(...) | ERA(...) | OKID(...)).fit(data)``) with
+  ``predict`` (:class:`StateSpaceSolution`), a stepper, ``to_state_space`` at its
+  identified ``dt``, OKID's observer (``estimate_states``) and HDF5 ``save``/``load``
+  (a DiscreteStateSpace file plus the state basis and observer gain);
 - :class:`HamiltonianROM`: canonical Hamiltonian ROMs, intrusive
   (:meth:`HamiltonianROM.galerkin`) or learned (``fit`` on
   :class:`~femrom.inference.CanonicalData` through
@@ -42,6 +47,7 @@ from femrom.rom._hamiltonian import (
     HamiltonianStepper,
     hamiltonian_step_matrix,
 )
+from femrom.rom._identified import StateSpaceROM, StateSpaceSolution
 from femrom.rom._hyper import HyperReducedPotential, ecsw_weights, sparse_nnls
 from femrom.rom._hyper_joint import JointSampling, ecsw_joint, hyper_reduced_system
 from femrom.rom._model import ReducedSolution, SecondOrderROM
@@ -61,8 +67,10 @@ from femrom.rom.schemes.verlet import verlet_bound
 
 __all__ = [
     "FIRST_ORDER_SCHEMES", "HAMILTONIAN_SCHEMES", "REDUCED_SCHEMES", "DiscreteStateSpace", "FirstOrderROM", "HamiltonianROM", "HamiltonianSolution", "HamiltonianStepper",
-    "HyperReducedPotential", "JointSampling", "LazyFields", "LinearParts", "ReducedModel", "ReducedNewton", "ReducedScheme",
-    "ReducedSolution", "ReducedStepper", "RegularizationScore", "SecondOrderROM", "StateSpaceStepper",
-    "ecsw_joint", "ecsw_weights", "hamiltonian_step_matrix", "hyper_reduced_system", "reduced_scheme", "register_reduced_scheme",
+    "HyperReducedPotential", "JointSampling", "LazyFields", "LinearParts", "ReducedModel", "ReducedNewton",
+    "ReducedScheme", "ReducedSolution", "ReducedStepper", "RegularizationScore", "SecondOrderROM", "StateSpaceROM",
+    "StateSpaceSolution", "StateSpaceStepper",
+    "ecsw_joint", "ecsw_weights", "hamiltonian_step_matrix", "hyper_reduced_system", "reduced_scheme",
+    "register_reduced_scheme",
     "registered_schemes", "run_linear", "select_regularization", "sparse_nnls", "uniform_step", "verlet_bound",
 ]
