@@ -54,7 +54,6 @@ from femrom.fem._interface_law import (
     InterfaceLaw,
     check_parameters,
     radial_return,
-    radial_return_tangent,
     register_interface_law,
     split_gap,
 )
@@ -116,9 +115,15 @@ class ClampedIwanLaw(InterfaceLaw):
         if not tangent:
             return traction, None
         D = np.zeros((g_n.size, 3, 3))
-        # an open point's sliders all "slip" at zero limit: ratio 0, so its tangent is zero
-        D[:, :2, :2] = np.einsum("m,smij->sij", self.slider_stiffness,
-                                 radial_return_tangent(ratio, direction, slipping))
+        # sum_m k_m dt_m/dt_trial: k_m I when stuck, k_m ratio_m (I - d_m d_m^T) when slipping (an open
+        # point's sliders all slip at zero limit: ratio 0, tangent zero); summed without forming the
+        # (s, N, 2, 2) blocks
+        k = self.slider_stiffness
+        slip_weight = np.where(slipping, ratio, 0.0) * k
+        diagonal = np.where(slipping, ratio, 1.0) @ k
+        D[:, :2, :2] = -np.einsum("sm,smi,smj->sij", slip_weight, direction, direction)
+        D[:, 0, 0] += diagonal
+        D[:, 1, 1] += diagonal
         D[:, 2, 2] = np.where(closed, self.normal_stiffness, 0.0)
         return traction, D
 
