@@ -13,9 +13,11 @@ full-order model included.
   and status of every solve; a failed solve raises or falls back by a stated
   policy (:class:`MPCError`, :class:`MPCWarning`);
 - QP formulations, registered (:func:`registered_formulations`,
-  :func:`register_formulation`): ``"condensed"`` (inputs only,
-  :class:`CondensedQP`) and ``"sparse"`` (states and inputs); :class:`MPCProblem`
-  is the math both are built from;
+  :func:`register_formulation`; :class:`QPFormulation`, :class:`CvxpyFormulation`,
+  :class:`QPSolution`): ``"condensed"`` (inputs only, :class:`CondensedQP`) and
+  ``"sparse"`` (states and inputs) as parametrised cvxpy problems, and
+  ``"condensed_osqp"`` (the condensed QP in OSQP directly, without cvxpy's
+  per-solve work); :class:`MPCProblem` is the math all are built from;
 - observers: :class:`KalmanObserver` (steady-state Kalman filter from the
   discrete Riccati equation), :class:`PolePlacementObserver`, both
   :class:`LinearObserver` filters that handle the feedthrough ``D`` and the
@@ -36,7 +38,9 @@ from femrom.control._closed_loop import ClosedLoopResult, closed_loop, open_loop
 from femrom.control._disturbance import DisturbanceModel
 from femrom.control._formulation import (
     QP_FORMULATIONS,
+    CvxpyFormulation,
     QPFormulation,
+    QPSolution,
     register_formulation,
     registered_formulations,
 )
@@ -46,8 +50,8 @@ from femrom.control._plants import FullOrderPlant, Plant, ReducedPlant, StateSpa
 from femrom.control._problem import CondensedQP, MPCConfig, MPCProblem
 
 __all__ = [
-    "QP_FORMULATIONS", "ClosedLoopResult", "CondensedQP", "DisturbanceModel", "FullOrderPlant",
+    "QP_FORMULATIONS", "ClosedLoopResult", "CondensedQP", "CvxpyFormulation", "DisturbanceModel", "FullOrderPlant",
     "KalmanObserver", "LinearMPC", "LinearObserver", "MPCConfig", "MPCError", "MPCProblem", "MPCWarning",
-    "Plant", "PolePlacementObserver", "QPFormulation", "ReducedPlant", "StateSpacePlant", "closed_loop",
+    "Plant", "PolePlacementObserver", "QPFormulation", "QPSolution", "ReducedPlant", "StateSpacePlant", "closed_loop",
     "open_loop", "register_formulation", "registered_formulations", "travelling_wave",
 ]

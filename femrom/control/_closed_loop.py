@@ -141,10 +141,13 @@ def closed_loop(plant, controller, observer, reference, n_steps: int | None = No
         On the controller's model (:class:`KalmanObserver`, :class:`PolePlacementObserver`);
         its estimate at call time is the prior ``x_{0|-1}``.
     reference : (p, K) array_like
-        ``r_k`` at the samples ``k = 0 .. K - 1``; past its end the last sample is
-        held for the horizon.
+        ``r_k`` at the samples ``k = 0 .. K - 1``. The MPC looks ``N`` samples
+        ahead: past the reference's end the last sample is held, a reference
+        the plant may not be able to follow, so give ``N`` samples more than
+        the run.
     n_steps : int, optional
-        Samples to step (default ``K - 1``; at most ``K - 1``).
+        Samples to step: default ``K - 1 - N`` (every window inside the
+        reference), at most ``K - 1``.
     u0 : (m,) array_like, optional
         The input applied at ``t_0`` (zeros by default; the plant must have been made with it).
     output_noise : float, optional
@@ -171,7 +174,12 @@ def closed_loop(plant, controller, observer, reference, n_steps: int | None = No
     if not np.all(np.isfinite(R)):
         raise ValueError("reference has non-finite entries")
     K = R.shape[1]
-    n_steps = K - 1 if n_steps is None else int(n_steps)
+    if n_steps is None:
+        if K - 1 - N < 1:
+            raise ValueError(f"the reference has {K} samples: give at least the horizon N = {N} + 2, "
+                             "or n_steps explicitly")
+        n_steps = K - 1 - N
+    n_steps = int(n_steps)
     if not 0 <= n_steps <= K - 1:
         raise ValueError(f"n_steps must be in [0, {K - 1}] for a reference of {K} samples, got {n_steps}")
     if observer.model.n_states != controller.n_states or observer.model.n_outputs != p \

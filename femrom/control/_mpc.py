@@ -1,10 +1,10 @@
 r"""Linear model-predictive control on a discrete state-space model.
 
 :class:`LinearMPC` builds the tracking QP of :mod:`._problem` once, as a
-parametrised cvxpy problem in a registered formulation (``"condensed"`` or
-``"sparse"``), and re-solves it every step with the new state estimate,
-reference window and previous input (OSQP warm-starts from the last
-solution). ``control`` returns the first input of the optimal plan and logs
+registered formulation (``"condensed"`` or ``"sparse"``: parametrised cvxpy
+problems; ``"condensed_osqp"``: the condensed QP in OSQP directly), and re-solves
+it every step with the new state estimate, reference window and previous input
+(OSQP warm-starts from the last solution). ``control`` returns the first input of the optimal plan and logs
 the wall time of the call and the solver's status.
 """
 
@@ -14,15 +14,11 @@ import dataclasses
 import time
 import warnings
 
-import cvxpy as cp
 import numpy as np
 
 from femrom.control._formulation import QP_FORMULATIONS
 from femrom.control._problem import MPCConfig, MPCProblem, vector
 from femrom.rom import DiscreteStateSpace
-
-#: Statuses whose solution is used as it is.
-ACCEPTED_STATUSES = (cp.OPTIMAL, cp.OPTIMAL_INACCURATE)
 
 
 class MPCError(RuntimeError):
@@ -62,7 +58,7 @@ class LinearMPC:
     qp : MPCProblem
         The weights and bounds as matrices.
     formulation : QPFormulation
-        Holds the parametrised ``cvxpy.Problem`` (``formulation.problem``).
+        Holds the QP (a cvxpy formulation's parametrised problem is ``formulation.problem``).
     plan_ : (m, N) ndarray or None
         The last successful plan.
     solve_seconds : list of float
@@ -81,14 +77,7 @@ class LinearMPC:
         config = MPCConfig(**settings) if config is None else dataclasses.replace(config, **settings)
         self.model, self.config = model, config
         self.qp = MPCProblem.from_model(model, config)
-        if config.solver not in cp.installed_solvers():
-            raise ValueError(f"solver {config.solver!r} is not installed for cvxpy; "
-                             f"installed: {', '.join(cp.installed_solvers())}")
-        self.formulation = QP_FORMULATIONS.get(config.formulation)(self.qp)
-        if not self.formulation.problem.is_dcp(dpp=True):
-            raise RuntimeError(f"formulation {config.formulation!r} is not DPP: cvxpy would "
-                               "recompile the QP on every solve")
-        self._solve_options = self._options(config)
+        self.formulation = QP_FORMULATIONS.get(config.formulation)(self.qp, config)
         self.plan_: np.ndarray | None = None
         self._plan_age = 0
         self.solve_seconds: list[float] = []
@@ -97,18 +86,6 @@ class LinearMPC:
         self.iterations: list[int] = []
         self.n_fallbacks = 0
         self._warned = False
-
-    @staticmethod
-    def _options(config: MPCConfig) -> dict:
-        tol, iters = float(config.tolerance), int(config.max_iterations)
-        if config.solver == "OSQP":
-            options = dict(eps_abs=tol, eps_rel=tol, max_iter=iters, polish=False)
-        elif config.solver == "CLARABEL":
-            options = dict(tol_gap_abs=tol, tol_gap_rel=tol, tol_feas=tol, max_iter=iters)
-        else:
-            options = {}
-        options.update(config.solver_options)
-        return dict(solver=config.solver, warm_start=True, **options)
 
     # -- sizes -----------------------------------------------------------------------------
     @property
@@ -166,20 +143,13 @@ class LinearMPC:
         w_y = vector(output_offset, p, "output_offset")
         z_T = vector(terminal_state, n, "terminal_state")
         self.formulation.set_parameters(z, R, u_prev, w_z, w_y, z_T)
-        problem = self.formulation.problem
-        try:
-            problem.solve(**self._solve_options)
-            status = problem.status
-        except cp.error.SolverError:
-            status = "error"
-        plan = self.formulation.plan() if status in ACCEPTED_STATUSES else None
+        solution = self.formulation.solve()
+        status, plan = solution.status, solution.plan
         if plan is not None and not np.all(np.isfinite(plan)):
             plan, status = None, f"{status} (non-finite)"
-        stats = problem.solver_stats if status != "error" else None
         self.statuses.append(status)
-        self.solver_seconds.append(float(stats.solve_time) if stats is not None and stats.solve_time is not None
-                                   else float("nan"))
-        self.iterations.append(int(stats.num_iters) if stats is not None and stats.num_iters is not None else -1)
+        self.solver_seconds.append(solution.solver_seconds)
+        self.iterations.append(solution.iterations)
         if plan is not None:
             self.plan_, self._plan_age = plan, 0
             u = plan[:, 0].copy()

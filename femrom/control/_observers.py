@@ -18,6 +18,8 @@ estimate obeys ``e_{k+1} = (I - M C) A e_k``: :meth:`LinearObserver.error_poles`
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import scipy.linalg as sla
 import scipy.signal as ssig
@@ -164,8 +166,11 @@ class KalmanObserver(LinearObserver):
         Augment with a constant disturbance for offset-free tracking
         (:class:`~femrom.control.DisturbanceModel`).
     disturbance_noise : float, (n_d,) or (n_d, n_d) array_like, optional
-        ``W_d``: how fast the disturbance estimate may move (default ``I``;
-        it must be positive for the estimate to move at all).
+        ``W_d``: how fast the disturbance estimate may move (it must be positive
+        for the estimate to move at all). Default ``I / ||[B_d; C_d]||_2^2``: a
+        disturbance moves the state and the outputs as much as the unit state
+        noise does (``I`` for the output model; for the input model, whose
+        ``B_d = B`` is of the order of ``dt^2`` in a Newmark model, much more).
     initial_state : (n,) array_like, optional
 
     Attributes
@@ -187,7 +192,10 @@ class KalmanObserver(LinearObserver):
             raise ValueError("measurement_noise must be positive definite")
         if disturbance is not None:
             nd = disturbance.n_disturbances
-            Wd = weight_matrix(1.0 if disturbance_noise is None else disturbance_noise, nd, "disturbance_noise")
+            if disturbance_noise is None:
+                reach = np.linalg.norm(np.vstack([disturbance.state_matrix, disturbance.output_matrix]), 2)
+                disturbance_noise = 1.0 / reach ** 2 if reach > 0 else 1.0
+            Wd = weight_matrix(disturbance_noise, nd, "disturbance_noise")
             W = sla.block_diag(W, Wd)
         elif disturbance_noise is not None:
             raise ValueError("disturbance_noise needs a disturbance model")
@@ -236,8 +244,14 @@ class PolePlacementObserver(LinearObserver):
         rank = int(np.sum(s > s[0] * 1e-12)) if s.size else 0
         Ur, sr, Vr = U[:, :rank], s[:rank], Vt[:rank].T
         try:
-            placed = ssig.place_poles(A.T, Ur, poles.real if np.all(poles.imag == 0) else poles)
+            with warnings.catch_warnings():
+                # place_poles warns when its robustness iterations stall; the placement is checked below
+                warnings.simplefilter("ignore", UserWarning)
+                placed = ssig.place_poles(A.T, Ur, poles.real if np.all(poles.imag == 0) else poles)
         except ValueError as err:
             raise ValueError(f"cannot place the observer poles: {err}") from None
         gain = (Vr / sr) @ placed.gain_matrix          # M^T = V_r S_r^-1 K_r
         super().__init__(model, gain.T, disturbance=disturbance, initial_state=initial_state)
+        achieved = np.sort_complex(self.error_poles())
+        if np.max(np.abs(achieved - np.sort_complex(poles))) > 1e-6:
+            raise ValueError("the observer poles could not be placed accurately (a nearly unobservable mode?)")

@@ -57,8 +57,9 @@ class MPCConfig:
         (needs ``D = 0``, ``S = None`` and ``R`` positive definite).
     formulation : str
         A registered QP formulation (:func:`~femrom.control.registered_formulations`):
-        ``"condensed"`` (inputs only, dense Hessian) or ``"sparse"`` (states and
-        inputs, the dynamics as equality constraints).
+        ``"condensed"`` (inputs only, dense Hessian; cvxpy), ``"sparse"`` (states and
+        inputs, the dynamics as equality constraints; cvxpy) or ``"condensed_osqp"``
+        (the condensed QP in OSQP without cvxpy's per-solve work).
     solver : str
         A cvxpy QP solver: ``"OSQP"`` (warm-started ADMM) or ``"CLARABEL"`` (interior point).
     tolerance : float
@@ -86,7 +87,7 @@ class MPCConfig:
     terminal_weight: object = None
     formulation: str = "condensed"
     solver: str = "OSQP"
-    tolerance: float = 1e-5
+    tolerance: float = 1e-6
     max_iterations: int = 10_000
     solver_options: dict = field(default_factory=dict)
     on_failure: str = "shift"

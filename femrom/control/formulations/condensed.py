@@ -22,18 +22,18 @@ from __future__ import annotations
 import cvxpy as cp
 import numpy as np
 
-from femrom.control._formulation import QPFormulation, box_constraints, register_formulation
+from femrom.control._formulation import CvxpyFormulation, box_constraints, register_formulation
 from femrom.control._problem import CondensedQP
 
 
 @register_formulation
-class CondensedFormulation(QPFormulation):
+class CondensedFormulation(CvxpyFormulation):
     """Inputs only, dense Hessian, the parameters folded into one gradient Parameter."""
 
     name = "condensed"
 
-    def __init__(self, problem):
-        super().__init__(problem)
+    def __init__(self, problem, config):
+        super().__init__(problem, config)
         self.qp = CondensedQP.from_problem(problem)
         self.scale = self.qp.cost_scale()
         m, N = problem.n_inputs, problem.horizon
@@ -42,6 +42,7 @@ class CondensedFormulation(QPFormulation):
         hessian = cp.psd_wrap(self.scale * self.qp.hessian)
         objective = cp.quad_form(self.inputs, hessian) + 2.0 * self.scale * (self.gradient @ self.inputs)
         self.problem = cp.Problem(cp.Minimize(objective), box_constraints(self.inputs, problem.bound, N))
+        self.compiled()
 
     def set_parameters(self, state, reference, u_previous, state_offset, output_offset, terminal_state):
         self.gradient.value = self.qp.gradient(state, reference, u_previous, state_offset, output_offset,

@@ -19,18 +19,18 @@ from __future__ import annotations
 import cvxpy as cp
 import numpy as np
 
-from femrom.control._formulation import QPFormulation, box_constraints, register_formulation
+from femrom.control._formulation import CvxpyFormulation, box_constraints, register_formulation
 from femrom.control._problem import CondensedQP, square_root
 
 
 @register_formulation
-class SparseFormulation(QPFormulation):
+class SparseFormulation(CvxpyFormulation):
     """States and inputs, the dynamics as constraints; every datum a cvxpy Parameter."""
 
     name = "sparse"
 
-    def __init__(self, problem):
-        super().__init__(problem)
+    def __init__(self, problem, config):
+        super().__init__(problem, config)
         A, B, C, D, N = problem.A, problem.B, problem.C, problem.D, problem.horizon
         n, m, p = problem.n_states, problem.n_inputs, problem.n_outputs
         self.scale = CondensedQP.from_problem(problem).cost_scale()
@@ -59,6 +59,7 @@ class SparseFormulation(QPFormulation):
                        Z[:, 1:] == A @ Z[:, :N] + B @ U + self.state_offset @ ones]
         constraints += box_constraints(cp.vec(U, order="F"), problem.bound, N)
         self.problem = cp.Problem(cp.Minimize(cost), constraints)
+        self.compiled()
 
     def set_parameters(self, state, reference, u_previous, state_offset, output_offset, terminal_state):
         self.state.value = state
