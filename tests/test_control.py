@@ -105,8 +105,8 @@ def test_formulations_solve_the_same_qp():
         mpc.control(z, window, u_prev)
         plans[formulation] = mpc.plan_
     assert set(registered_formulations()) >= {"condensed", "sparse", "condensed_osqp"}
-    # at least one bound is active (a QP, not a linear solve), and the plans agree to the solvers'
-    # 1e-9 tolerance amplified by the Hessian's conditioning (< 1e4): 1e-5 of the bound
+    # bounds are active (a QP, not a linear solve), and the plans agree to the solvers' 1e-9
+    # tolerance amplified by the Hessian's conditioning (290): measured 4e-7 (sparse), 1e-5 of the bound
     assert np.max(np.abs(plans["condensed"])) > 0.1 - 1e-6
     for name in ("sparse", "condensed_osqp"):
         assert np.max(np.abs(plans[name] - plans["condensed"])) < 1e-5 * 0.1, name
@@ -162,16 +162,18 @@ def test_observer_error_converges_from_a_wrong_initial_estimate_and_feasible_tra
     # and a final error below 1e-2 of the initial one
     assert rho < 0.99 and error[-1] < 1e-2 * error[0]
     assert np.all(error[100:] < error[0])
-    # once the estimate has converged the plant follows the reference: the remaining error is the
-    # rate weight's (1e-6 relative) and the observer's rest; 1e-3 is 100x above that, and a
-    # reference off by one sample gives ~5e-2
-    assert result.tracking_error(start=150) < 1e-3
+    # once the estimate has converged the plant follows the reference: measured 4e-4 from k = 150,
+    # the observer's remaining error (7e-4 of its start) and the rate weight's bias (1e-6); a loop
+    # that fed the windows one sample off would track a shifted reference, 0.14 away from this one
+    assert result.tracking_error(start=150) < 2e-3
+    # OSQP's stopping test: a bound residual below eps_abs + eps_rel max|u| = 1e-6 (1 + 0.1)
     assert result.max_constraint_violation() <= 1e-6 * 1.1
     metrics = result.metrics()
     assert metrics["n_steps"] == 250 - 30 and metrics["n_fallbacks"] == 0
     assert set(metrics) >= {"tracking_error", "input_effort", "max_constraint_violation", "qp_seconds_per_step"}
-    # the input the MPC chose is the one that made the reference (the rate weight's bias aside)
-    assert np.max(np.abs(result.inputs[:, 150:] - U[:, 150:result.n_samples])) < 1e-3 * 0.05 / 1e-3 * 0.02
+    # the MPC finds the input that made the reference again: measured 4e-5 of 0.05 from k = 150
+    # (one sample off: 9e-3)
+    assert np.max(np.abs(result.inputs[:, 150:] - U[:, 150:result.n_samples])) < 0.02 * 0.05
 
 
 # -- bounds ----------------------------------------------------------------------------------
@@ -192,8 +194,8 @@ def test_applied_inputs_respect_the_bound_and_it_is_active(formulation):
     # OSQP stops when the primal residual is below eps_abs + eps_rel * max|u|, |u| <= ~0.1
     assert result.max_constraint_violation() <= tolerance * (1 + 0.1)
     assert np.all(applied <= 0.1 + tolerance * 1.1)
-    # active: many inputs sit at the bound (to the tolerance), and the reference is missed
-    assert np.mean(applied >= 0.1 - 1e-4) > 0.2
+    # active: most inputs sit at the bound (measured 98 %), and the reference is missed
+    assert np.mean(applied >= 0.1 - 1e-4) > 0.5
     assert result.tracking_error() > 0.3
 
 
@@ -233,11 +235,11 @@ def test_disturbance_model_removes_the_offset_of_a_gain_error(kind):
         result = closed_loop(StateSpacePlant(plant_model), mpc, observer, reference)
         steady = result.outputs[:, -20:] - reference[:, -20:][:, :20]
         errors[disturbance] = np.sqrt(np.mean(steady ** 2)) / np.sqrt(np.mean(target ** 2))
-    # with the disturbance state the offset goes to the solver's tolerance (1e-6) and the
-    # transient's rest after 370 steps: 1e-4
+    # with the disturbance state the offset goes to the transient's rest after 370 steps
+    # (measured 1.7e-5 output, 4e-6 input): 1e-4
     assert errors[kind] < 1e-4
-    # without it the model's 10 % gain error leaves an offset of the order of a percent
-    assert errors[None] > 1e-3
+    # without it the model's 10 % gain error leaves an offset of that order (measured 12 %)
+    assert errors[None] > 0.05
 
 
 def test_disturbance_models_are_checked_for_detectability():
@@ -289,6 +291,25 @@ def test_closed_loop_on_the_full_order_model_with_a_truncated_rom():
     assert 0.05 < open_error
     assert metrics["tracking_error"] < min(0.1, 0.7 * open_error)
     assert metrics["max_constraint_violation"] <= 1e-6 * 1.1 and metrics["n_fallbacks"] == 0
+
+
+def test_output_noise_reaches_only_the_observer():
+    model = exact_model(chain())
+    U = sines(101)
+    reference = open_loop(StateSpacePlant(model), U)
+    rms = np.sqrt(np.mean(reference ** 2))
+    runs = []
+    for noise in (None, 0.1 * rms):
+        mpc = LinearMPC(model, horizon=20, output_weight=1 / rms ** 2, input_weight=1e-4 / 0.01, input_bound=0.1)
+        runs.append(closed_loop(StateSpacePlant(model), mpc, KalmanObserver(model), reference, output_noise=noise,
+                                record_state=lambda plant: plant.state))
+    clean, noisy = runs
+    # the recorded outputs are the plant's own, C z + D u, to round-off
+    exact = model.C @ noisy.plant_states + model.D @ noisy.inputs
+    assert np.max(np.abs(noisy.outputs - exact)) <= 1e-12 * np.max(np.abs(exact))
+    # the noise moved the estimates and hence the inputs, and the tracking got worse
+    assert np.max(np.abs(noisy.estimates - clean.estimates)) > 1e-3 * np.max(np.abs(clean.estimates))
+    assert noisy.tracking_error() > clean.tracking_error()
 
 
 def test_travelling_wave_reference():
