@@ -20,6 +20,10 @@ by a precomputed Cholesky factor (``scipy.linalg.cho_solve``) for the same gradi
 cheapest possible step of the same problem. The target is <= 10 ms per step at r <= 20
 (faster than real time at dt = 0.01 s).
 
+BLAS runs on one thread (``OMP_NUM_THREADS`` etc. set to 1 unless already set): a controller
+process on a core of its own; on two shared cores, threaded BLAS made the same small products
+several times slower.
+
 Run ``PYTHONPATH=. python benchmarks/mpc_solve.py [--sizes 2 6 10 20] [--repeats 3]``; it
 prints a table and writes ``benchmarks/results/mpc_solve.json``.
 """
@@ -29,6 +33,9 @@ from __future__ import annotations
 import argparse
 import json
 import os
+
+for _name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_name, "1")
 import platform
 import statistics
 import time
@@ -155,7 +162,8 @@ def main(argv=None):
         "benchmark": "mpc_solve", "horizon": HORIZON, "n_inputs": N_INPUTS, "n_outputs": N_OUTPUTS, "dt": DT,
         "input_bound": BOUND, "steps": args.steps, "repeats": args.repeats, "rows": rows, "table": table,
         "machine": {"platform": platform.platform(), "processor": platform.processor(),
-                    "cpu_count": os.cpu_count(), "load_average": os.getloadavg()},
+                    "cpu_count": os.cpu_count(), "load_average": os.getloadavg(),
+                    "blas_threads": os.environ.get("OMP_NUM_THREADS")},
         "timestamp": datetime.now(timezone.utc).isoformat(timespec="seconds"),
     }, indent=1))
 
