@@ -325,25 +325,38 @@ def test_travelling_wave_reference():
 # -- failures and bad input ------------------------------------------------------------------
 
 def test_failed_solves_follow_the_stated_policy(monkeypatch):
+    """A solver that raises (cvxpy) and one that stops at its iteration limit (OSQP directly):
+    "shift" applies the next input of the last plan, "hold" the previous input, "raise" raises."""
+    import cvxpy
+
     model = exact_model(chain())
-    for policy in ("shift", "hold", "raise"):
-        mpc = LinearMPC(model, horizon=10, output_weight=1e8, input_weight=1.0, input_bound=0.1,
-                        on_failure=policy)
-        window = 1e-4 * np.ones((3, 10))
-        first = mpc.control(np.zeros(16), window)
-        plan = mpc.plan_.copy()
-        monkeypatch.setattr(mpc.formulation.problem, "solve", lambda **kw: (_ for _ in ()).throw(
-            __import__("cvxpy").error.SolverError("boom")))
-        if policy == "raise":
-            with pytest.raises(MPCError, match="status 'error'"):
-                mpc.control(np.zeros(16), window, first)
-            continue
-        with pytest.warns(MPCWarning, match="QP solve failed"):
-            u = mpc.control(np.zeros(16), window, first)
-        expected = plan[:, 1] if policy == "shift" else first
-        np.testing.assert_array_equal(u, expected)
-        assert mpc.n_fallbacks == 1 and mpc.statuses[-1] == "error"
-        assert np.all(np.isfinite(u))
+    window = 1e-4 * np.ones((3, 10))
+
+    def failing(mpc, formulation):
+        if formulation == "condensed":
+            def solve(**options):
+                raise cvxpy.error.SolverError("boom")
+            monkeypatch.setattr(mpc.formulation.problem, "solve", solve)
+            return "error"
+        mpc.formulation.solver.update_settings(max_iter=1)    # stops before converging
+        return "user_limit"
+
+    for formulation in ("condensed", "condensed_osqp"):
+        for policy in ("shift", "hold", "raise"):
+            mpc = LinearMPC(model, horizon=10, output_weight=1e8, input_weight=1.0, input_bound=0.1,
+                            formulation=formulation, on_failure=policy)
+            first = mpc.control(np.zeros(16), window)
+            plan = mpc.plan_.copy()
+            status = failing(mpc, formulation)
+            if policy == "raise":
+                with pytest.raises(MPCError, match=f"status '{status}'"):
+                    mpc.control(np.zeros(16), 0.5 * window, first)
+                continue
+            with pytest.warns(MPCWarning, match="QP solve failed"):
+                u = mpc.control(np.zeros(16), 0.5 * window, first)
+            expected = plan[:, 1] if policy == "shift" else first
+            np.testing.assert_array_equal(u, expected)
+            assert mpc.n_fallbacks == 1 and mpc.statuses[-1] == status and np.all(np.isfinite(u))
 
 
 def test_bad_input_gives_one_clear_error():

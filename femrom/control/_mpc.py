@@ -2,7 +2,8 @@ r"""Linear model-predictive control on a discrete state-space model.
 
 :class:`LinearMPC` builds the tracking QP of :mod:`._problem` once, as a
 registered formulation (``"condensed"`` or ``"sparse"``: parametrised cvxpy
-problems; ``"condensed_osqp"``: the condensed QP in OSQP directly), and re-solves
+problems; ``"condensed_osqp"``, the default with OSQP: the condensed QP in OSQP
+directly), and re-solves
 it every step with the new state estimate, reference window and previous input
 (OSQP warm-starts from the last solution). ``control`` returns the first input of the optimal plan and logs
 the wall time of the call and the solver's status.
@@ -77,7 +78,7 @@ class LinearMPC:
         config = MPCConfig(**settings) if config is None else dataclasses.replace(config, **settings)
         self.model, self.config = model, config
         self.qp = MPCProblem.from_model(model, config)
-        self.formulation = QP_FORMULATIONS.get(config.formulation)(self.qp, config)
+        self.formulation = QP_FORMULATIONS.get(config.formulation_name)(self.qp, config)
         self.plan_: np.ndarray | None = None
         self._plan_age = 0
         self.solve_seconds: list[float] = []
@@ -162,7 +163,7 @@ class LinearMPC:
         policy = self.config.on_failure
         if policy == "raise":
             raise MPCError(f"QP solve failed with status {status!r} ({self.config.solver}, "
-                           f"{self.config.formulation}) at solve {len(self.statuses)}")
+                           f"{self.config.formulation_name}) at solve {len(self.statuses)}")
         self.n_fallbacks += 1
         if not self._warned:
             warnings.warn(f"QP solve failed with status {status!r}; applying the "

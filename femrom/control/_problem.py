@@ -55,11 +55,13 @@ class MPCConfig:
         unconstrained regulator, the stabilising solution of
         ``P = A^T P A - A^T P B (R + B^T P B)^{-1} B^T P A + C^T Q C``
         (needs ``D = 0``, ``S = None`` and ``R`` positive definite).
-    formulation : str
+    formulation : str or None
         A registered QP formulation (:func:`~femrom.control.registered_formulations`):
         ``"condensed"`` (inputs only, dense Hessian; cvxpy), ``"sparse"`` (states and
         inputs, the dynamics as equality constraints; cvxpy) or ``"condensed_osqp"``
-        (the condensed QP in OSQP without cvxpy's per-solve work).
+        (the condensed QP in OSQP without cvxpy's per-solve work). ``None``: the
+        fastest measured for the solver (``benchmarks/mpc_solve.py``),
+        ``"condensed_osqp"`` with OSQP and ``"condensed"`` with any other.
     solver : str
         A cvxpy QP solver: ``"OSQP"`` (warm-started ADMM) or ``"CLARABEL"`` (interior point).
     tolerance : float
@@ -85,7 +87,7 @@ class MPCConfig:
     input_rate_weight: object = None
     input_bound: object = 0.1
     terminal_weight: object = None
-    formulation: str = "condensed"
+    formulation: str | None = None
     solver: str = "OSQP"
     tolerance: float = 1e-6
     max_iterations: int = 10_000
@@ -102,13 +104,22 @@ class MPCConfig:
         if not (isinstance(self.max_iterations, (int, np.integer)) and self.max_iterations >= 1):
             raise ValueError(f"max_iterations must be a positive integer, got {self.max_iterations!r}")
 
+    @property
+    def formulation_name(self) -> str:
+        """The formulation used: ``formulation``, or the default for the solver."""
+        if self.formulation is not None:
+            return self.formulation
+        return "condensed_osqp" if self.solver == "OSQP" else "condensed"
+
     def describe(self) -> dict:
         """The settings as plain JSON values (weights as given, arrays as lists)."""
         def plain(value):
             if isinstance(value, np.ndarray):
                 return value.tolist()
             return value
-        return {name: plain(getattr(self, name)) for name in self.__dataclass_fields__}
+        settings = {name: plain(getattr(self, name)) for name in self.__dataclass_fields__}
+        settings["formulation"] = self.formulation_name
+        return settings
 
 
 def vector(x, size: int, name: str) -> np.ndarray:
