@@ -312,6 +312,69 @@ def test_output_noise_reaches_only_the_observer():
     assert noisy.tracking_error() > clean.tracking_error()
 
 
+def test_an_lopinf_rom_learned_from_fom_snapshots_controls_the_fom():
+    """The issue's chain in small: FOM snapshots of a random multisine, a mass-orthonormal POD
+    basis, L-OpInf (nonintrusive), its Newmark state space, MPC and Kalman observer, closed loop on
+    the FOM against a feasible reference the training never saw (2-3 Hz sines from rest)."""
+    import dataclasses
+
+    from femrom.basis import POD
+    from femrom.inference import LagrangianOpInf, reduce_snapshots
+    from femrom.integrators import Trajectory, integrate
+
+    system = chain(n=12, p=4)
+    rng = np.random.default_rng(5)
+    frequencies, phases = rng.uniform(0.3, 6.0, (2, 6)), rng.uniform(0, 2 * np.pi, (2, 6))
+
+    def training_input(t):
+        return 0.025 * np.sum(np.sin(2 * np.pi * frequencies * t + phases), axis=1)
+
+    trajectory = Trajectory()
+    integrate(dataclasses.replace(system, inputs=training_input), Newmark(), np.zeros(12), np.zeros(12), DT, 600,
+              consumers=[trajectory], progress=False)
+    Q = trajectory.q
+    inputs = np.column_stack([training_input(t) for t in trajectory.t])
+    basis = POD(rank=6, product=system.mass).fit(Q).basis_
+    data = reduce_snapshots(basis, Q, DT, product=system.mass, velocities=trajectory.v,
+                            accelerations=trajectory.a, derivatives="stored", inputs=inputs,
+                            outputs=system.output_matrix @ Q)
+    rom = SecondOrderROM(basis=basis, product=system.mass, learner=LagrangianOpInf.for_system(system)).fit(data)
+    model = rom.to_state_space(DT)
+    U = sines(231, amplitude=0.04)
+    reference = open_loop(FullOrderPlant(system, DT), U)
+    rms = np.sqrt(np.mean(reference ** 2))
+    mpc = LinearMPC(model, horizon=30, output_weight=1 / rms ** 2, input_weight=0.0,
+                    input_rate_weight=1e-4 / 0.01, input_bound=0.1)
+    result = closed_loop(FullOrderPlant(system, DT), mpc, KalmanObserver(model, disturbance="output"), reference)
+    open_error = np.sqrt(np.mean((open_loop(StateSpacePlant(model), U) - reference) ** 2)) / rms
+    # measured: the ROM predicts the reference open loop to 2.3 %, the closed loop tracks it to 0.9 %;
+    # the issue's target is 10 %, and feedback must beat the open-loop prediction
+    assert result.tracking_error() < min(0.1, 0.7 * open_error)
+    assert result.max_constraint_violation() <= 1e-6 * 1.1
+
+
+def test_the_observer_gives_the_models_own_state_back():
+    """Newmark's state space carries z = [q; v] - E u; model_state(u) = z + E u is [q; v] again.
+    Against the FOM with the identity basis the filtered estimate converges to the FOM's q, v."""
+    system = chain()
+    model = exact_model(system)
+    U = sines(91, amplitude=0.02)
+    reference = open_loop(StateSpacePlant(model), U)
+    rms = np.sqrt(np.mean(reference ** 2))
+    observer = KalmanObserver(model, initial_state=np.full(16, rms))
+    mpc = LinearMPC(model, horizon=20, output_weight=1 / rms ** 2, input_weight=1e-3 / 0.01, input_bound=0.1)
+    plant = FullOrderPlant(system, DT)
+    result = closed_loop(plant, mpc, observer, reference,
+                         record_state=lambda plant: np.concatenate([plant.last.q, plant.last.v]))
+    estimated = result.estimates + model.input_offset @ result.inputs
+    error = np.linalg.norm(estimated - result.plant_states, axis=0)
+    # the filter's error decays like rho^k (rho = 0.97): measured 0.012 of the start after 70 steps;
+    # the estimate taken for [q; v] without the input offset stays 0.34 off
+    assert error[-1] < 0.05 * error[0]
+    # and the last one is observer.model_state(u) of the last input
+    np.testing.assert_allclose(observer.model_state(result.inputs[:, -1]), estimated[:, -1], rtol=1e-14, atol=0)
+
+
 def test_travelling_wave_reference():
     x = np.linspace(0.0, 1.0, 5)
     t = np.array([0.0, 0.25])
