@@ -457,6 +457,31 @@ def test_bad_input_gives_one_clear_error():
         FullOrderPlant(SecondOrderSystem(mass=sp.identity(2, format="csr"), stiffness=sp.identity(2, format="csr")), DT)
 
 
+def test_a_formulation_written_outside_the_package_registers_and_is_checked_for_dpp():
+    import cvxpy as cp
+
+    from femrom.control import QP_FORMULATIONS, CvxpyFormulation, register_formulation
+
+    @register_formulation
+    class ProductOfParameters(CvxpyFormulation):
+        """Not DPP: a product of two Parameters multiplies the variable."""
+
+        name = "product_of_parameters"
+
+        def __init__(self, problem, config):
+            super().__init__(problem, config)
+            a, b, x = cp.Parameter(), cp.Parameter(), cp.Variable()
+            self.problem = cp.Problem(cp.Minimize(cp.square(x) + a * b * x))
+            self.compiled()
+
+    try:
+        assert "product_of_parameters" in registered_formulations()
+        with pytest.raises(RuntimeError, match="'product_of_parameters' is not DPP"):
+            LinearMPC(exact_model(chain()), input_weight=1.0, formulation="product_of_parameters")
+    finally:
+        QP_FORMULATIONS.remove("product_of_parameters")
+
+
 # -- layers ----------------------------------------------------------------------------------
 
 LOWER = {"solvers", "mesh", "fem", "scene", "integrators", "snapshots", "linalg", "basis", "inference", "rom"}
