@@ -3,7 +3,6 @@ tracking under model mismatch, and a full-order plant against its exact state sp
 
 import ast
 import pathlib
-import warnings
 
 import numpy as np
 import pytest

@@ -223,9 +223,9 @@ class MPCProblem:
             raise ValueError(f"model must be a DiscreteStateSpace (e.g. rom.to_state_space(dt)), "
                              f"got a {type(model).__name__}")
         if model.metadata.get("constant_input"):
-            raise ValueError("model has a constant input channel (a constant load): the MPC decides "
-                             "every input; export the model without the load or fold it into the offsets")
-        n, m, p = model.n_states, model.n_inputs, model.n_outputs
+            raise ValueError("model has a constant input channel (a constant load, metadata['constant_input']): "
+                             "the MPC decides every input; control a model exported without the load")
+        m, p = model.n_inputs, model.n_outputs
         if m == 0 or p == 0:
             raise ValueError(f"model needs inputs and outputs to be controlled, has m = {m}, p = {p}")
         for name in ("A", "B", "C", "D"):
