@@ -81,15 +81,16 @@ def test_unconstrained_mpc_with_the_dare_terminal_cost_is_the_lqr(formulation, s
     for _ in range(3):
         x = rng.standard_normal(4)
         u = mpc.control(x, np.zeros(4))
-        # the solvers stop at 1e-10 on a well-conditioned QP (cond H < 1e3) and python-control
-        # solves the DARE by a different route: 1e-6 relative is far above both, and far below
-        # the 1e-2-size gap of the same MPC without the terminal cost (asserted below)
-        assert np.linalg.norm(u + K @ x) <= 1e-6 * np.linalg.norm(K @ x)
+        # the solvers stop at 1e-10 on a well-conditioned QP (cond H = 7) and python-control solves
+        # the DARE by its own call: measured 5e-15 (Clarabel) to 8e-12 (OSQP); 1e-8 leaves room for
+        # both, and is far below the gap of the same MPC without the terminal cost (asserted below)
+        assert np.linalg.norm(u + K @ x) <= 1e-8 * np.linalg.norm(K @ x)
     assert mpc.statuses == ["optimal"] * 3
-    # without the terminal cost a short horizon gives another feedback: the terminal cost is doing the work
+    # without the terminal cost a short horizon gives another feedback (measured 80-100 % off):
+    # the terminal cost is doing the work
     short = LinearMPC(model, horizon=3, output_weight=Q, input_weight=R, input_bound=None,
                       formulation=formulation, solver=solver, tolerance=1e-10)
-    assert np.linalg.norm(short.control(x, np.zeros(4)) + K @ x) > 1e-2 * np.linalg.norm(K @ x)
+    assert np.linalg.norm(short.control(x, np.zeros(4)) + K @ x) > 0.1 * np.linalg.norm(K @ x)
 
 
 def test_formulations_solve_the_same_qp():
