@@ -119,25 +119,27 @@ def test_kalman_gain_is_python_controls_dlqe():
     W, V = np.diag(np.linspace(1.0, 2.0, 16)), np.diag([0.5, 1.0, 2.0])
     observer = KalmanObserver(model, W, V)
     L, P, _ = control.dlqe(model.A, np.eye(16), model.C, W, V)
-    # the predictor gain A M is dlqe's L; both from a DARE of condition ~1e3: 1e-8 relative
-    assert np.linalg.norm(model.A @ observer.gain_ - L) <= 1e-8 * np.linalg.norm(L)
-    assert np.linalg.norm(observer.covariance_ - P) <= 1e-8 * np.linalg.norm(P)
+    # the predictor gain A M is dlqe's L. python-control solves the same Riccati equation (P agrees
+    # exactly here) but forms its gain its own way: measured 4e-16 relative; 1e-12 allows for a
+    # different DARE route (P has condition 2e3)
+    assert np.linalg.norm(model.A @ observer.gain_ - L) <= 1e-12 * np.linalg.norm(L)
+    assert np.linalg.norm(observer.covariance_ - P) <= 1e-12 * np.linalg.norm(P)
     # the dual of the LQR: dlqr(A^T, C^T, W, V) gives L^T
     Kd, _, _ = control.dlqr(model.A.T, model.C.T, W, V)
-    assert np.linalg.norm(Kd.T - L) <= 1e-8 * np.linalg.norm(L)
+    assert np.linalg.norm(Kd.T - L) <= 1e-12 * np.linalg.norm(L)
     assert np.max(np.abs(observer.error_poles())) < 1.0
     # augmented with an output disturbance: dlqe on the augmented matrices
     augmented = KalmanObserver(model, W, V, disturbance="output", disturbance_noise=0.1)
     Aa, Ca = augmented.augmented.A, augmented.augmented.C
     La, _, _ = control.dlqe(Aa, np.eye(19), Ca, sla.block_diag(W, 0.1 * np.eye(3)), V)
-    assert np.linalg.norm(Aa @ augmented.gain_ - La) <= 1e-8 * np.linalg.norm(La)
+    assert np.linalg.norm(Aa @ augmented.gain_ - La) <= 1e-12 * np.linalg.norm(La)
 
 
 def test_pole_placement_observer_places_the_error_poles():
     model = exact_model(chain(n=4, p=2))
     poles = np.linspace(0.3, 0.6, 8)
     observer = PolePlacementObserver(model, poles)
-    # place_poles on a well-conditioned (8, 2) pair: the poles to 1e-8
+    # place_poles on an (8, 2) pair: measured 3e-11 off; 1e-8
     assert np.allclose(np.sort(observer.error_poles().real), poles, atol=1e-8)
     assert np.max(np.abs(observer.error_poles().imag)) < 1e-8
     with pytest.raises(ValueError, match="inside the unit circle"):
