@@ -10,6 +10,7 @@ import scipy.linalg as sla
 import scipy.sparse as sp
 
 from femrom.control import (
+    ClosedLoopResult,
     DisturbanceModel,
     FullOrderPlant,
     KalmanObserver,
@@ -295,7 +296,7 @@ def test_closed_loop_on_the_full_order_model_with_a_truncated_rom():
     assert metrics["max_constraint_violation"] <= 1e-6 * 1.1 and metrics["n_fallbacks"] == 0
 
 
-def test_output_noise_reaches_only_the_observer():
+def test_output_noise_reaches_only_the_observer_and_a_result_saves(tmp_path):
     model = exact_model(chain())
     U = sines(101)
     reference = open_loop(StateSpacePlant(model), U)
@@ -306,6 +307,11 @@ def test_output_noise_reaches_only_the_observer():
         runs.append(closed_loop(StateSpacePlant(model), mpc, KalmanObserver(model), reference, output_noise=noise,
                                 record_state=lambda plant: plant.state))
     clean, noisy = runs
+    noisy.save(tmp_path / "loop.h5", metadata={"controller": mpc.describe()})
+    loaded = ClosedLoopResult.load(tmp_path / "loop.h5")
+    for name in ("outputs", "inputs", "reference", "estimates", "qp_seconds", "plant_states"):
+        np.testing.assert_array_equal(getattr(loaded, name), getattr(noisy, name))
+    assert loaded.statuses == noisy.statuses and loaded.metrics() == noisy.metrics()
     # the recorded outputs are the plant's own, C z + D u, to round-off
     exact = model.C @ noisy.plant_states + model.D @ noisy.inputs
     assert np.max(np.abs(noisy.outputs - exact)) <= 1e-12 * np.max(np.abs(exact))

@@ -31,7 +31,7 @@ full-order model included.
   (a :class:`~femrom.scene.SecondOrderSystem` stepped by its own integrator);
 - :func:`closed_loop` -> :class:`ClosedLoopResult` (outputs, inputs, estimates,
   QP times; ``metrics()``: tracking error, input effort, constraint violation,
-  QP seconds per step); :func:`open_loop` (a feasible reference: a plant's
+  QP seconds per step; HDF5 ``save``/``load``); :func:`open_loop` (a feasible reference: a plant's
   response to a known input) and :func:`travelling_wave` (``a(x) sin(k x - omega t)``).
 """
 

@@ -22,6 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from femrom._json import dumps
 from femrom._progress import Progress
 from femrom.control._problem import vector
 
@@ -120,6 +121,43 @@ class ClosedLoopResult:
             "n_inaccurate": sum(status == "optimal_inaccurate" for status in self.statuses),
             "n_steps": self.n_samples - 1,
         }
+
+
+    # -- storage ------------------------------------------------------------------------
+    _ARRAYS = ("outputs", "inputs", "reference", "estimates", "qp_seconds", "solver_seconds", "input_bound")
+
+    def save(self, path, *, metadata: dict | None = None) -> None:
+        """Write the arrays, the statuses, the metrics and ``metadata`` (e.g. the controller's
+        ``describe()``) to HDF5."""
+        import h5py
+
+        with h5py.File(path, "w") as f:
+            f.attrs["format"] = "femrom.ClosedLoopResult"
+            f.attrs["version"] = 1
+            f.attrs["n_fallbacks"] = int(self.n_fallbacks)
+            if self.dt is not None:
+                f.attrs["dt"] = float(self.dt)
+            f.attrs["metrics"] = dumps(self.metrics())
+            f.attrs["metadata"] = dumps(metadata or {})
+            for name in self._ARRAYS:
+                f.create_dataset(name, data=getattr(self, name))
+            f.create_dataset("statuses", data=np.array(self.statuses, dtype=object), dtype=h5py.string_dtype())
+            if self.plant_states is not None:
+                f.create_dataset("plant_states", data=self.plant_states)
+
+    @classmethod
+    def load(cls, path) -> "ClosedLoopResult":
+        import h5py
+
+        with h5py.File(path, "r") as f:
+            if f.attrs.get("format") != "femrom.ClosedLoopResult":
+                raise ValueError(f"{path} is not a femrom ClosedLoopResult file")
+            arrays = {name: f[name][()] for name in cls._ARRAYS}
+            statuses = tuple(s.decode() if isinstance(s, bytes) else str(s) for s in f["statuses"][()])
+            states = f["plant_states"][()] if "plant_states" in f else None
+            dt = float(f.attrs["dt"]) if "dt" in f.attrs else None
+            return cls(**arrays, statuses=statuses, n_fallbacks=int(f.attrs["n_fallbacks"]),
+                       plant_states=states, dt=dt)
 
 
 def _padded(reference: np.ndarray, extra: int) -> np.ndarray:
