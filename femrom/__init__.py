@@ -2,8 +2,8 @@
 
 Layers import downward only::
 
-    mesh -> fem -> scene -> integrators -> snapshots -> linalg -> basis
-         -> inference -> rom -> post            (cli and cases on top)
+    solvers -> mesh -> fem -> scene -> integrators -> snapshots -> linalg -> basis
+         -> inference -> rom -> control -> post -> study      (cli and cases on top)
 """
 
 from importlib.metadata import PackageNotFoundError, version
