@@ -174,7 +174,7 @@ class TransformedForce(NonlinearForce):
         if blocks is not None and not self.force_model.velocity_dependent:
             g, D = blocks(x, state)
             s = D.shape[0]
-            LD = np.einsum("sab,sbk->sak", D, L.reshape(s, 3, -1)).reshape(3 * s, -1)
+            LD = np.matmul(D, L.reshape(s, 3, -1)).reshape(3 * s, -1)
             return L.T @ g, L.T @ LD, None
         xdot = None if v_hat is None else L @ v_hat
         g = self.force_model.local_force(x, xdot, state)

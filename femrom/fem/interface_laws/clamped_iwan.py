@@ -121,9 +121,11 @@ class ClampedIwanLaw(InterfaceLaw):
         k = self.slider_stiffness
         slip_weight = np.where(slipping, ratio, 0.0) * k
         diagonal = np.where(slipping, ratio, 1.0) @ k
-        D[:, :2, :2] = -np.einsum("sm,smi,smj->sij", slip_weight, direction, direction)
-        D[:, 0, 0] += diagonal
-        D[:, 1, 1] += diagonal
+        d1, d2 = direction[..., 0], direction[..., 1]
+        weighted = slip_weight * d1
+        D[:, 0, 0] = diagonal - (weighted * d1).sum(axis=1)
+        D[:, 0, 1] = D[:, 1, 0] = -(weighted * d2).sum(axis=1)
+        D[:, 1, 1] = diagonal - (slip_weight * d2 * d2).sum(axis=1)
         D[:, 2, 2] = np.where(closed, self.normal_stiffness, 0.0)
         return traction, D
 
