@@ -207,7 +207,10 @@ class SolidSpace:
         if nodes:
             if isinstance(probe.at, str):
                 raise SpaceError(f"a nearest-node probe needs a point [x, y, z], got {probe.at!r}")
-            return _vector_ops.nearest_node_rows(self.basis, [probe.at], component, nodes)
+            try:
+                return _vector_ops.nearest_node_rows(self.basis, [probe.at], component, nodes)
+            except ValueError as exc:       # a point outside the mesh, too many nodes
+                raise SpaceError(str(exc)) from None
         if probe.average:
             return _vector_ops.average_rows(self.basis, _name(probe.at, "average"), component)
         if isinstance(probe.at, str):

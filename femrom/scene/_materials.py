@@ -65,8 +65,9 @@ def element_materials(materials, mesh) -> fem.ElementMaterial:
             elements = subdomains[region]
             taken = owner[elements]
             if np.any(taken >= 0):
-                other = materials[int(taken[taken >= 0][0])]
-                shared = int(np.count_nonzero(taken >= 0))
+                first = int(taken[taken >= 0][0])
+                other = materials[first]
+                shared = int(np.count_nonzero(taken == first))
                 raise SceneError(f"[materials.{material.label}] region {region!r} overlaps a region of "
                                  f"[materials.{other.label}] ({', '.join(other.regions)}): {shared} elements "
                                  "in both; each element needs exactly one material")
