@@ -162,6 +162,7 @@ class SolidSpace:
         # lowest quadrature keeps its precomputed values small: skfem's default
         # order would hold ~4 GB of basis values for vector P2 at 5e5 dofs.
         self.basis = Basis(mesh, ElementVector(scalar()), intorder=1)
+        self._node_tree = None
 
     @property
     def n_total(self) -> int:
@@ -207,8 +208,10 @@ class SolidSpace:
         if nodes:
             if isinstance(probe.at, str):
                 raise SpaceError(f"a nearest-node probe needs a point [x, y, z], got {probe.at!r}")
+            if self._node_tree is None:     # built once, for the many points of a line of probes
+                self._node_tree = _vector_ops.node_tree(self.basis)
             try:
-                return _vector_ops.nearest_node_rows(self.basis, [probe.at], component, nodes)
+                return _vector_ops.nearest_node_rows(self.basis, [probe.at], component, nodes, tree=self._node_tree)
             except ValueError as exc:       # a point outside the mesh, too many nodes
                 raise SpaceError(str(exc)) from None
         if probe.average:

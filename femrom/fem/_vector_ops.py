@@ -213,7 +213,7 @@ def probe_rows(basis, points, component: int) -> sp.csr_matrix:
     return P[c * n:(c + 1) * n]
 
 
-def nearest_node_rows(basis, points, component: int, nodes: int) -> sp.csr_matrix:
+def nearest_node_rows(basis, points, component: int, nodes: int, *, tree=None) -> sp.csr_matrix:
     r"""Rows that average one displacement component over the nodes nearest to given points.
 
     .. math::
@@ -236,20 +236,21 @@ def nearest_node_rows(basis, points, component: int, nodes: int) -> sp.csr_matri
         0, 1 or 2 for ``u_x``, ``u_y``, ``u_z``.
     nodes : int
         ``n >= 1``, at most the number of nodes.
+    tree : scipy.spatial.cKDTree, optional
+        The k-d tree of the basis's node locations (:func:`node_tree`), to reuse over many calls.
 
     Returns
     -------
     (p, n_total) scipy.sparse.csr_matrix
         ``n`` entries ``1 / n`` per row; each row sums to 1.
     """
-    from scipy.spatial import cKDTree
-
     _scalar_element(basis)
     c = _check_component(component)
     x = np.atleast_2d(np.asarray(points, dtype=float))
     if x.ndim != 2 or x.shape[1] != 3 or not np.all(np.isfinite(x)):
         raise ValueError(f"points must be finite, of shape (p, 3), got {np.shape(points)}")
-    locations = _node_locations(basis)
+    tree = node_tree(basis) if tree is None else tree
+    locations = tree.data
     if isinstance(nodes, bool) or not isinstance(nodes, (int, np.integer)) or not 1 <= nodes <= len(locations):
         raise ValueError(f"nodes must be a whole number in [1, {len(locations)}], got {nodes!r}")
     lo, hi = locations.min(axis=0), locations.max(axis=0)
@@ -258,11 +259,18 @@ def nearest_node_rows(basis, points, component: int, nodes: int) -> sp.csr_matri
     if outside.size:
         raise ValueError(f"point {x[outside[0]].tolist()} lies outside the mesh (bounding box "
                          f"{lo.tolist()} to {hi.tolist()})")
-    _, nearest = cKDTree(locations).query(x, k=int(nodes))
+    _, nearest = tree.query(x, k=int(nodes))
     nearest = np.asarray(nearest).reshape(x.shape[0], int(nodes))
     rows = np.repeat(np.arange(x.shape[0]), int(nodes))
     return sp.csr_matrix((np.full(rows.size, 1.0 / nodes), (rows, 3 * nearest.ravel() + c)),
                          shape=(x.shape[0], basis.N))
+
+
+def node_tree(basis):
+    """A ``scipy.spatial.cKDTree`` of the scalar nodes' locations (its ``data``: (n_nodes, 3))."""
+    from scipy.spatial import cKDTree
+
+    return cKDTree(_node_locations(basis))
 
 
 def average_rows(basis, region: str, component: int) -> sp.csr_matrix:
