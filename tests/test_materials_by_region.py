@@ -175,3 +175,16 @@ def test_a_sweep_varies_one_region_material():
         SweepConfig.from_dict({"parameters": {"materials.stiff.poisson_ratio": [0.6]}}, data)
     with pytest.raises(SceneError, match=r"\[materials.fin\] has no number 'density'"):
         SweepConfig.from_dict({"parameters": {"materials.fin.density": [1.0]}}, data)
+
+
+def test_a_conditioning_refusal_names_the_region_materials():
+    """A density in the wrong units (1e-200 kg/m^3) is refused before the run, and the message
+    lists the [materials] tables, as it lists [material] for a one-material scene."""
+    from femrom.integrators import ConditioningError, simulate
+
+    tiny = {**TWO, "stiff": {**TWO["stiff"], "density": 1e-200}, "soft": {**TWO["soft"], "density": 1e-200}}
+    model = build(_scene(materials=tiny), mesh=_bar())
+    with pytest.raises(ConditioningError) as info:
+        simulate(model, progress=False)
+    message = str(info.value)
+    assert "[materials] soft: youngs_modulus = 500000" in message and "stiff: youngs_modulus = 2e+06" in message
