@@ -29,5 +29,5 @@ class Gravity(Effect):
         if space.element == "hermite":
             unit[space.basis.nodal_dofs[1]] = 0.0            # a uniform translation has no slope
         with build.timed("load"):
-            mass = space.mass(build.scene.material, lumped=False)
+            mass = space.mass(build.material, lumped=False)
             build.load = -float(options["g"]) * build.condensation.vector(mass @ unit)

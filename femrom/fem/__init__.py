@@ -1,8 +1,14 @@
-"""Finite-element forms, assembly, boundary conditions, loads, outputs and nonlinear forces."""
+"""Finite-element forms, assembly, boundary conditions, loads, outputs and nonlinear forces.
+
+Materials are one isotropic material (floats) or :class:`ElementMaterial`, constants per
+element (several materials by region); outputs include the row averaging a displacement
+component over the nodes nearest to a point (:func:`nearest_node_rows`).
+"""
 
 from femrom.fem._condensation import Condensation
 from femrom.fem._damping import rayleigh_damping, rayleigh_from_damping_ratios
 from femrom.fem._elasticity import elasticity_stiffness, lame_parameters, vector_mass
+from femrom.fem._material import ElementMaterial
 from femrom.fem._line import (
     axial_stiffness,
     bending_stiffness,
@@ -36,6 +42,7 @@ from femrom.fem._spaces import LineSpace, SolidSpace, SpaceError
 from femrom.fem._vector_ops import (
     average_rows,
     dirichlet_dofs,
+    nearest_node_rows,
     point_load,
     probe_rows,
     rigid_body_modes,
@@ -49,13 +56,13 @@ from femrom.fem.interface_laws.iwan import IwanLaw
 from femrom.fem.interface_laws.jenkins import JenkinsLaw
 
 __all__ = [
-    "DENSITIES", "FORCES", "INTERFACE_LAWS", "ClampedFrictionLaw", "ClampedIwanLaw", "clamped_iwan_state", "clamped_state", "Condensation", "DryFrictionLaw", "ForceSum", "InterfaceLaw",
+    "DENSITIES", "FORCES", "INTERFACE_LAWS", "ClampedFrictionLaw", "ClampedIwanLaw", "clamped_iwan_state", "clamped_state", "Condensation", "DryFrictionLaw", "ElementMaterial", "ForceSum", "InterfaceLaw",
     "IwanLaw", "JenkinsForce", "JenkinsLaw", "JointForce", "LineSpace", "LocalPotential", "NonlinearForce",
     "ParallelSliderLaw", "QuarticPotential", "SolidSpace", "SpaceError", "TransformedForce", "transform_force", "force_from_parameters",
     "interface_frames", "interface_law", "interface_law_from_parameters", "radial_return",
     "register_force", "register_interface_law", "relative_displacement_map", "selection_map", "sum_of_forces",
     "average_rows", "axial_stiffness", "bending_stiffness", "dirichlet_dofs", "elasticity_stiffness",
-    "hrz_lumped", "lame_parameters", "line_basis", "line_mass", "point_load", "probe_rows",
+    "hrz_lumped", "lame_parameters", "line_basis", "line_mass", "nearest_node_rows", "point_load", "probe_rows",
     "rayleigh_damping", "rayleigh_from_damping_ratios", "rigid_body_modes", "surface_pressure",
     "surface_traction", "vector_mass",
 ]

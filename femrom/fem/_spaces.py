@@ -103,6 +103,8 @@ class LineSpace:
         return load.magnitude * np.asarray(self._row(load.at, load.component).todense()).ravel()
 
     def output_row(self, probe) -> sp.csr_matrix:
+        if getattr(probe, "nodes", 0):
+            raise SpaceError("nearest-node outputs are for solids; a line probe reads the field at its point")
         if probe.average:
             if not isinstance(probe.at, str):
                 raise SpaceError("an average output needs a subdomain name in 'over'")
@@ -160,18 +162,22 @@ class SolidSpace:
         # lowest quadrature keeps its precomputed values small: skfem's default
         # order would hold ~4 GB of basis values for vector P2 at 5e5 dofs.
         self.basis = Basis(mesh, ElementVector(scalar()), intorder=1)
+        self._node_tree = None
 
     @property
     def n_total(self) -> int:
         return self.basis.N
 
     def stiffness(self, effect: str, material) -> sp.csr_matrix:
+        """Elasticity stiffness of ``material``: one material (floats ``youngs_modulus``,
+        ``poisson_ratio``) or an :class:`~femrom.fem.ElementMaterial` (one value per element)."""
         if effect != "elasticity":
             raise SpaceError(f"a solid takes the 'elasticity' effect, not {effect!r}")
         _need(material, "poisson_ratio", "elasticity")
         return _elasticity.elasticity_stiffness(self.basis, material.youngs_modulus, material.poisson_ratio)
 
     def mass(self, material, *, lumped: bool) -> sp.csr_matrix:
+        """Mass of ``material.density`` (a float, or one value per element)."""
         return _elasticity.vector_mass(self.basis, material.density, lumped=lumped)
 
     def boundary_dofs(self, name: str, *, clamped: bool) -> np.ndarray:
@@ -195,7 +201,19 @@ class SolidSpace:
         return _vector_ops.point_load(self.basis, load.at, vector)
 
     def output_row(self, probe) -> sp.csr_matrix:
+        """(1, n_total) row of a probe: the component at a point (interpolated, or averaged over
+        the ``probe.nodes`` nearest nodes when that is >= 1), or its mean over a named region."""
         component = self.components.index(self._component(probe.component))
+        nodes = getattr(probe, "nodes", 0)
+        if nodes:
+            if isinstance(probe.at, str):
+                raise SpaceError(f"a nearest-node probe needs a point [x, y, z], got {probe.at!r}")
+            if self._node_tree is None:     # built once, for the many points of a line of probes
+                self._node_tree = _vector_ops.node_tree(self.basis)
+            try:
+                return _vector_ops.nearest_node_rows(self.basis, [probe.at], component, nodes, tree=self._node_tree)
+            except ValueError as exc:       # a point outside the mesh, too many nodes
+                raise SpaceError(str(exc)) from None
         if probe.average:
             return _vector_ops.average_rows(self.basis, _name(probe.at, "average"), component)
         if isinstance(probe.at, str):

@@ -29,6 +29,7 @@ from femrom.mesh import MeshError, boundary_facets, subdomain_elements
 __all__ = [
     "average_rows",
     "dirichlet_dofs",
+    "nearest_node_rows",
     "point_load",
     "probe_rows",
     "rigid_body_modes",
@@ -210,6 +211,66 @@ def probe_rows(basis, points, component: int) -> sp.csr_matrix:
     # skfem stacks the rows component-major: row c * p + k is u_c(x_k).
     n = x.shape[0]
     return P[c * n:(c + 1) * n]
+
+
+def nearest_node_rows(basis, points, component: int, nodes: int, *, tree=None) -> sp.csr_matrix:
+    r"""Rows that average one displacement component over the nodes nearest to given points.
+
+    .. math::
+
+        (E q)_k = \frac{1}{n} \sum_{s \in N_n(x_k)} q_{3 s + c},
+
+    ``N_n(x_k)`` the ``n`` scalar nodes (vertices, and on P2 edge midpoints)
+    nearest to ``x_k`` in the Euclidean distance (ties broken by a k-d tree, in
+    a fixed order). A nodal interpolant of a linear field is exact at the
+    nodes, so such a row reads the field at the centroid of the ``n`` nodes;
+    a translation ``q_{3 s + c} = a`` reads ``a`` exactly.
+
+    Parameters
+    ----------
+    basis : skfem.CellBasis
+        Vector P1/P2 basis on a ``MeshTet``.
+    points : (p, 3) array_like
+        Where to read (m); each must lie in the mesh's bounding box.
+    component : int
+        0, 1 or 2 for ``u_x``, ``u_y``, ``u_z``.
+    nodes : int
+        ``n >= 1``, at most the number of nodes.
+    tree : scipy.spatial.cKDTree, optional
+        The k-d tree of the basis's node locations (:func:`node_tree`), to reuse over many calls.
+
+    Returns
+    -------
+    (p, n_total) scipy.sparse.csr_matrix
+        ``n`` entries ``1 / n`` per row; each row sums to 1.
+    """
+    _scalar_element(basis)
+    c = _check_component(component)
+    x = np.atleast_2d(np.asarray(points, dtype=float))
+    if x.ndim != 2 or x.shape[1] != 3 or not np.all(np.isfinite(x)):
+        raise ValueError(f"points must be finite, of shape (p, 3), got {np.shape(points)}")
+    tree = node_tree(basis) if tree is None else tree
+    locations = tree.data
+    if isinstance(nodes, bool) or not isinstance(nodes, (int, np.integer)) or not 1 <= nodes <= len(locations):
+        raise ValueError(f"nodes must be a whole number in [1, {len(locations)}], got {nodes!r}")
+    lo, hi = locations.min(axis=0), locations.max(axis=0)
+    pad = 1e-9 * float(np.max(hi - lo))
+    outside = np.flatnonzero(np.any((x < lo - pad) | (x > hi + pad), axis=1))
+    if outside.size:
+        raise ValueError(f"point {x[outside[0]].tolist()} lies outside the mesh (bounding box "
+                         f"{lo.tolist()} to {hi.tolist()})")
+    _, nearest = tree.query(x, k=int(nodes))
+    nearest = np.asarray(nearest).reshape(x.shape[0], int(nodes))
+    rows = np.repeat(np.arange(x.shape[0]), int(nodes))
+    return sp.csr_matrix((np.full(rows.size, 1.0 / nodes), (rows, 3 * nearest.ravel() + c)),
+                         shape=(x.shape[0], basis.N))
+
+
+def node_tree(basis):
+    """A ``scipy.spatial.cKDTree`` of the scalar nodes' locations (its ``data``: (n_nodes, 3))."""
+    from scipy.spatial import cKDTree
+
+    return cKDTree(_node_locations(basis))
 
 
 def average_rows(basis, region: str, component: int) -> sp.csr_matrix:

@@ -27,6 +27,16 @@ class SimulationResult:
     summary: dict
 
 
+def _materials_text(scene) -> str:
+    """The scene's material constants in one line: ``[material] ...`` or ``[materials] label: ...; ...``."""
+    def constants(material):
+        return ", ".join(f"{k} = {v:g}" for k, v in asdict(material).items()
+                         if isinstance(v, (int, float)) and not isinstance(v, bool))
+    if scene.material is not None:
+        return f"[material] {constants(scene.material)}"
+    return "[materials] " + "; ".join(f"{m.label}: {constants(m)}" for m in scene.materials)
+
+
 def simulate(model, *, dt: float | None = None, t_end: float | None = None, consumers=(),
              progress: bool | None = None, solver=None, clock=None) -> SimulationResult:
     """Integrate a :class:`~femrom.scene.FullOrderModel` over its time window.
@@ -47,9 +57,7 @@ def simulate(model, *, dt: float | None = None, t_end: float | None = None, cons
     try:
         check_conditioning(system, dt)
     except ConditioningError as exc:
-        material = ", ".join(f"{k} = {v:g}" for k, v in asdict(scene.material).items()
-                             if isinstance(v, (int, float)) and not isinstance(v, bool))
-        raise ConditioningError(f"{scene.name}: {exc} ([material] {material})") from None
+        raise ConditioningError(f"{scene.name}: {exc} ({_materials_text(scene)})") from None
     every = scene.outputs.save_every
     kept = []
     outputs = energy = trajectory = None

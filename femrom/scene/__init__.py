@@ -2,6 +2,12 @@
 
 Effects are registered classes (:class:`Effect`, :func:`register_effect`):
 one module each in the package ``femrom.scene.effects``, found by :func:`registered_effects`.
+
+A scene has one ``[material]`` (:class:`MaterialConfig`) or ``[materials]``, a material per
+region of the mesh (:class:`RegionMaterialConfig`), resolved to constants per element by
+:func:`element_materials` (every element exactly one material). Its outputs are point probes,
+region averages and lines of probes (:class:`LineConfig`: n points along a polyline, each
+the mean of a component over its nearest nodes).
 """
 
 from femrom.scene._build import FullOrderModel, build
@@ -11,10 +17,12 @@ from femrom.scene._config import (
     EffectConfig,
     InitialConfig,
     InputConfig,
+    LineConfig,
     LoadConfig,
     MaterialConfig,
     OutputConfig,
     ProbeConfig,
+    RegionMaterialConfig,
     Scene,
     StructureConfig,
     TimeConfig,
@@ -22,6 +30,7 @@ from femrom.scene._config import (
 from femrom.scene._craig_bampton import CraigBampton, boundary_dofs_of, craig_bampton
 from femrom.scene._effects import EFFECTS, Assembly, Effect, effect_class, register_effect, registered_effects
 from femrom.scene._errors import SceneError
+from femrom.scene._materials import element_materials
 from femrom.scene._modal import BeamModeShape, Modes, beam_mode_shape, linearized_modes, tangent_stiffness
 from femrom.scene._projection import project_system
 from femrom.scene._rom import BasisSpec, Derivatives, LearnerSpec, ReportSpec, RomConfig, RunSpec, TimingSpec
@@ -34,7 +43,8 @@ __all__ = [
     "MAX_STEPS",
     "EFFECTS", "Assembly", "BasisSpec", "BoundaryConfig", "Derivatives", "LearnerSpec", "ReportSpec",
     "RomConfig", "RunSpec", "CraigBampton", "boundary_dofs_of", "craig_bampton", "TimingSpec", "Effect", "EffectConfig", "FullOrderModel", "InitialConfig",
-    "InputConfig", "LoadConfig", "MaterialConfig", "OutputConfig", "ProbeConfig", "Scene",
+    "InputConfig", "LineConfig", "LoadConfig", "MaterialConfig", "OutputConfig", "ProbeConfig",
+    "RegionMaterialConfig", "Scene", "element_materials",
     "SceneError", "SecondOrderSystem", "Signal", "SignalVector", "SweepConfig", "StructureConfig", "TimeConfig", "build",
     "effect_class", "half_sine_spectrum", "register_effect", "registered_effects",
     "BeamModeShape", "Modes", "Preload", "StaticSolution", "beam_mode_shape", "linearized_modes",

@@ -16,6 +16,7 @@ from femrom.mesh import MeshError, build_mesh
 from femrom.scene._config import Scene
 from femrom.scene._effects import Assembly, registered_effects
 from femrom.scene._errors import SceneError
+from femrom.scene._materials import element_materials
 from femrom.scene._system import SecondOrderSystem
 from femrom.solvers import make_solver
 
@@ -60,7 +61,8 @@ def _assemble(scene: Scene, mesh, timings: dict):
         space = make_space(scene, mesh)
         with _located("boundary"):
             condensation = _condensation(scene, space)
-    build = Assembly(scene=scene, space=space, condensation=condensation, timings=timings)
+        material = _material(scene, space)
+    build = Assembly(scene=scene, space=space, condensation=condensation, timings=timings, material=material)
     known = registered_effects()
     for name in sorted(scene.effect_names, key=lambda name: list(known).index(name)):
         effect = known[name]()
@@ -96,6 +98,15 @@ def _timed(timings: dict, name: str):
     tic = time.perf_counter()
     yield
     timings[name] = time.perf_counter() - tic
+
+
+def _material(scene: Scene, space):
+    """What the effects read as the material: ``[material]``, or ``[materials]`` per element."""
+    if scene.material is not None:
+        return scene.material
+    if not isinstance(space, fem.SolidSpace):
+        raise SceneError("[materials] (a material per region) needs a solid mesh; a line takes [material]")
+    return element_materials(scene.materials, space.mesh)
 
 
 def make_space(scene: Scene, mesh):

@@ -1,7 +1,8 @@
 """Scene configuration: frozen dataclasses loaded from TOML.
 
 A scene file lists a structure (geometry + mesh parameters + element), a
-material, the *effects* to simulate, boundary conditions, inputs, initial
+material (``[material]``, or ``[materials]``: one per region of the mesh), the
+*effects* to simulate, boundary conditions, inputs, initial
 conditions, the time window and the outputs to keep. Every key is checked: an
 unknown key or effect is an error naming it and listing the valid ones.
 
@@ -37,6 +38,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import tomllib
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
@@ -122,16 +124,59 @@ class MaterialConfig:
         keys = {"youngs_modulus": None, "density": None, "poisson_ratio": None,
                 "area": None, "second_moment": None}
         d = _take(data, "material", keys, ("youngs_modulus", "density"))
-        for k, v in d.items():
-            if v is None:
-                continue
-            number = isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
-            if k == "poisson_ratio":     # the elasticity form is positive definite for -1 < nu < 1/2
-                if not (number and -1.0 < v < 0.5):
-                    raise SceneError(f"[material] poisson_ratio must lie in (-1, 0.5), got {v!r}")
-            elif not (number and v > 0):
-                raise SceneError(f"[material] {k} must be a finite positive number, got {v!r}")
-        return cls(**{k: (None if v is None else float(v)) for k, v in d.items()})
+        return cls(**_material_constants(d, "material"))
+
+
+def _material_constants(d: dict, where: str) -> dict:
+    """The material numbers of table ``[where]`` as floats (None kept), or one SceneError naming the key."""
+    for k, v in d.items():
+        if v is None:
+            continue
+        number = isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+        if k == "poisson_ratio":     # the elasticity form is positive definite for -1 < nu < 1/2
+            if not (number and -1.0 < v < 0.5):
+                raise SceneError(f"[{where}] poisson_ratio must lie in (-1, 0.5), got {v!r}")
+        elif not (number and v > 0):
+            raise SceneError(f"[{where}] {k} must be a finite positive number, got {v!r}")
+    return {k: (None if v is None else float(v)) for k, v in d.items()}
+
+
+@dataclass(frozen=True)
+class RegionMaterialConfig:
+    """One entry of ``[materials]``: an isotropic solid material on named regions (SI).
+
+    ``[materials.<label>]`` gives ``youngs_modulus``, ``poisson_ratio``,
+    ``density`` and optionally ``regions``, the physical volumes of the mesh it
+    fills (default: the one region named ``label``). Every element of the
+    mesh must get exactly one material (checked when the scene is built,
+    :func:`femrom.scene.element_materials`).
+    """
+
+    label: str
+    regions: tuple[str, ...]
+    youngs_modulus: float
+    poisson_ratio: float
+    density: float
+
+
+def _materials_from_dict(data) -> tuple[RegionMaterialConfig, ...]:
+    """``[materials]``: a table of material tables, each on its regions; a region listed twice is an error."""
+    if not isinstance(data, dict) or not data:
+        raise SceneError("[materials] must be a table of [materials.<region>] tables, e.g. "
+                         "[materials.body] youngs_modulus = 2e6, poisson_ratio = 0.45, density = 1100")
+    materials, owner = [], {}
+    for label, table in data.items():
+        where = f"materials.{label}"
+        d = _take(table, where, {"youngs_modulus": None, "poisson_ratio": None, "density": None,
+                                 "regions": [label]}, ("youngs_modulus", "poisson_ratio", "density"))
+        regions = _names(d.pop("regions"), f"{where}.regions")
+        for region in regions:
+            if region in owner:
+                raise SceneError(f"[materials] region {region!r} has two materials: "
+                                 f"[materials.{owner[region]}] and [{where}]")
+            owner[region] = label
+        materials.append(RegionMaterialConfig(label, regions, **_material_constants(d, where)))
+    return tuple(materials)
 
 
 @dataclass(frozen=True)
@@ -314,34 +359,117 @@ class TimeConfig:
 
 @dataclass(frozen=True)
 class ProbeConfig:
+    """One output row: ``component`` at point ``at`` (interpolated; with ``nodes >= 1`` the
+    mean over the ``nodes`` nearest nodes), or (``average``) its mean over region ``at``."""
+
     name: str
     at: Any
     component: str | None = None
     average: bool = False
+    nodes: int = 0
+
+
+@dataclass(frozen=True)
+class LineConfig:
+    """A line of probes: ``points`` points equally spaced by arc length along a polyline
+    ``path`` (both ends included), each read as the mean of one displacement component over
+    its ``nodes`` nearest nodes, for each of ``components``.
+
+    Expands to the outputs ``<name>_<i>_<component>``, ``i = 00, 01, ...`` from the path's
+    first vertex, point by point (all components of point 0, then point 1, ...).
+    """
+
+    name: str
+    path: tuple[tuple[float, ...], ...]
+    points: int
+    components: tuple[str, ...]
+    nodes: int = 1
+
+    @classmethod
+    def from_dict(cls, data, index: int) -> "LineConfig":
+        where = f"outputs.lines[{index}]"
+        d = _take(data, where, {"name": None, "start": None, "end": None, "path": None, "points": None,
+                                "components": None, "nodes": 1}, ("name", "points", "components"))
+        if not isinstance(d["name"], str) or not d["name"] or any(c in d["name"] for c in "/\\\0"):
+            raise SceneError(f"[{where}] name must be a non-empty string, got {d['name']!r}")
+        if d["path"] is not None and (d["start"] is not None or d["end"] is not None):
+            raise SceneError(f"[{where}] give 'path' (a polyline) or 'start' and 'end', not both")
+        if d["path"] is None:
+            if d["start"] is None or d["end"] is None:
+                raise SceneError(f"[{where}] needs 'start' and 'end' points (or a 'path' polyline)")
+            vertices = [d["start"], d["end"]]
+        else:
+            vertices = d["path"]
+            if isinstance(vertices, (str, bytes)) or not isinstance(vertices, (list, tuple)) or len(vertices) < 2:
+                raise SceneError(f"[{where}] path must list at least two points [x, y, z], got {vertices!r}")
+        path = tuple(_vector(v, f"{where}.path") for v in vertices)
+        if any(len(v) != len(path[0]) for v in path):
+            raise SceneError(f"[{where}] the points of the path have different dimensions: {path}")
+        lengths = [math.dist(a, b) for a, b in zip(path[:-1], path[1:])]
+        if min(lengths) <= 0:
+            raise SceneError(f"[{where}] the path has two equal consecutive points; its pieces need a length")
+        for key, low in (("points", 2), ("nodes", 1)):
+            v = d[key]
+            if isinstance(v, bool) or not isinstance(v, int) or v < low:
+                raise SceneError(f"[{where}] {key} must be a whole number >= {low}, got {v!r}")
+        components = _names(d["components"], f"{where}.components")
+        if len(set(components)) != len(components):
+            raise SceneError(f"[{where}] components are listed twice: {list(components)}")
+        return cls(d["name"], path, d["points"], components, d["nodes"])
+
+    def locations(self) -> np.ndarray:
+        """(points, dim) ndarray: the points, equally spaced by arc length, both ends included."""
+        path = np.asarray(self.path, dtype=float)
+        arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(path, axis=0), axis=1))])
+        s = np.linspace(0.0, arc[-1], self.points)
+        return np.stack([np.interp(s, arc, path[:, k]) for k in range(path.shape[1])], axis=1)
+
+    def probes(self) -> tuple[ProbeConfig, ...]:
+        """One :class:`ProbeConfig` per point and component, named ``<name>_<i>_<component>``."""
+        digits = max(2, len(str(self.points - 1)))
+        return tuple(ProbeConfig(f"{self.name}_{i:0{digits}d}_{c}", tuple(float(v) for v in x), c, nodes=self.nodes)
+                     for i, x in enumerate(self.locations()) for c in self.components)
 
 
 @dataclass(frozen=True)
 class OutputConfig:
-    """What a run keeps: probes (``E`` rows), full fields, energy; nothing else."""
+    """What a run keeps: probes (``E`` rows), full fields, energy; nothing else.
+
+    ``probes`` holds every output row in order: the point probes, the averages, then the
+    expanded lines of probes (``lines`` keeps the lines as written)."""
 
     probes: tuple[ProbeConfig, ...] = ()
     fields: tuple[str, ...] = ()
     energy: bool = True
     save_every: int = 1
+    lines: tuple[LineConfig, ...] = ()
 
     @classmethod
     def from_dict(cls, data):
-        d = _take(data, "outputs", {"probes": [], "averages": [], "fields": [], "energy": True, "save_every": 1})
+        d = _take(data, "outputs", {"probes": [], "averages": [], "lines": [], "fields": [], "energy": True,
+                                    "save_every": 1})
         probes = []
         for kind, entries in (("probes", d["probes"]), ("averages", d["averages"])):
             for i, p in enumerate(entries):
                 where = f"outputs.{kind}[{i}]"
                 key = "at" if kind == "probes" else "over"
-                e = _take(p, where, {"name": f"{kind[:-1]}{i}", key: None, "component": None}, (key,))
+                allowed = {"name": f"{kind[:-1]}{i}", key: None, "component": None}
+                if kind == "probes":
+                    allowed["nodes"] = 0
+                e = _take(p, where, allowed, (key,))
                 at = e[key] if isinstance(e[key], str) else _vector(e[key], f"{where}.{key}")
                 if not isinstance(e["name"], str) or not e["name"]:
                     raise SceneError(f"[{where}] name must be a non-empty string, got {e['name']!r}")
-                probes.append(ProbeConfig(e["name"], at, e["component"], kind == "averages"))
+                nodes = e.get("nodes", 0)
+                if isinstance(nodes, bool) or not isinstance(nodes, int) or nodes < 0:
+                    raise SceneError(f"[{where}] nodes must be a whole number >= 0 (0: interpolate at the point), "
+                                     f"got {nodes!r}")
+                probes.append(ProbeConfig(e["name"], at, e["component"], kind == "averages", nodes))
+        if not isinstance(d["lines"], list):
+            raise SceneError(f"[outputs] lines must be an array of tables ([[outputs.lines]]), got {d['lines']!r}")
+        lines = tuple(LineConfig.from_dict(line, i) for i, line in enumerate(d["lines"]))
+        for line in lines:
+            probes.extend(line.probes())
         names = [p.name for p in probes]
         if len(set(names)) != len(names):
             raise SceneError(f"[outputs] output names must be unique, got {names}")
@@ -352,7 +480,7 @@ class OutputConfig:
             raise SceneError(f"[outputs] save_every must be a whole number >= 1, got {every!r}")
         if not isinstance(d["energy"], bool):
             raise SceneError(f"[outputs] energy must be true or false, got {d['energy']!r}")
-        return cls(tuple(probes), tuple(d["fields"]), d["energy"], every)
+        return cls(tuple(probes), tuple(d["fields"]), d["energy"], every, lines)
 
 
 @dataclass(frozen=True)
@@ -363,7 +491,7 @@ class Scene:
 
     name: str
     structure: StructureConfig
-    material: MaterialConfig
+    material: MaterialConfig | None
     effects: tuple[EffectConfig, ...]
     time: TimeConfig
     boundary: BoundaryConfig = BoundaryConfig()
@@ -374,8 +502,9 @@ class Scene:
     rom: RomConfig | None = None
     sweep: SweepConfig | None = None
     source_text: str = field(default="", repr=False, compare=False)
+    materials: tuple[RegionMaterialConfig, ...] = ()
 
-    SECTIONS = ("name", "description", "structure", "material", "effects", "boundary",
+    SECTIONS = ("name", "description", "structure", "material", "materials", "effects", "boundary",
                 "inputs", "initial_conditions", "time", "outputs", "rom", "sweep")
 
     @classmethod
@@ -383,9 +512,12 @@ class Scene:
         unknown = sorted(set(data) - set(cls.SECTIONS))
         if unknown:
             raise SceneError(f"unknown section {unknown[0]!r}; valid sections: {', '.join(cls.SECTIONS)}")
-        for required in ("structure", "material", "effects", "time"):
+        for required in ("structure", "effects", "time"):
             if required not in data:
                 raise SceneError(f"missing section [{required}]")
+        if ("material" in data) == ("materials" in data):
+            raise SceneError("give one of [material] (one material) and [materials] (a material per region)"
+                             if "material" in data else "missing section [material] (or [materials], by region)")
         effects = _effects_from_dict(data["effects"])
         inputs = tuple(InputConfig.from_dict(d, i) for i, d in enumerate(data.get("inputs", [])))
         input_names = [i.name for i in inputs]
@@ -396,9 +528,9 @@ class Scene:
             raise SceneError("the scene lists [[inputs]] but not the 'actuation' effect")
         if "actuation" in names and not inputs:
             raise SceneError("the 'actuation' effect needs at least one [[inputs]] entry")
-        if data.get("rom") is not None and not (data.get("outputs") or {}).get("probes") \
-                and not (data.get("outputs") or {}).get("averages"):
-            raise SceneError("[rom] compares reduced and full outputs: list probes or averages in [outputs]")
+        if data.get("rom") is not None and not any((data.get("outputs") or {}).get(kind)
+                                                    for kind in ("probes", "averages", "lines")):
+            raise SceneError("[rom] compares reduced and full outputs: list probes, averages or lines in [outputs]")
         name = data.get("name", "scene")
         if not isinstance(name, str) or not name.strip() or any(c in name for c in "/\\\0"):
             raise SceneError(f"name must be a non-empty string without path separators, got {name!r}")
@@ -406,7 +538,8 @@ class Scene:
             name=name,
             description=str(data.get("description", "")),
             structure=StructureConfig.from_dict(data["structure"]),
-            material=MaterialConfig.from_dict(data["material"]),
+            material=MaterialConfig.from_dict(data["material"]) if "material" in data else None,
+            materials=_materials_from_dict(data["materials"]) if "materials" in data else (),
             effects=effects,
             boundary=BoundaryConfig.from_dict(data.get("boundary")),
             inputs=inputs,

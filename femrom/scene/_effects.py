@@ -97,6 +97,9 @@ class Assembly:
     Attributes
     ----------
     scene : Scene
+    material : MaterialConfig or ElementMaterial
+        What the effects read as the material: the scene's ``[material]``, or the
+        constants per element of its ``[materials]`` (:func:`femrom.scene.element_materials`).
     space : LineSpace or SolidSpace
         Operators, loads and boundary data in the full dof numbering.
     condensation : Condensation
@@ -120,7 +123,12 @@ class Assembly:
     input_matrix: Any = None
     inputs: Any = None
     load: np.ndarray | None = None
+    material: Any = None
     nonlinear_forces: list = field(default_factory=list)
+
+    def __post_init__(self):
+        if self.material is None:       # an assembly made by hand: the scene's one material
+            self.material = getattr(self.scene, "material", None)
 
     @property
     def n_free(self) -> int:

@@ -7,7 +7,8 @@ Example::
     fields = ["q"]                 # what each run streams to the store
     parameters = { "inputs.0.signal.amplitude" = [1.0e4, 2.0e4], "material.youngs_modulus" = [0.9e6, 1.1e6] }
 
-Parameter paths: ``material.<key>`` (a number of ``[material]``),
+Parameter paths: ``material.<key>`` (a number of ``[material]``), ``materials.<name>.<key>``
+(a number of ``[materials.<name>]``),
 ``inputs.<i>.signal.<key>`` (a number of the i-th input's signal), and
 ``effects.<name>.<key>`` (a number among a listed effect's options). The mesh
 and the time window stay those of the scene: every run has the same dofs and
@@ -82,6 +83,12 @@ def _check_path(path: str, scene: dict) -> None:
         if not isinstance(scene.get("material", {}).get(parts[1], None), (int, float)):
             raise SceneError(f"[sweep.parameters] {path!r}: [material] has no number {parts[1]!r}")
         return
+    if head == "materials" and len(parts) == 3:
+        table = (scene.get("materials") or {}).get(parts[1])
+        if not isinstance(table, dict) or isinstance(table.get(parts[2]), bool) \
+                or not isinstance(table.get(parts[2]), (int, float)):
+            raise SceneError(f"[sweep.parameters] {path!r}: [materials.{parts[1]}] has no number {parts[2]!r}")
+        return
     if head == "inputs" and len(parts) == 4 and parts[2] == "signal":
         inputs = scene.get("inputs", [])
         if not parts[1].isdigit() or int(parts[1]) >= len(inputs):
@@ -100,7 +107,7 @@ def _check_path(path: str, scene: dict) -> None:
         if isinstance(options.get(parts[2]), bool) or not isinstance(options.get(parts[2]), (int, float)):
             raise SceneError(f"[sweep.parameters] {path!r}: effect {parts[1]!r} has no numeric option {parts[2]!r}")
         return
-    raise SceneError(f"[sweep.parameters] unknown path {path!r}; valid: material.<key>, "
+    raise SceneError(f"[sweep.parameters] unknown path {path!r}; valid: material.<key>, materials.<name>.<key>, "
                      "inputs.<i>.signal.<key>, effects.<name>.<key>")
 
 
@@ -110,6 +117,13 @@ def _check_value(path: str, value: float, scene: dict) -> None:
     where = f"[sweep.parameters] {path!r} = {value:g}"
     if parts[0] == "material" and not value > 0:
         raise SceneError(f"{where}: material constants must be positive")
+    if parts[0] == "materials":
+        from femrom.scene._config import _material_constants
+
+        try:
+            _material_constants({parts[2]: value}, f"materials.{parts[1]}")
+        except SceneError as exc:
+            raise SceneError(f"{where}: {exc}") from None
     if parts[0] == "inputs":
         try:
             Signal.from_dict({**scene["inputs"][int(parts[1])]["signal"], parts[3]: value})
@@ -131,6 +145,10 @@ def with_parameters(scene, values) -> "object":
         parts = path.split(".")
         if parts[0] == "material":
             scene = dataclasses.replace(scene, material=dataclasses.replace(scene.material, **{parts[1]: value}))
+        elif parts[0] == "materials":
+            materials = tuple(dataclasses.replace(m, **{parts[2]: value}) if m.label == parts[1] else m
+                              for m in scene.materials)
+            scene = dataclasses.replace(scene, materials=materials)
         elif parts[0] == "inputs":
             i = int(parts[1])
             signal = scene.inputs[i].signal

@@ -16,4 +16,4 @@ class Inertia(Effect):
     def assemble(self, build, options):
         with build.timed("mass"):
             build.mass = build.condensation.matrix(
-                build.space.mass(build.scene.material, lumped=options["mass"] == "lumped"))
+                build.space.mass(build.material, lumped=options["mass"] == "lumped"))

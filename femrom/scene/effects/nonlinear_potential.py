@@ -35,9 +35,15 @@ class NonlinearPotential(Effect):
                 if options["component"] is None:
                     raise SceneError("[effects.nonlinear_potential] a solid needs 'component' (x, y or z)")
                 dofs, _ = space.coordinates(options["component"])
-                lumped = space.mass(build.scene.material, lumped=True).diagonal()
+                material = build.material
+                if np.ndim(material.density):      # per element: the lumped mass of unit density
+                    lumped = space.mass(material.with_unit_density(), lumped=True).diagonal()
+                    density = 1.0
+                else:
+                    lumped = space.mass(material, lumped=True).diagonal()
+                    density = material.density
                 weights = 0.0 * lumped
-                weights[dofs] = lumped[dofs] / build.scene.material.density
+                weights[dofs] = lumped[dofs] / density
             weights = options["coefficient"] * condensation.vector(weights)
             on = (np.abs(weights) > 1e-12 * np.abs(weights).max()).nonzero()[0]
             placement = {} if on.size == weights.size else {"dofs": on, "n_dofs": weights.size}
