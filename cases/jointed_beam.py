@@ -24,7 +24,7 @@ The bolted half Brake-Reuss beam of ``jointed_beam.toml`` (free-free, three bolt
    error removed (``f = tan(pi f_h dt) / (pi dt)``, exact for a linear mode).
 6. **The measured backbone** of the same processing (``data/brb/hammer_impact.npz``).
 7. The stepped-sine forced response of the hyper-reduced model at the shaker (``shaker1``):
-   by default 0.2 and 1.5 N at 80.0-80.6 Hz in 0.1 Hz steps; ``--full-sweep`` the
+   by default 0.2 and 1.5 N at 79.6-80.6 Hz in 0.1 Hz steps; ``--full-sweep`` the
    issue's 0.2, 0.5, 1 and 1.5 N at 79-81.5 Hz in 0.05 Hz steps.
 
 Run ``python -m femrom run jointed_beam [-o results/jointed_beam] [--full-sweep] [--quick] [--no-fit]``.
@@ -101,14 +101,15 @@ class JointedBeamCase:
     qsma_amplitudes: tuple = tuple(np.round(np.logspace(0, np.log10(32.0), 16), 4))  #: acc1 [m/s^2]
     forced: bool = True
     forced_levels: tuple = (0.2, 1.5)            #: shaker force amplitudes [N] (--full-sweep: 0.2, 0.5, 1, 1.5)
-    forced_frequencies: tuple = tuple(np.round(np.arange(80.0, 80.6 + 1e-9, 0.1), 3))  #: (--full-sweep: 79-81.5 by 0.05)
+    forced_frequencies: tuple = tuple(np.round(np.arange(79.6, 80.6 + 1e-9, 0.1), 3))  #: (--full-sweep: 79-81.5 by 0.05)
     forced_steps_per_period: int = 32
     forced_tolerance: float = 1e-2
     friction_coefficient: float = 0.6           #: mu of the Iwan joint's macro-slip traction mu p_0 (textbook)
-    # chi, beta: the fit's result on the default mesh (-0.499, 0.943), the fit's start, or used as is
+    # chi, beta: used as they are without the fit (--no-fit); the fit's result on the default mesh
     iwan_chi: float = -0.5                      #: the Iwan density's exponent
     iwan_beta: float = 0.94                     #: the weight of its delta
     fit_iwan: bool = True                       #: fit chi and beta on the measured backbone (when the data are there)
+    fit_start: tuple = (-0.5, 0.5)              #: (chi, beta) the fit starts from
     fit_evaluations: int = 50                   #: Nelder-Mead budget of the fit (one 10-mode QSMA each)
     training_impacts: tuple = (300.0, 1500.0)   #: blows [N] of the all-pair ring-downs ECSW trains on
     training_window: float = 0.15               #: their length [s]
@@ -245,7 +246,8 @@ def fit_iwan(setup: dict, config: JointedBeamCase, supports, measured: Backbone,
         return value
 
     tic = time.perf_counter()
-    start = [np.log((config.iwan_chi + 1.0) / -config.iwan_chi), np.log(config.iwan_beta)]
+    chi0, beta0 = config.fit_start
+    start = [np.log((chi0 + 1.0) / -chi0), np.log(beta0)]
     minimize(misfit, start, method="Nelder-Mead",
              options={"xatol": 1e-2, "fatol": 1e-4, "maxfev": config.fit_evaluations})
     value, chi, beta = min(history)
