@@ -18,7 +18,15 @@
   :class:`SecondOrderOpInf` (plain least squares, the baseline),
   :class:`HamiltonianOpInf` (symmetric ``D^_q``, ``D^_p`` by Lyapunov
   equations), :class:`CanonicalOpInf` (an unconstrained first-order ``A^`` on
-  canonical data, H-OpInf's baseline), :class:`GalerkinProjection` (the intrusive reference);
+  canonical data, H-OpInf's baseline), :class:`GalerkinProjection` (the intrusive reference),
+  :class:`SpML` (L-OpInf, then a learned mass, potential and dissipation function on top,
+  structure by construction; fitting needs torch, the ``ml`` extra, and says so in one
+  line without it: :data:`TORCH_MISSING`; settings :class:`SpMLConfig`);
+- learned nonlinear terms (numpy, no torch): :class:`LearnedPotential` (a scalar
+  ``U^(q^)`` of monomials of degree 3 and 4 and an MLP, force ``dU^/dq^``) and
+  :class:`LearnedDissipation` (a convex ``F^(q^') >= 0``, force ``dF^/dq^'``), built
+  from :class:`SymmetricPolynomial`, :class:`ConvexPowers` and :class:`ScalarNetwork`
+  (value, exact gradient and Hessian);
 - :class:`ErrorSplit`, :class:`HamiltonianErrorSplit`: projection, derivative
   and optimisation errors of a fit.
 """
@@ -73,8 +81,12 @@ from femrom.inference.learners.hopinf import HamiltonianOpInf
 from femrom.inference.learners.canonical_opinf import CanonicalOpInf
 from femrom.inference.learners.lopinf import LagrangianOpInf
 from femrom.inference.learners.opinf import SecondOrderOpInf
+from femrom.inference.learners.spml import TORCH_MISSING, SpML, SpMLConfig, torch_available
+from femrom.inference._networks import ConvexPowers, ScalarNetwork, SymmetricPolynomial
 from femrom.inference.terms.damping import Damping
 from femrom.inference.terms.input import Input
+from femrom.inference.terms.learned_dissipation import LearnedDissipation
+from femrom.inference.terms.learned_potential import LearnedPotential
 from femrom.inference.terms.mass import Mass
 from femrom.inference.terms.output import Output
 from femrom.inference.terms.projected_force import ProjectedNonlinearForce
@@ -82,7 +94,8 @@ from femrom.inference.terms.stiffness import Stiffness
 
 __all__ = [
     "CONIC_SOLVERS", "DERIVATIVE_SOURCES", "GRADIENT_DATA", "HAMILTONIAN_DERIVATIVE_SOURCES", "LEARNERS",
-    "SOLVERS", "TERMS", "VARIABLES", "Block", "CanonicalData", "CanonicalOpInf", "Damping", "ErrorSplit", "FastOptions", "ForcePotential",
+    "SOLVERS", "TERMS", "TORCH_MISSING", "VARIABLES", "ConvexPowers", "LearnedDissipation", "LearnedPotential",
+    "ScalarNetwork", "SpML", "SpMLConfig", "SymmetricPolynomial", "torch_available", "Block", "CanonicalData", "CanonicalOpInf", "Damping", "ErrorSplit", "FastOptions", "ForcePotential",
     "GalerkinProjection", "canonical_from_second_order",
     "GramProblem", "HamiltonianErrorSplit", "HamiltonianOperators", "HamiltonianOpInf", "Input",
     "LagrangianOpInf", "Learner", "LinearTerm", "Mass", "Output", "ProjectedNonlinearForce",

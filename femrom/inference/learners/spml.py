@@ -1,0 +1,354 @@
+r"""L-OpInf enhanced with structure-preserving machine learning (SpML)."""
+
+from __future__ import annotations
+
+import importlib
+import importlib.util
+import time
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from femrom._progress import Progress
+from femrom.inference._data import SecondOrderData, concatenate
+from femrom.inference._learner import Learner, register_learner
+from femrom.inference._operators import ReducedOperators
+from femrom.inference._terms import registered_terms, term_class
+from femrom.inference.learners.lopinf import LagrangianOpInf
+from femrom.inference.terms.learned_dissipation import LearnedDissipation
+from femrom.inference.terms.learned_potential import LearnedPotential
+
+#: The one line a user without torch reads when asking for SpML.
+TORCH_MISSING = "SpML needs torch, which is not installed: pip install 'femrom[ml]' (torch==2.13.0, CPU is enough)"
+
+
+def torch_available() -> bool:
+    """Whether torch can be imported (without importing it)."""
+    try:
+        return importlib.util.find_spec("torch") is not None
+    except (ImportError, ValueError):
+        return False
+
+
+def _backend():
+    try:
+        return importlib.import_module("femrom.inference._spml_torch")
+    except ImportError:
+        raise ImportError(TORCH_MISSING) from None
+
+
+@dataclass(frozen=True)
+class SpMLConfig:
+    """Settings of the SpML fit (step 2; step 1 is :class:`LagrangianOpInf`'s).
+
+    Attributes
+    ----------
+    potential_degrees : tuple of int
+        Degrees of the potential's monomials, a subset of (3, 4) (degree 2 is ``K^``;
+        degrees 0 and 1 would move the equilibrium); all ``C(r + d - 1, d)`` monomials of each.
+    potential_widths : tuple of int
+        Hidden widths of the potential's MLP (tanh); ``()``: no network.
+    learn_dissipation : bool
+        Whether to learn a nonlinear dissipation function ``F^`` (the linear ``C^`` is step 1's).
+    dissipation_directions : int or None
+        Directions ``a_k``, ``b_k`` of the convex powers ``|a_k . v|^3 / 3``, ``(b_k . v)^4 / 4``
+        (``None``: r; 0: none).
+    dissipation_widths : tuple of int
+        Hidden widths of the input-convex network (softplus); ``()``: none.
+    refine_linear : bool
+        Refine step 1's linear terms in step 2 within their structure (``K^ = G G^T + eps I``,
+        ``C^ = G G^T``, ``B^`` free), starting from step 1's values; ``False`` keeps them fixed.
+        Step 1 fits a linear model to nonlinear data, so its ``K^`` carries the nonlinear force's
+        secant part, which a potential of degree >= 3 cannot take back.
+    learn_mass : bool
+        Learn ``M^ = L L^T`` (``L`` lower triangular, positive diagonal, starting at the step-1
+        mass); else keep step 1's.
+    max_iterations : int
+        L-BFGS iterations at most.
+    check_every : int
+        Iterations between two checks of the validation loss (and progress updates).
+    patience : int
+        Checks without improvement before stopping early.
+    tolerance : float
+        Relative improvement of the checked loss that counts.
+    history_size : int
+        L-BFGS memory.
+    weight_decay : float
+        ``mu sum ||W||_F^2`` over the networks' weight matrices, added to the relative loss.
+    seed : int
+        Seed of the initial weights (a ``torch.Generator``; same seed, same weights).
+    threads : int
+        torch threads during the fit (restored after; 1 is fastest at these sizes).
+    """
+
+    potential_degrees: tuple = (3, 4)
+    potential_widths: tuple = (32, 32)
+    learn_dissipation: bool = True
+    dissipation_directions: int | None = None
+    dissipation_widths: tuple = (16,)
+    refine_linear: bool = True
+    learn_mass: bool = True
+    max_iterations: int = 2000
+    check_every: int = 20
+    patience: int = 10
+    tolerance: float = 1e-4
+    history_size: int = 50
+    weight_decay: float = 0.0
+    seed: int = 0
+    threads: int = 1
+
+    def __post_init__(self):
+        object.__setattr__(self, "potential_degrees", tuple(int(d) for d in self.potential_degrees))
+        object.__setattr__(self, "potential_widths", tuple(int(w) for w in self.potential_widths))
+        object.__setattr__(self, "dissipation_widths", tuple(int(w) for w in self.dissipation_widths))
+        bad = [d for d in self.potential_degrees if d not in (3, 4)]
+        if bad or len(set(self.potential_degrees)) != len(self.potential_degrees):
+            raise ValueError(f"SpMLConfig.potential_degrees must be distinct values of (3, 4), got "
+                             f"{self.potential_degrees}")
+        for name in ("potential_widths", "dissipation_widths"):
+            if any(w < 1 for w in getattr(self, name)):
+                raise ValueError(f"SpMLConfig.{name} must be positive widths, got {getattr(self, name)}")
+        if self.dissipation_directions is not None and int(self.dissipation_directions) < 0:
+            raise ValueError(f"SpMLConfig.dissipation_directions must be >= 0, got {self.dissipation_directions}")
+        for name in ("max_iterations", "check_every", "patience", "history_size", "threads"):
+            if int(getattr(self, name)) < 1:
+                raise ValueError(f"SpMLConfig.{name} must be >= 1, got {getattr(self, name)}")
+        if not (self.tolerance >= 0 and self.weight_decay >= 0):
+            raise ValueError(f"SpMLConfig.tolerance and weight_decay must be >= 0, got "
+                             f"{self.tolerance}, {self.weight_decay}")
+
+
+@register_learner("spml")
+class SpML(Learner):
+    r"""L-OpInf, then the nonlinear Lagrangian and dissipation learned on top (Sharma, Najera-Flores, Todd & Kramer, CMAME 423, 116865, 2024).
+
+    Step 1, :class:`LagrangianOpInf`: the best linear Lagrangian model
+    ``M_0 q'' + C^ q' + K^ q = B^ u`` (``K^ = K^^T > 0``, ``C^ = C^^T >= 0``,
+    ``M_0 = I`` for a mass-orthonormal basis). Step 2 keeps ``K^, C^, B^`` and learns
+
+    .. math::
+
+        \min_{L,\,\hat K,\,\hat C,\,\hat B,\,\alpha,\,\theta_U,\,a,\,b,\,\theta_F}\;
+        \frac{\big\| \hat M^{-1} \big(\hat M \ddot{\hat Q} + \hat C \dot{\hat Q} + \nabla\hat{\mathcal F}(\dot{\hat Q})
+              + \hat K \hat Q + \nabla\hat U(\hat Q) - \hat B U\big) \big\|_F^2}
+             {\| \ddot{\hat Q} \|_F^2}
+
+    by full-batch L-BFGS (torch, float64), with every structure built in,
+    not penalised:
+
+    - mass ``M^ = L L^T``, ``L`` lower triangular with an exponential
+      diagonal: symmetric positive definite for any weights (the seed's
+      ``I + M^_NN``), so ``T = v^T M^ v / 2 > 0``;
+    - potential ``U^`` (:class:`LearnedPotential`): monomials of degree 3 and
+      4 plus an MLP, shifted to ``U^(0) = 0``, ``grad U^(0) = 0``: a scalar,
+      whose force is its exact gradient (autograd in training, the exported
+      analytic gradient and Hessian in the ROM);
+    - dissipation ``F^`` (:class:`LearnedDissipation`): convex powers and an
+      input-convex network, convex with minimum 0 at ``v = 0``, hence
+      ``v . grad F^(v) >= F^(v) >= 0``: it never feeds power in.
+
+    With the :class:`~femrom.rom.SecondOrderROM` scheme ``"discrete_gradient"``
+    the energy ``T + q^T K^ q / 2 + U^`` never increases without input.
+    The validation trajectory, when given, decides when to stop (the best
+    weights by its loss are kept). Fitting needs torch (the ``ml`` extra);
+    the fitted model is numpy only (steps, saves and loads without torch).
+
+    Parameters
+    ----------
+    terms, regularization, solver, mass, mass_orthonormal, stiffness_margin, solver_options
+        Step 1's (:class:`~femrom.inference.SecondOrderLearner`): e.g. ``terms=["damping"]``.
+    config : SpMLConfig
+    progress : bool or None
+        The progress line with the loss (``None``: on a terminal, in a log every 30 s).
+
+    Attributes
+    ----------
+    operators_ : ReducedOperators
+        Step 1's terms with ``M^`` in place of its mass, :class:`LearnedPotential`,
+        :class:`LearnedDissipation` and the output map.
+    linear_ : LagrangianOpInf
+        The fitted step 1.
+    mass_ : (r, r) ndarray
+    potential_ : LearnedPotential or None
+    dissipation_ : LearnedDissipation or None
+    history_ : list of dict
+        ``iteration``, ``loss`` (training), ``validation_loss`` at every check.
+    best_iteration_, iterations_ : int
+    loss_ : float
+        The relative training loss of the kept weights; ``linear_loss_`` step 1's.
+    training_seconds_ : float
+    """
+
+    method = "spml"
+
+    def __init__(self, terms=(), *, config: SpMLConfig = SpMLConfig(), regularization=0.0, solver: str = "fast",
+                 mass: np.ndarray | None = None, mass_orthonormal: bool = True, stiffness_margin: float = 1e-10,
+                 solver_options: dict | None = None, progress: bool | None = None):
+        if not torch_available():
+            raise ImportError(TORCH_MISSING)
+        if not isinstance(config, SpMLConfig):
+            raise TypeError(f"config must be an SpMLConfig, got {type(config).__name__}")
+        self.config, self.progress = config, progress
+        self.linear = LagrangianOpInf(terms, regularization=regularization, solver=solver, mass=mass,
+                                      mass_orthonormal=mass_orthonormal, stiffness_margin=stiffness_margin,
+                                      solver_options=solver_options)
+        self.linear_options = {"regularization": regularization, "solver": solver, "mass": mass,
+                               "mass_orthonormal": mass_orthonormal, "stiffness_margin": stiffness_margin,
+                               "solver_options": solver_options}
+
+    @property
+    def learned_terms(self):
+        return self.linear.learned_terms
+
+    @property
+    def known_terms(self):
+        return self.linear.known_terms
+
+    @classmethod
+    def for_system(cls, system, basis: np.ndarray | None = None, *, known_forces: bool = False, **options):
+        """An SpML with the learnable terms of ``system``'s effects (damping, ...).
+
+        A known nonlinear force is what SpML learns, so it is left out unless
+        ``known_forces`` (then it is projected with ``basis`` and kept, and SpML learns the rest).
+        """
+        system = getattr(system, "system", system)
+        terms = []
+        for effect in system.effects:
+            for term in registered_terms().values():
+                if term.effect != effect or term.name in ("stiffness", "mass", "input", "output"):
+                    continue
+                if term.learnable:
+                    terms.append(term)
+                elif term.structure == "known" and known_forces:
+                    if basis is None:
+                        raise ValueError(f"known_forces=True: for_system needs the basis to project {effect!r}")
+                    terms.append(term.galerkin(system, basis))
+        return cls(terms, **options)
+
+    # -- the regression's pieces on any data ------------------------------------------------
+    def _arrays(self, data: SecondOrderData):
+        """``(Q^T, Q'^T, Q''^T, Y^T, [D_j^T], ||Q''||_F^2)``: step 1's target (``M_0 Q''`` and
+        the known terms) and the data blocks of its learned linear terms, as (K, .) arrays."""
+        linear = self.linear
+        Y = linear._target(data)
+        blocks = [cls.datablock(data).T for cls in linear._learned(data)]
+        norm = float(np.sum(data.accelerations ** 2))
+        return (data.states.T, data.velocities.T, data.accelerations.T, Y.T, blocks,
+                max(norm, np.finfo(float).tiny))
+
+    def _linear_specs(self, data: SecondOrderData, arrays) -> list:
+        """Step 1's learned linear terms: name, structure, matrix, ``eps`` shift and a scale floor."""
+        force = np.sqrt(arrays[5] / data.states.size)
+        specs = []
+        for cls, D in zip(self.linear._learned(data), arrays[4]):
+            typical = force / max(float(np.sqrt(np.mean(D * D))), np.finfo(float).tiny)
+            structure = {"spd": "spd", "psd": "psd", "symmetric": "symmetric"}.get(cls.structure, "free")
+            specs.append({"name": cls.name, "structure": structure, "matrix": self.linear.coefficients_[cls.name],
+                          "shift": self.linear.stiffness_shift_ if structure == "spd" else 0.0,
+                          "floor": np.sqrt(1e-2 * typical) if structure == "psd" else 1e-2 * typical})
+        return specs
+
+    def _mass0(self, r: int) -> np.ndarray:
+        return np.eye(r) if self.linear.mass is None else self.linear.mass
+
+    # -- fit ---------------------------------------------------------------------------------
+    def fit(self, data, validation=None) -> "SpML":
+        r"""Step 1 (L-OpInf) on ``data``, then step 2 (module docstring).
+
+        Parameters
+        ----------
+        data : SecondOrderData or list of SecondOrderData
+            Reduced training trajectories (with inputs when the model has inputs).
+        validation : SecondOrderData or list, optional
+            Trajectories not trained on: their loss picks the kept weights and stops
+            the fit (without them, the training loss does).
+
+        Returns
+        -------
+        self
+        """
+        backend = _backend()
+        import torch
+
+        tic = time.perf_counter()
+        data = concatenate(data) if isinstance(data, (list, tuple)) else data
+        if validation is not None:
+            validation = concatenate(validation) if isinstance(validation, (list, tuple)) else validation
+            if validation.r != data.r:
+                raise ValueError(f"validation data have r = {validation.r}, the training data r = {data.r}")
+        self.linear.fit(data)
+        linear_ops = self.linear.operators_
+        r, cfg = data.r, self.config
+        train_arrays = self._arrays(data)
+        validation_arrays = None if validation is None else self._arrays(validation)
+        scales = _scales(data, train_arrays[5])
+        generator = torch.Generator().manual_seed(int(cfg.seed))
+        module = backend.SpMLModule(r, cfg, scales, self._mass0(r), self._linear_specs(data, train_arrays),
+                                    generator)
+        with Progress(cfg.max_iterations, "SpML fit", enabled=self.progress) as progress:
+            result = backend.train(module, train_arrays, validation_arrays, cfg, progress)
+        mass, linear, polynomial, u_network, powers, f_network = module.export()
+        self.linear_matrices_ = linear
+        self.history_ = result["history"]
+        self.best_iteration_, self.iterations_ = result["best_iteration"], result["iterations"]
+        self.training_seconds_ = time.perf_counter() - tic
+        self.mass_ = mass
+        self.potential_ = None if polynomial is None and u_network is None else \
+            LearnedPotential(r, polynomial, u_network)
+        self.dissipation_ = None if powers is None and f_network is None else \
+            LearnedDissipation(r, powers, f_network)
+        self.linear_loss_ = self._loss(data, {n: self.linear.coefficients_[n] for n in linear}, step1=True)
+        self.loss_ = self._loss(data, linear)
+        self.operators_ = self._operators(linear_ops, data)
+        return self
+
+    def _operators(self, linear_ops: ReducedOperators, data) -> ReducedOperators:
+        refined = {cls.name: cls.from_coefficients(self.linear_matrices_[cls.name]) for cls in self.linear._learned(data)}
+        terms = [refined.get(t.name, t) for t in linear_ops.terms if t.name != "mass"]
+        if self.config.learn_mass or self.linear.mass is not None:
+            terms.append(term_class("mass")(self.mass_))
+        terms += [t for t in (self.potential_, self.dissipation_) if t is not None]
+        return ReducedOperators(tuple(terms), self.describe())
+
+    def nonlinear_forces(self, Q: np.ndarray, Vel: np.ndarray | None = None) -> np.ndarray:
+        """(r, K) ``grad U^(Q) + grad F^(Vel)``: the learned nonlinear forces at columns."""
+        out = np.zeros(np.shape(Q))
+        if self.potential_ is not None:
+            out += self.potential_.forces(Q)
+        if self.dissipation_ is not None and Vel is not None:
+            out += self.dissipation_.forces(Q, Vel)
+        return out
+
+    def _loss(self, data: SecondOrderData, linear: dict, step1: bool = False) -> float:
+        """The relative residual ``||M^^-1 R||_F^2 / ||Q''||_F^2`` of the exported (numpy) model
+        (``step1``: of step 1's model alone)."""
+        q, v, a, Y, blocks, norm = self._arrays(data)
+        R = Y.T + sum(linear[cls.name] @ D.T for cls, D in zip(self.linear._learned(data), blocks))
+        mass = self._mass0(data.r)
+        if not step1:
+            R = R + (self.mass_ - mass) @ data.accelerations + self.nonlinear_forces(data.states, data.velocities)
+            mass = self.mass_
+        R = np.linalg.solve(mass, R)
+        return float(np.sum(R * R) / norm)
+
+    def describe(self) -> dict:
+        out = {"method": self.method, "config": asdict(self.config),
+               "linear": self.linear.describe() if self.linear.is_fitted else {"method": self.linear.method}}
+        if getattr(self, "history_", None) is not None:
+            out.update(loss=self.loss_, linear_loss=self.linear_loss_, iterations=self.iterations_,
+                       best_iteration=self.best_iteration_, training_seconds=self.training_seconds_)
+        return out
+
+
+def _scales(data: SecondOrderData, target_norm2: float) -> dict:
+    """Coordinate and energy scales of the training coordinates (module :mod:`._spml_torch`)."""
+
+    def rms(X):
+        s = np.sqrt(np.mean(X * X, axis=1))
+        return np.maximum(s, 1e-8 * max(float(s.max()), np.finfo(float).tiny))
+
+    sq, sv = rms(data.states), rms(data.velocities)
+    force = np.sqrt(target_norm2 / data.states.size)
+    return {"q": sq, "v": sv, "potential": force * float(np.sqrt(np.mean(sq * sq))),
+            "dissipation": force * float(np.sqrt(np.mean(sv * sv)))}
+
