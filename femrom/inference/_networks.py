@@ -39,6 +39,28 @@ def multi_indices(r: int, degree: int) -> np.ndarray:
     return np.array(list(combinations_with_replacement(range(r), degree)), dtype=np.int64).reshape(-1, degree)
 
 
+def monomials(X: np.ndarray, degree: int) -> np.ndarray:
+    """(K, n) ndarray: the monomials of one degree (:func:`multi_indices` order) at the rows of ``X`` (K, r)."""
+    index = multi_indices(X.shape[1], degree)
+    out = np.ones((X.shape[0], index.shape[0]))
+    for j in range(degree):
+        out *= X[:, index[:, j]]
+    return out
+
+
+def derivative_map(r: int, degree: int):
+    """``(m, p, i, e)`` int arrays: monomial ``m`` of ``degree`` differentiated in ``x_i`` is ``e``
+    times monomial ``p`` of ``degree - 1`` (:func:`multi_indices` orders), one row per pair."""
+    lower = {tuple(p): k for k, p in enumerate(multi_indices(r, degree - 1).tolist())}
+    rows = []
+    for m, index in enumerate(multi_indices(r, degree).tolist()):
+        for i in sorted(set(index)):
+            reduced = list(index)
+            reduced.remove(i)
+            rows.append((m, lower[tuple(reduced)], i, index.count(i)))
+    return tuple(np.array(c, dtype=np.int64) for c in zip(*rows))
+
+
 def symmetric_tensor(r: int, indices: np.ndarray, coefficients: np.ndarray) -> np.ndarray:
     """The symmetric tensor ``T`` with ``T[x, ..., x] = sum_m c_m prod_j x_{i_mj}``."""
     degree = indices.shape[1]
@@ -86,6 +108,11 @@ class SymmetricPolynomial:
         c4, c3 = B4 @ x, B3 @ x
         return float(c3 @ x + c4 @ x), 3.0 * c3 + 4.0 * c4, 6.0 * B3 + 12.0 * B4
 
+    def value(self, x: np.ndarray) -> float:
+        """``phi`` at one point ``x`` (r,)."""
+        c3 = (self.T3 @ x) @ x
+        return float(c3 @ x + (((self.T4 @ x) @ x) @ x) @ x)
+
     def value_gradient(self, X: np.ndarray):
         """``(phi (K,), grad (r, K))`` at the columns of ``X`` (r, K)."""
         r, K = X.shape
@@ -124,6 +151,10 @@ class ConvexPowers:
         grad = A.T @ (np.abs(s) * s) + B.T @ t ** 3
         hess = A.T @ ((2.0 * np.abs(s))[:, None] * A) + B.T @ ((3.0 * t * t)[:, None] * B)
         return value, grad, hess
+
+    def value(self, x: np.ndarray) -> float:
+        s, t = self.cubic @ x, self.quartic @ x
+        return float(np.sum(np.abs(s) ** 3) / 3.0 + np.sum(t ** 4) / 4.0)
 
     def value_gradient(self, X: np.ndarray):
         S, T = self.cubic @ X, self.quartic @ X
@@ -213,6 +244,17 @@ class ScalarNetwork:
                 delta = layer.weight.T @ dz
         return value, grad, H
 
+    def value(self, x: np.ndarray) -> float:
+        h = None
+        for layer in self.layers:
+            z = layer.bias.copy()
+            if layer.weight is not None:
+                z += layer.weight @ h
+            if layer.input_weight is not None:
+                z += layer.input_weight @ x
+            h = self._sigma(z)[0]
+        return float(self.output @ h) - self.value0 - float(self.gradient0 @ x)
+
     def value_gradient_hessian(self, x: np.ndarray):
         value, grad, H = self._raw(np.asarray(x, dtype=float))
         return value - self.value0 - float(self.gradient0 @ x), grad - self.gradient0, H
@@ -275,6 +317,9 @@ class ScalarSum:
             v, g, h = part.value_gradient_hessian(x)
             value, grad, hess = value + v, grad + g, hess + h
         return value, grad, hess
+
+    def value(self, x: np.ndarray) -> float:
+        return float(sum(part.value(x) for part in self.parts))
 
     def value_gradient(self, X: np.ndarray):
         values, grads = np.zeros(X.shape[1]), np.zeros(X.shape)

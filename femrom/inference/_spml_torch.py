@@ -17,7 +17,8 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from femrom.inference._networks import ConvexPowers, Layer, ScalarNetwork, SymmetricPolynomial, multi_indices
+from femrom.inference._networks import (ConvexPowers, Layer, ScalarNetwork, SymmetricPolynomial, derivative_map,
+                                       monomials, multi_indices)
 
 DTYPE = torch.float64
 
@@ -38,9 +39,12 @@ class SpMLModule(torch.nn.Module):
     mass0 : (r, r) ndarray
         The step-1 mass (the identity for a mass-orthonormal basis): ``L`` starts at its Cholesky factor.
     generator : torch.Generator
+    initial : dict, optional
+        ``{"alpha": {degree: (n,) ndarray}}``: the monomials' starting coefficients (scaled units).
     """
 
-    def __init__(self, r: int, config, scales: dict, mass0: np.ndarray, linear: list, generator: torch.Generator):
+    def __init__(self, r: int, config, scales: dict, mass0: np.ndarray, linear: list, generator: torch.Generator,
+                 initial: dict | None = None):
         super().__init__()
         self.r, self.config = r, config
         self._linear_terms(linear)
@@ -60,7 +64,9 @@ class SpMLModule(torch.nn.Module):
         # potential: monomials of degree 3 and 4 (index lists) and an MLP; both start at zero force
         self.indices = {d: torch.as_tensor(multi_indices(r, d)) for d in config.potential_degrees}
         self._maps = {}
-        self.alpha = torch.nn.ParameterDict({str(d): zeros(len(i)) for d, i in self.indices.items()})
+        alpha0 = initial.get("alpha", {}) if initial else {}
+        self.alpha = torch.nn.ParameterDict({str(d): torch.nn.Parameter(_tensor(alpha0[d])) if d in alpha0
+                                             else zeros(len(i)) for d, i in self.indices.items()})
         widths = (r, *config.potential_widths)
         self.u_weights = torch.nn.ParameterList(
             [normal(b, a, std=1.0 / np.sqrt(a)) for a, b in zip(widths[:-1], widths[1:])])
@@ -174,10 +180,10 @@ class SpMLModule(torch.nn.Module):
         x = q / self.sq
         value = torch.zeros(q.shape[0], dtype=DTYPE)
         for d, index in self.indices.items():
-            monomials = x[:, index[:, 0]]
+            products = x[:, index[:, 0]]
             for j in range(1, d):
-                monomials = monomials * x[:, index[:, j]]
-            value = value + monomials @ self.alpha[str(d)]
+                products = products * x[:, index[:, j]]
+            value = value + products @ self.alpha[str(d)]
         if self.u_output is not None:
             value = value + self._u_network(x)
         return self.cU * value
@@ -197,27 +203,12 @@ class SpMLModule(torch.nn.Module):
     def features(self, q: torch.Tensor) -> dict:
         """The monomials of degree ``d - 1`` of ``x = q / s_q`` (K, n_{d-1}), fixed data: the
         gradient of ``sum_m alpha_m x^m`` is ``Phi_{d-1}(x) A(alpha)``, linear in ``alpha``."""
-        x = q / self.sq
-        out = {}
-        for d in self.indices:
-            lower = torch.as_tensor(multi_indices(self.r, d - 1))
-            monomials = x[:, lower[:, 0]]
-            for j in range(1, d - 1):
-                monomials = monomials * x[:, lower[:, j]]
-            out[d] = monomials
-        return out
+        x = (q / self.sq).numpy()
+        return {d: _tensor(monomials(x, d - 1)) for d in self.indices}
 
     def _derivative_map(self, d: int):
-        """``(m, p, i, e)``: monomial ``m`` of degree ``d`` differentiated in ``x_i`` is ``e x^p``."""
         if d not in self._maps:
-            lower = {tuple(p): k for k, p in enumerate(multi_indices(self.r, d - 1).tolist())}
-            rows = []
-            for m, index in enumerate(multi_indices(self.r, d).tolist()):
-                for i in sorted(set(index)):
-                    reduced = list(index)
-                    reduced.remove(i)
-                    rows.append((m, lower[tuple(reduced)], i, index.count(i)))
-            m, p, i, e = (torch.as_tensor(c) for c in zip(*rows))
+            m, p, i, e = (torch.as_tensor(c) for c in derivative_map(self.r, d))
             self._maps[d] = (m, p, i, e.to(DTYPE))
         return self._maps[d]
 

@@ -68,7 +68,7 @@ class LearnedDissipation(ReducedTerm):
     def dissipation(self, v) -> float | np.ndarray:
         """``F^(v)`` for (r,) or at the columns of (r, K)."""
         v = np.asarray(v, dtype=float)
-        return self._at(v)[0] if v.ndim == 1 else self.function.value_gradient(v)[0]
+        return self._at.value(v) if v.ndim == 1 else self.function.value_gradient(v)[0]
 
     def force(self, q, v=None, state=None) -> np.ndarray:
         """(r,) ``dF^/dv`` (zero without a velocity)."""

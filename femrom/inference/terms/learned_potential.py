@@ -21,6 +21,12 @@ class _PointCache:
             self.x = np.array(x, dtype=float)
         return self.result
 
+    def value(self, x) -> float:
+        """``phi(x)`` (from the cache at its point, else the value alone)."""
+        if self.x is not None and np.array_equal(self.x, x):
+            return self.result[0]
+        return self.function.value(x)
+
 
 @register_term
 class LearnedPotential(ReducedTerm):
@@ -72,7 +78,7 @@ class LearnedPotential(ReducedTerm):
     def potential(self, q) -> float | np.ndarray:
         """``U^(q)`` for (r,) or at the columns of (r, K)."""
         q = np.asarray(q, dtype=float)
-        return self._at(q)[0] if q.ndim == 1 else self.function.value_gradient(q)[0]
+        return self._at.value(q) if q.ndim == 1 else self.function.value_gradient(q)[0]
 
     def force(self, q, v=None, state=None) -> np.ndarray:
         """(r,) ``dU^/dq^``."""
