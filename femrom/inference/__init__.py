@@ -25,7 +25,8 @@
 - learned nonlinear terms (numpy, no torch): :class:`LearnedPotential` (a scalar
   ``U^(q^)`` of monomials of degree 3 and 4 and an MLP, force ``dU^/dq^``) and
   :class:`LearnedDissipation` (a convex ``F^(q^') >= 0``, force ``dF^/dq^'``), built
-  from :class:`SymmetricPolynomial`, :class:`ConvexPowers` and :class:`ScalarNetwork`
+  from :class:`SymmetricPolynomial`, :class:`ConvexPowers` and :class:`ScalarNetwork` (of :class:`NetworkLayer`; monomials by
+  :func:`multi_indices`)
   (value, exact gradient and Hessian);
 - :class:`ErrorSplit`, :class:`HamiltonianErrorSplit`: projection, derivative
   and optimisation errors of a fit.
@@ -82,7 +83,7 @@ from femrom.inference.learners.canonical_opinf import CanonicalOpInf
 from femrom.inference.learners.lopinf import LagrangianOpInf
 from femrom.inference.learners.opinf import SecondOrderOpInf
 from femrom.inference.learners.spml import TORCH_MISSING, SpML, SpMLConfig, torch_available
-from femrom.inference._networks import ConvexPowers, ScalarNetwork, SymmetricPolynomial
+from femrom.inference._networks import ConvexPowers, NetworkLayer, ScalarNetwork, SymmetricPolynomial, multi_indices
 from femrom.inference.terms.damping import Damping
 from femrom.inference.terms.input import Input
 from femrom.inference.terms.learned_dissipation import LearnedDissipation
@@ -95,7 +96,7 @@ from femrom.inference.terms.stiffness import Stiffness
 __all__ = [
     "CONIC_SOLVERS", "DERIVATIVE_SOURCES", "GRADIENT_DATA", "HAMILTONIAN_DERIVATIVE_SOURCES", "LEARNERS",
     "SOLVERS", "TERMS", "TORCH_MISSING", "VARIABLES", "ConvexPowers", "LearnedDissipation", "LearnedPotential",
-    "ScalarNetwork", "SpML", "SpMLConfig", "SymmetricPolynomial", "torch_available", "Block", "CanonicalData", "CanonicalOpInf", "Damping", "ErrorSplit", "FastOptions", "ForcePotential",
+    "NetworkLayer", "ScalarNetwork", "multi_indices", "SpML", "SpMLConfig", "SymmetricPolynomial", "torch_available", "Block", "CanonicalData", "CanonicalOpInf", "Damping", "ErrorSplit", "FastOptions", "ForcePotential",
     "GalerkinProjection", "canonical_from_second_order",
     "GramProblem", "HamiltonianErrorSplit", "HamiltonianOperators", "HamiltonianOpInf", "Input",
     "LagrangianOpInf", "Learner", "LinearTerm", "Mass", "Output", "ProjectedNonlinearForce",

@@ -143,6 +143,10 @@ class ConvexPowers:
     def __init__(self, cubic: np.ndarray, quartic: np.ndarray):
         self.cubic = np.atleast_2d(np.asarray(cubic, dtype=float))
         self.quartic = np.atleast_2d(np.asarray(quartic, dtype=float))
+        if self.cubic.shape[1] != self.quartic.shape[1]:
+            raise ValueError(f"convex powers: cubic rows have {self.cubic.shape[1]} entries, quartic "
+                             f"{self.quartic.shape[1]}")
+        self.r = self.cubic.shape[1]
 
     def value_gradient_hessian(self, x: np.ndarray):
         A, B = self.cubic, self.quartic
@@ -169,7 +173,7 @@ def _tanh(z):
 
 
 def _softplus(z):
-    s = 1.0 / (1.0 + np.exp(-z))
+    s = 0.5 * (1.0 + np.tanh(0.5 * z))          # the logistic function, without overflow
     return np.logaddexp(0.0, z), s, s * (1.0 - s)
 
 
@@ -178,7 +182,7 @@ ACTIVATIONS = {"tanh": _tanh, "softplus": _softplus}
 
 
 @dataclass(frozen=True, eq=False)
-class Layer:
+class NetworkLayer:
     """``z = W h_prev + U x + b`` (``W`` absent in the first layer, ``U`` optional after it)."""
 
     bias: np.ndarray
@@ -195,7 +199,7 @@ class ScalarNetwork:
 
     Parameters
     ----------
-    layers : sequence of Layer
+    layers : sequence of NetworkLayer
     output : (w_L,) ndarray
         ``c``.
     activation : {"tanh", "softplus"}
@@ -299,7 +303,7 @@ class ScalarNetwork:
         layers = []
         for i in range(int(group.attrs["n_layers"])):
             sub = group[f"layer_{i}"]
-            layers.append(Layer(sub["bias"][()], *(sub[name][()] if name in sub else None
+            layers.append(NetworkLayer(sub["bias"][()], *(sub[name][()] if name in sub else None
                                                    for name in ("weight", "input_weight"))))
         return cls(layers, group["output"][()], str(group.attrs["activation"]))
 

@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from femrom.inference._networks import (ConvexPowers, Layer, ScalarNetwork, SymmetricPolynomial, derivative_map,
+from femrom.inference._networks import (ConvexPowers, NetworkLayer, ScalarNetwork, SymmetricPolynomial, derivative_map,
                                        monomials, multi_indices)
 
 DTYPE = torch.float64
@@ -293,8 +293,8 @@ class SpMLModule(torch.nn.Module):
                 polynomial = SymmetricPolynomial(self.r, terms)
             u_network = None
             if self.u_output is not None:
-                layers = [Layer(self.u_biases[0].numpy().copy(), None, self.u_weights[0].numpy() / sq)]
-                layers += [Layer(b.numpy().copy(), W.numpy().copy()) for W, b in
+                layers = [NetworkLayer(self.u_biases[0].numpy().copy(), None, self.u_weights[0].numpy() / sq)]
+                layers += [NetworkLayer(b.numpy().copy(), W.numpy().copy()) for W, b in
                            zip(self.u_weights[1:], self.u_biases[1:])]
                 u_network = ScalarNetwork(layers, self.cU * self.u_output.numpy(), "tanh")
             powers = None
@@ -304,8 +304,8 @@ class SpMLModule(torch.nn.Module):
             f_network = None
             if self.f_output_raw is not None:
                 softplus = torch.nn.functional.softplus
-                layers = [Layer(self.f_biases[0].numpy().copy(), None, self.f_input[0].numpy() / sv)]
-                layers += [Layer(b.numpy().copy(), softplus(raw).numpy().copy(), U.numpy() / sv)
+                layers = [NetworkLayer(self.f_biases[0].numpy().copy(), None, self.f_input[0].numpy() / sv)]
+                layers += [NetworkLayer(b.numpy().copy(), softplus(raw).numpy().copy(), U.numpy() / sv)
                            for raw, U, b in zip(self.f_hidden_raw, self.f_input[1:], self.f_biases[1:])]
                 f_network = ScalarNetwork(layers, self.cF * softplus(self.f_output_raw).numpy(), "softplus")
             linear = {e["name"]: X.numpy().copy() for e, X in zip(self.linear, self.linear_matrices())}
@@ -342,9 +342,13 @@ def _train(module, train_arrays, validation_arrays, config, progress) -> dict:
     train_t = tensors[0]
     valid_t = tensors[1] if validation_arrays is not None else None
     parameters = [p for p in module.parameters() if p.requires_grad]
-    optimizer = torch.optim.LBFGS(parameters, lr=1.0, max_iter=config.check_every,
-                                  history_size=config.history_size, line_search_fn="strong_wolfe",
-                                  tolerance_grad=1e-14, tolerance_change=1e-16)
+
+    def lbfgs():
+        return torch.optim.LBFGS(parameters, lr=1.0, max_iter=config.check_every,
+                                 history_size=config.history_size, line_search_fn="strong_wolfe",
+                                 tolerance_grad=1e-14, tolerance_change=1e-16)
+
+    optimizer = lbfgs()
     decay = [p for name, p in module.named_parameters() if "weights" in name or "input" in name or "raw" in name]
 
     def loss_of(arrays):
@@ -365,10 +369,10 @@ def _train(module, train_arrays, validation_arrays, config, progress) -> dict:
         return float(loss_of(arrays).detach())
 
     history, best = [], {"loss": np.inf, "iteration": 0, "state": None}
-    stale, iterations = 0, 0
+    stale, iterations, offset, stalled = 0, 0, 0, False
     while iterations < config.max_iterations:
         optimizer.step(closure)
-        done = int(optimizer.state[parameters[0]].get("n_iter", iterations + config.check_every))
+        done = offset + int(optimizer.state[parameters[0]].get("n_iter", 0))
         step_iterations = max(done - iterations, 1)
         iterations = done
         train_loss, check = float(loss_of(train_t).detach()), score()
@@ -385,8 +389,14 @@ def _train(module, train_arrays, validation_arrays, config, progress) -> dict:
             stale += 1
             if stale >= config.patience:
                 break
-        if step_iterations < config.check_every:    # L-BFGS met its own tolerance
-            break
+        if step_iterations < config.check_every:
+            # L-BFGS stopped on its own (no step along its direction changes the loss): once
+            # with a fresh memory, and if that stalls at once too, the fit has converged
+            if stalled:
+                break
+            stalled, offset, optimizer = True, iterations, lbfgs()
+        else:
+            stalled = False
     if best["state"] is not None:
         module.load_state_dict(best["state"])
     return {"history": history, "best_iteration": best["iteration"], "best_loss": best["loss"],
