@@ -213,7 +213,8 @@ class SpMLModule(torch.nn.Module):
         return self._maps[d]
 
     def potential_force(self, q: torch.Tensor, features: dict) -> torch.Tensor:
-        r"""(K, r) ``dU^/dq`` at the rows of ``q``: ``c_U / s_q * (sum_d Phi_{d-1} A_d(alpha) + grad N(x) - grad N(0))``."""
+        r"""(K, r) ``dU^/dq`` at the rows of ``q``:
+        ``c_U / s_q * (sum_d Phi_{d-1} A_d(alpha) + grad N(x) - grad N(0))``."""
         x = q / self.sq
         grad = torch.zeros_like(q)
         for d in self.indices:

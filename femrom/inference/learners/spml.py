@@ -133,11 +133,15 @@ class SpMLConfig:
 
 @register_learner("spml")
 class SpML(Learner):
-    r"""L-OpInf, then the nonlinear Lagrangian and dissipation learned on top (Sharma, Najera-Flores, Todd & Kramer, CMAME 423, 116865, 2024).
+    r"""L-OpInf, then the nonlinear Lagrangian and dissipation learned on top.
+
+    Sharma, Najera-Flores, Todd & Kramer, CMAME 423, 116865, 2024 (docs/spml.md).
 
     Step 1, :class:`LagrangianOpInf`: the best linear Lagrangian model
     ``M_0 q'' + C^ q' + K^ q = B^ u`` (``K^ = K^^T > 0``, ``C^ = C^^T >= 0``,
-    ``M_0 = I`` for a mass-orthonormal basis). Step 2 keeps ``K^, C^, B^`` and learns
+    ``M_0 = I`` for a mass-orthonormal basis). Step 2 starts there and learns, refining
+    ``K^, C^, B^`` within their structure (``refine_linear``; step 1's ``K^`` carries the
+    nonlinear force's secant part, which only a quadratic term can take back)
 
     .. math::
 
@@ -146,16 +150,19 @@ class SpML(Learner):
               + \hat K \hat Q + \nabla\hat U(\hat Q) - \hat B U\big) \big\|_F^2}
              {\| \ddot{\hat Q} \|_F^2}
 
-    by full-batch L-BFGS (torch, float64), with every structure built in,
-    not penalised:
+    (the residual solved with ``M^``: an acceleration, so that scaling every term by one
+    factor changes nothing, and that scale is fixed by ``tr M^ = tr M_0``) by full-batch
+    L-BFGS (torch, float64, one thread), with every structure built in, not penalised:
 
     - mass ``M^ = L L^T``, ``L`` lower triangular with an exponential
       diagonal: symmetric positive definite for any weights (the seed's
       ``I + M^_NN``), so ``T = v^T M^ v / 2 > 0``;
     - potential ``U^`` (:class:`LearnedPotential`): monomials of degree 3 and
       4 plus an MLP, shifted to ``U^(0) = 0``, ``grad U^(0) = 0``: a scalar,
-      whose force is its exact gradient (autograd in training, the exported
-      analytic gradient and Hessian in the ROM);
+      whose force is its exact gradient (explicit backward passes in training,
+      checked against autograd in the tests; the exported analytic gradient and
+      Hessian in the ROM, 65-135x cheaper a call than autograd,
+      ``benchmarks/spml_step.py``);
     - dissipation ``F^`` (:class:`LearnedDissipation`): convex powers and an
       input-convex network, convex with minimum 0 at ``v = 0``, hence
       ``v . grad F^(v) >= F^(v) >= 0``: it never feeds power in.
@@ -323,7 +330,8 @@ class SpML(Learner):
         return self
 
     def _operators(self, linear_ops: ReducedOperators, data) -> ReducedOperators:
-        refined = {cls.name: cls.from_coefficients(self.linear_matrices_[cls.name]) for cls in self.linear._learned(data)}
+        refined = {cls.name: cls.from_coefficients(self.linear_matrices_[cls.name])
+                   for cls in self.linear._learned(data)}
         terms = [refined.get(t.name, t) for t in linear_ops.terms if t.name != "mass"]
         if self.config.learn_mass or self.linear.mass is not None:
             terms.append(term_class("mass")(self.mass_))

@@ -1,4 +1,4 @@
-r"""The implicit midpoint rule with the average-vector-field discrete gradient of the potential: the energy never increases."""
+r"""Implicit midpoint with the average-vector-field discrete gradient of the potential: energy never increases."""
 
 import numpy as np
 
