@@ -220,25 +220,25 @@ class ScalarNetwork:
 
     def _raw(self, x: np.ndarray, hessian: bool = True):
         sigma = self._sigma
-        zs, Js, h, Jh = [], [], None, None
+        derivatives, Js, h, Jh = [], [], None, None
         for layer in self.layers:
-            z = layer.bias.copy()
-            J = np.zeros((z.size, self.r))
-            if layer.weight is not None:
-                z += layer.weight @ h
-                J += layer.weight @ Jh
-            if layer.input_weight is not None:
-                z += layer.input_weight @ x
-                J += layer.input_weight
-            s, ds, _ = sigma(z)
-            zs.append(z)
+            if layer.weight is None:
+                z = layer.bias + layer.input_weight @ x
+                J = layer.input_weight
+            else:
+                z = layer.bias + layer.weight @ h
+                J = layer.weight @ Jh
+                if layer.input_weight is not None:
+                    z = z + layer.input_weight @ x
+                    J = J + layer.input_weight
+            s, ds, dds = sigma(z)
+            derivatives.append((ds, dds))
             Js.append(J)
             h, Jh = s, ds[:, None] * J
         value = float(self.output @ h)
         grad, H = np.zeros(self.r), np.zeros((self.r, self.r)) if hessian else None
         delta = self.output
-        for layer, z, J in zip(reversed(self.layers), reversed(zs), reversed(Js)):
-            _, ds, dds = sigma(z)
+        for layer, (ds, dds), J in zip(reversed(self.layers), reversed(derivatives), reversed(Js)):
             dz = delta * ds
             if hessian:
                 H += J.T @ ((delta * dds)[:, None] * J)

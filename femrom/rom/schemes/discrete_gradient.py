@@ -16,7 +16,7 @@ GAUSS_NODES = 0.5 + 0.5 * np.array([-np.sqrt(0.6), 0.0, np.sqrt(0.6)])
 GAUSS_WEIGHTS = np.array([5.0, 8.0, 5.0]) / 18.0
 
 
-def discrete_gradient(term, q0: np.ndarray, q1: np.ndarray):
+def discrete_gradient(term, q0: np.ndarray, q1: np.ndarray, potential0: float | None = None):
     r"""The average-vector-field discrete gradient of a conservative term and its derivative in ``q1``:
 
     .. math::
@@ -38,6 +38,7 @@ abla^2 U(q_0 + s \Delta)\, ds,
     the correction is skipped (it is round-off there, and its division would amplify the
     round-off of ``U(q1) - U(q0)`` enough to stall Newton near rest). The derivative is the
     quadrature's (Newton stays quadratic up to the small correction).
+    ``potential0``: ``U(q0)`` when the caller has it (it is the same in every Newton iteration).
     Returns ``(grad (r,), d grad / d q1 (r, r) or None)``.
     """
     delta = q1 - q0
@@ -51,7 +52,8 @@ abla^2 U(q_0 + s \Delta)\, ds,
     dd = float(delta @ delta)
     if dd > SMALL_STEP * (float(q1 @ q1) + float(q0 @ q0) + 1.0):
         # Gonzalez's projection onto the energy identity: grad . Delta = U(q1) - U(q0) exactly
-        grad = grad + ((term.potential(q1) - term.potential(q0) - float(grad @ delta)) / dd) * delta
+        u0 = term.potential(q0) if potential0 is None else potential0
+        grad = grad + ((term.potential(q1) - u0 - float(grad @ delta)) / dd) * delta
     return grad, jac
 
 
@@ -99,7 +101,7 @@ class DiscreteGradientScheme(ReducedScheme):
             states = state if state is not None else (None,) * len(terms)
         else:
             terms, states = (nonlinear,), (state,)
-        conservative = [t_ for t_ in terms if t_.conservative]
+        conservative = [(t_, t_.potential(q)) for t_ in terms if t_.conservative]
         other = [(t_, s) for t_, s in zip(terms, states) if not t_.conservative]
 
         def residual_and_jacobian(x):
@@ -107,8 +109,8 @@ class DiscreteGradientScheme(ReducedScheme):
             qm = q + 0.5 * h * x
             parts = [M @ (x - v) / (0.5 * h), C @ x, K @ qm, -force]
             J = M / (0.5 * h) + C + 0.5 * h * K
-            for term in conservative:
-                grad, Jq = discrete_gradient(term, q, q1)
+            for term, potential0 in conservative:
+                grad, Jq = discrete_gradient(term, q, q1, potential0)
                 parts.append(grad)
                 if Jq is not None:
                     J = J + h * Jq
