@@ -270,6 +270,14 @@ class SpML(Learner):
                           "floor": np.sqrt(1e-2 * typical) if structure == "psd" else 1e-2 * typical})
         return specs
 
+    def _own(self, data: SecondOrderData) -> SecondOrderData:
+        """The data without projected known forces unless a known force term pairs with them: the
+        nonlinear force is what SpML learns, so it must not see its projection (a study's data carry
+        it for the learners that know the force)."""
+        if data.nonlinear_forces is not None and self.linear.nonlinear is None:
+            return replace(data, nonlinear_forces=None)
+        return data
+
     def _mass0(self, r: int) -> np.ndarray:
         return np.eye(r) if self.linear.mass is None else self.linear.mass
 
@@ -280,7 +288,8 @@ class SpML(Learner):
         Parameters
         ----------
         data : SecondOrderData or list of SecondOrderData
-            Reduced training trajectories (with inputs when the model has inputs).
+            Reduced training trajectories (with inputs when the model has inputs). Projected
+            known forces in them are ignored unless a known force term was given.
         validation : SecondOrderData or list, optional
             Trajectories not trained on: their loss picks the kept weights and stops
             the fit (without them, the training loss does).
@@ -293,9 +302,9 @@ class SpML(Learner):
         import torch
 
         tic = time.perf_counter()
-        data = concatenate(data) if isinstance(data, (list, tuple)) else data
+        data = self._own(concatenate(data) if isinstance(data, (list, tuple)) else data)
         if validation is not None:
-            validation = concatenate(validation) if isinstance(validation, (list, tuple)) else validation
+            validation = self._own(concatenate(validation) if isinstance(validation, (list, tuple)) else validation)
             if validation.r != data.r:
                 raise ValueError(f"validation data have r = {validation.r}, the training data r = {data.r}")
         self.linear_ = self.linear.fit(data)
