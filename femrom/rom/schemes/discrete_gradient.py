@@ -7,13 +7,14 @@ from femrom.rom.schemes.midpoint import MidpointScheme
 
 #: Above this ``||q1 - q0||^2`` (relative to ``||q0||^2 + ||q1||^2 + 1``) the quadrature is
 #: projected onto the exact energy identity; below it the quadrature's own error,
-#: ``O(||q1 - q0||^7)``, is round-off, and the projection's division by ``||q1 - q0||^2``
+#: ``O(||q1 - q0||^5)``, is round-off, and the projection's division by ``||q1 - q0||^2``
 #: would only amplify the round-off of ``U(q1) - U(q0)``.
 SMALL_STEP = 1e-6
 
-#: Gauss-Legendre nodes and weights on [0, 1], three points: exact for polynomials of degree 5.
-GAUSS_NODES = 0.5 + 0.5 * np.array([-np.sqrt(0.6), 0.0, np.sqrt(0.6)])
-GAUSS_WEIGHTS = np.array([5.0, 8.0, 5.0]) / 18.0
+#: Gauss-Legendre nodes and weights on [0, 1], two points: exact for polynomials of degree 3,
+#: i.e. for the gradient of a quartic potential along the segment.
+GAUSS_NODES = 0.5 + 0.5 * np.array([-1.0, 1.0]) / np.sqrt(3.0)
+GAUSS_WEIGHTS = np.array([0.5, 0.5])
 
 
 def discrete_gradient(term, q0: np.ndarray, q1: np.ndarray, potential0: float | None = None):
@@ -30,9 +31,9 @@ abla^2 U(q_0 + s \Delta)\, ds,
         \qquad \Delta = q_1 - q_0,
 
     so that ``grad . Delta = U(q1) - U(q0)`` (Quispel & McLaren, J. Phys. A 41, 2008), with the
-    integrals by three-point Gauss-Legendre: exact for potentials of degree <= 6 (the
+    integrals by two-point Gauss-Legendre: exact for potentials of degree <= 4 (the
     monomials of degree 3 and 4), for a smooth potential (a tanh network) an error
-    ``O(|Delta|^7)``. For steps above :data:`SMALL_STEP` the quadrature is then corrected
+    ``O(|Delta|^5)``. For steps above :data:`SMALL_STEP` the quadrature is then corrected
     along ``Delta`` by Gonzalez's term ``(U(q1) - U(q0) - grad . Delta) Delta / |Delta|^2``
     (J. Nonlinear Sci. 6, 1996), which makes the identity exact for any potential; below it
     the correction is skipped (it is round-off there, and its division would amplify the
