@@ -30,6 +30,15 @@
   then ERA, and the identified observer's gain, :func:`okid_observer_gain`);
   Markov parameters of a model (:func:`markov_parameters`), a stepper
   (:func:`impulse_response`) or a full-order system (:func:`system_impulse_response`);
+- :class:`SpML` (L-OpInf, then a learned mass, potential and dissipation function on top,
+  structure by construction; fitting needs torch, the ``ml`` extra, and says so in one
+  line without it: :data:`TORCH_MISSING`; settings :class:`SpMLConfig`);
+- learned nonlinear terms (numpy, no torch): :class:`LearnedPotential` (a scalar
+  ``U^(q^)`` of monomials of degree 3 and 4 and an MLP, force ``dU^/dq^``) and
+  :class:`LearnedDissipation` (a convex ``F^(q^') >= 0``, force ``dF^/dq^'``), built
+  from :class:`SymmetricPolynomial`, :class:`ConvexPowers` and :class:`ScalarNetwork` (of :class:`NetworkLayer`; monomials by
+  :func:`multi_indices`)
+  (value, exact gradient and Hessian);
 - :class:`ErrorSplit`, :class:`HamiltonianErrorSplit`: projection, derivative
   and optimisation errors of a fit.
 """
@@ -99,8 +108,12 @@ from femrom.inference.learners.canonical_opinf import CanonicalOpInf
 from femrom.inference.learners.lopinf import LagrangianOpInf
 from femrom.inference.learners.okid import OKID
 from femrom.inference.learners.opinf import SecondOrderOpInf
+from femrom.inference.learners.spml import TORCH_MISSING, SpML, SpMLConfig, torch_available
+from femrom.inference._networks import ConvexPowers, NetworkLayer, ScalarNetwork, SymmetricPolynomial, multi_indices
 from femrom.inference.terms.damping import Damping
 from femrom.inference.terms.input import Input
+from femrom.inference.terms.learned_dissipation import LearnedDissipation
+from femrom.inference.terms.learned_potential import LearnedPotential
 from femrom.inference.terms.mass import Mass
 from femrom.inference.terms.output import Output
 from femrom.inference.terms.projected_force import ProjectedNonlinearForce
@@ -108,7 +121,8 @@ from femrom.inference.terms.stiffness import Stiffness
 
 __all__ = [
     "CONIC_SOLVERS", "DERIVATIVE_SOURCES", "GRADIENT_DATA", "HAMILTONIAN_DERIVATIVE_SOURCES", "LEARNERS",
-    "SOLVERS", "TERMS", "VARIABLES", "Block", "CanonicalData", "CanonicalOpInf", "Damping", "ErrorSplit", "FastOptions", "ForcePotential",
+    "SOLVERS", "TERMS", "TORCH_MISSING", "VARIABLES", "ConvexPowers", "LearnedDissipation", "LearnedPotential",
+    "NetworkLayer", "ScalarNetwork", "multi_indices", "SpML", "SpMLConfig", "SymmetricPolynomial", "torch_available", "Block", "CanonicalData", "CanonicalOpInf", "Damping", "ErrorSplit", "FastOptions", "ForcePotential",
     "GalerkinProjection", "canonical_from_second_order",
     "GramProblem", "HamiltonianErrorSplit", "HamiltonianOperators", "HamiltonianOpInf", "Input",
     "LagrangianOpInf", "Learner", "LinearTerm", "Mass", "Output", "ProjectedNonlinearForce",

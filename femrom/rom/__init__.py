@@ -9,8 +9,10 @@
 - :class:`ReducedSolution`: what ``predict`` returns;
 - reduced schemes: registered classes (:func:`registered_schemes`,
   :func:`register_reduced_scheme`): Newmark average acceleration, the implicit
-  midpoint rule, Stoermer-Verlet, each a precomputed linear step map and a
-  nonlinear step;
+  midpoint rule, Stoermer-Verlet, and ``discrete_gradient`` (implicit midpoint with
+  the average-vector-field discrete gradient of every conservative force: the energy
+  never increases without input, the scheme of learned SpML models), each a
+  precomputed linear step map and a nonlinear step;
 - :class:`DiscreteStateSpace`: ``z+ = A z + B u``, ``y = C z + D u``, with
   ``simulate``, a stepper and HDF5 (the form of identified first-order models);
 - :class:`StateSpaceROM`: an identified first-order model

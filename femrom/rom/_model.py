@@ -96,11 +96,14 @@ class SecondOrderROM(ReducedModel):
         ops = galerkin(system, basis, mass_orthonormal=mass_orthonormal)
         return cls(ops, basis, product=product)
 
-    def fit(self, data=None) -> "SecondOrderROM":
-        """Fit the learner on ``data`` (SecondOrderData or a list) and keep its operators."""
+    def fit(self, data=None, **options) -> "SecondOrderROM":
+        """Fit the learner on ``data`` (SecondOrderData or a list) and keep its operators.
+
+        ``options`` go to the learner's ``fit`` (e.g. ``validation=`` for :class:`~femrom.inference.SpML`).
+        """
         if self.learner is None:
             raise ValueError("this ROM has no learner; pass learner=LagrangianOpInf(...)")
-        self.operators_ = self.learner.fit(data).operators_
+        self.operators_ = self.learner.fit(data, **options).operators_
         return self
 
     # -- evaluation --------------------------------------------------------------

@@ -28,6 +28,8 @@ What the case scripts share, for any scene (``femrom run scene.toml`` with a
   :func:`plot_output_history`, :func:`plot_histories` (the pictures of a table),
   :func:`evaluate_runs` (a case's own ROM on every run, as the study's), :func:`extra_rom_rows`
   (a case's own ROMs as study rows, timed interleaved with the study's);
+- learned nonlinear forces against a reference (the Galerkin-projected force):
+  :func:`force_error`, :func:`conservative_acceleration`, :func:`nonlinear_forces`;
 - hyper-reduction: :func:`hyper_reduced_rows` (a learned ROM's known conservative force
   replaced by its ECSW-sampled potential, :data:`HYPER_COLUMNS`);
 - costs: :class:`Cost` (the fastest of several timed blocks, and their quartiles),
@@ -50,6 +52,7 @@ What the case scripts share, for any scene (``femrom run scene.toml`` with a
   :func:`write_report`.
 """
 
+from femrom.study._learned_forces import conservative_acceleration, force_error, nonlinear_forces
 from femrom.study._figures import (
     plot_accuracy_cost,
     plot_energy,
@@ -126,6 +129,7 @@ from femrom.study._sweep import SweepRun, run_sweep, run_sweep_point, sweep_runs
 from femrom.study._timing import Cost, blocked_cost, call_cost, repeated_cost, repeated_costs
 
 __all__ = [
+    "conservative_acceleration", "force_error", "nonlinear_forces",
     "CanonicalRun", "CanonicalSpec", "Cost", "Evaluation", "FINAL_STATE_COLUMNS", "FOMRun", "FREQUENCY_COLUMNS", "HYPER_COLUMNS", "LEARNERS", "LEARNER_NAMES",
     "Projection", "ROW_COLUMNS", "SceneHamiltonianROM", "SceneRun", "StudyState", "SweepRun", "TIME_STEP_COLUMNS", "blocked_cost",
     "call_cost", "canonical_rows", "canonical_time_step_ladder", "check_canonical_learners",

@@ -43,10 +43,13 @@ BLOWUP = 1e6
 
 
 def study_learners() -> tuple[str, ...]:
-    """The names a ``[rom]`` section may use: ``galerkin``, every registered second-order learner and
-    every canonical one (``hopinf``: conservative scenes without inputs, :mod:`femrom.study._canonical`)."""
+    """The names a ``[rom]`` section may use: ``galerkin``, every registered second-order learner (a
+    :class:`SecondOrderLearner`, or any learner of second-order models with ``for_system``, as
+    :class:`~femrom.inference.SpML`) and every canonical one (``hopinf``: conservative scenes
+    without inputs, :mod:`femrom.study._canonical`)."""
     return (GALERKIN, *(name for name, cls in registered_learners().items()
-                        if name != GALERKIN and (issubclass(cls, SecondOrderLearner) or is_canonical(name))))
+                        if name != GALERKIN and (issubclass(cls, SecondOrderLearner) or is_canonical(name)
+                                                 or (cls.model == "second_order" and hasattr(cls, "for_system")))))
 
 
 def check_rom_config(config: RomConfig) -> None:

@@ -1,0 +1,480 @@
+r"""L-OpInf enhanced with structure-preserving machine learning (SpML)."""
+
+from __future__ import annotations
+
+import importlib
+import importlib.util
+import time
+from dataclasses import asdict, dataclass, replace
+
+import numpy as np
+
+from femrom._progress import Progress
+from femrom.inference._data import SecondOrderData, concatenate
+from femrom.inference._learner import Learner, register_learner
+from femrom.inference._networks import derivative_map, monomials, multi_indices
+from femrom.inference._operators import ReducedOperators
+from femrom.inference._terms import registered_terms, term_class
+from femrom.inference.learners.lopinf import LagrangianOpInf
+from femrom.inference.terms.learned_dissipation import LearnedDissipation
+from femrom.inference.terms.learned_potential import LearnedPotential
+
+#: The one line a user without torch reads when asking for SpML.
+TORCH_MISSING = "SpML needs torch, which is not installed: pip install 'femrom[ml]' (torch==2.13.0, CPU is enough)"
+
+
+def torch_available() -> bool:
+    """Whether torch can be imported (without importing it)."""
+    try:
+        return importlib.util.find_spec("torch") is not None
+    except (ImportError, ValueError):
+        return False
+
+
+def _backend():
+    try:
+        return importlib.import_module("femrom.inference._spml_torch")
+    except ImportError:
+        raise ImportError(TORCH_MISSING) from None
+
+
+@dataclass(frozen=True)
+class SpMLConfig:
+    """Settings of the SpML fit (step 2; step 1 is :class:`LagrangianOpInf`'s).
+
+    Attributes
+    ----------
+    potential_degrees : tuple of int
+        Degrees of the potential's monomials, a subset of (3, 4) (degree 2 is ``K^``;
+        degrees 0 and 1 would move the equilibrium); all ``C(r + d - 1, d)`` monomials of each.
+    potential_widths : tuple of int
+        Hidden widths of the potential's MLP (tanh); ``()``: no network.
+    learn_dissipation : bool or None
+        Whether to learn a nonlinear dissipation function ``F^`` (the linear ``C^`` is step 1's);
+        ``None``: when step 1 learns a damping term (an undamped structure gets none, which a
+        spurious dissipation would only make lose energy).
+    dissipation_directions : int or None
+        Directions ``a_k``, ``b_k`` of the convex powers ``|a_k . v|^3 / 3``, ``(b_k . v)^4 / 4``
+        (``None``: r; 0: none).
+    dissipation_widths : tuple of int
+        Hidden widths of the input-convex network (softplus); ``()``: none.
+    polynomial_start : bool
+        Start the monomials (and corrections of step 1's linear terms) at their least-squares
+        solution (:func:`_polynomial_start`) instead of zero. Measured: it helps where the
+        potential is a polynomial of degree <= 4 (a reduced Duffing system: force error 8.8e-3
+        against 0.11 from zero after 150 iterations) and hurts where it is not (sine-Gordon:
+        1.4 against 0.037, the quartic fit of ``sin q - q`` extrapolates badly), so it is off.
+    polynomial_ridge : float
+        Relative Tikhonov weight of that least-squares start.
+    refine_linear : bool
+        Refine step 1's linear terms in step 2 within their structure (``K^ = G G^T + eps I``,
+        ``C^ = G G^T``, ``B^`` free), starting from step 1's values; ``False`` keeps them fixed.
+        Step 1 fits a linear model to nonlinear data, so its ``K^`` carries the nonlinear force's
+        secant part, which a potential of degree >= 3 cannot take back.
+    learn_mass : bool
+        Learn ``M^ = L L^T`` (``L`` lower triangular, positive diagonal, starting at the step-1
+        mass); else keep step 1's.
+    max_iterations : int
+        L-BFGS iterations at most.
+    check_every : int
+        Iterations between two checks of the validation loss (and progress updates).
+    patience : int
+        Checks without improvement before stopping early.
+    tolerance : float
+        Relative improvement of the checked loss that counts.
+    history_size : int
+        L-BFGS memory.
+    weight_decay : float
+        ``mu sum ||W||_F^2`` over the networks' weight matrices, added to the relative loss.
+    seed : int
+        Seed of the initial weights (a ``torch.Generator``; same seed, same weights).
+    threads : int
+        torch threads during the fit (restored after; 1 is fastest at these sizes).
+    """
+
+    potential_degrees: tuple = (3, 4)
+    potential_widths: tuple = (32, 32)
+    learn_dissipation: bool | None = None
+    dissipation_directions: int | None = None
+    dissipation_widths: tuple = (16,)
+    polynomial_start: bool = False
+    polynomial_ridge: float = 1e-12
+    refine_linear: bool = True
+    learn_mass: bool = True
+    max_iterations: int = 2000
+    check_every: int = 20
+    patience: int = 10
+    tolerance: float = 1e-4
+    history_size: int = 50
+    weight_decay: float = 0.0
+    seed: int = 0
+    threads: int = 1
+
+    def __post_init__(self):
+        object.__setattr__(self, "potential_degrees", tuple(int(d) for d in self.potential_degrees))
+        object.__setattr__(self, "potential_widths", tuple(int(w) for w in self.potential_widths))
+        object.__setattr__(self, "dissipation_widths", tuple(int(w) for w in self.dissipation_widths))
+        bad = [d for d in self.potential_degrees if d not in (3, 4)]
+        if bad or len(set(self.potential_degrees)) != len(self.potential_degrees):
+            raise ValueError(f"SpMLConfig.potential_degrees must be distinct values of (3, 4), got "
+                             f"{self.potential_degrees}")
+        for name in ("potential_widths", "dissipation_widths"):
+            if any(w < 1 for w in getattr(self, name)):
+                raise ValueError(f"SpMLConfig.{name} must be positive widths, got {getattr(self, name)}")
+        if self.dissipation_directions is not None and int(self.dissipation_directions) < 0:
+            raise ValueError(f"SpMLConfig.dissipation_directions must be >= 0, got {self.dissipation_directions}")
+        for name in ("max_iterations", "check_every", "patience", "history_size", "threads"):
+            if int(getattr(self, name)) < 1:
+                raise ValueError(f"SpMLConfig.{name} must be >= 1, got {getattr(self, name)}")
+        if not (self.tolerance >= 0 and self.weight_decay >= 0 and self.polynomial_ridge >= 0):
+            raise ValueError(f"SpMLConfig.tolerance, weight_decay and polynomial_ridge must be >= 0, got "
+                             f"{self.tolerance}, {self.weight_decay}, {self.polynomial_ridge}")
+
+
+@register_learner("spml")
+class SpML(Learner):
+    r"""L-OpInf, then the nonlinear Lagrangian and dissipation learned on top.
+
+    Sharma, Najera-Flores, Todd & Kramer, CMAME 423, 116865, 2024 (docs/spml.md).
+
+    Step 1, :class:`LagrangianOpInf`: the best linear Lagrangian model
+    ``M_0 q'' + C^ q' + K^ q = B^ u`` (``K^ = K^^T > 0``, ``C^ = C^^T >= 0``,
+    ``M_0 = I`` for a mass-orthonormal basis). Step 2 starts there and learns, refining
+    ``K^, C^, B^`` within their structure (``refine_linear``; step 1's ``K^`` carries the
+    nonlinear force's secant part, which only a quadratic term can take back)
+
+    .. math::
+
+        \min_{L,\,\hat K,\,\hat C,\,\hat B,\,\alpha,\,\theta_U,\,a,\,b,\,\theta_F}\;
+        \frac{\big\| \hat M^{-1} \big(\hat M \ddot{\hat Q} + \hat C \dot{\hat Q} + \nabla\hat{\mathcal F}(\dot{\hat Q})
+              + \hat K \hat Q + \nabla\hat U(\hat Q) - \hat B U\big) \big\|_F^2}
+             {\| \ddot{\hat Q} \|_F^2}
+
+    (the residual solved with ``M^``: an acceleration, so that scaling every term by one
+    factor changes nothing, and that scale is fixed by ``tr M^ = tr M_0``) by full-batch
+    L-BFGS (torch, float64, one thread), with every structure built in, not penalised:
+
+    - mass ``M^ = L L^T``, ``L`` lower triangular with an exponential
+      diagonal: symmetric positive definite for any weights (the seed's
+      ``I + M^_NN``), so ``T = v^T M^ v / 2 > 0``;
+    - potential ``U^`` (:class:`LearnedPotential`): monomials of degree 3 and
+      4 plus an MLP, shifted to ``U^(0) = 0``, ``grad U^(0) = 0``: a scalar,
+      whose force is its exact gradient (explicit backward passes in training,
+      checked against autograd in the tests; the exported analytic gradient and
+      Hessian in the ROM, 65-135x cheaper a call than autograd,
+      ``benchmarks/spml_step.py``);
+    - dissipation ``F^`` (:class:`LearnedDissipation`): convex powers and an
+      input-convex network, convex with minimum 0 at ``v = 0``, hence
+      ``v . grad F^(v) >= F^(v) >= 0``: it never feeds power in.
+
+    With the :class:`~femrom.rom.SecondOrderROM` scheme ``"discrete_gradient"``
+    the energy ``T + q^T K^ q / 2 + U^`` never increases without input.
+    The validation trajectory, when given, decides when to stop (the best
+    weights by its loss are kept). Fitting needs torch (the ``ml`` extra);
+    the fitted model is numpy only (steps, saves and loads without torch).
+
+    Parameters
+    ----------
+    terms, regularization, solver, mass, mass_orthonormal, stiffness_margin, solver_options
+        Step 1's (:class:`~femrom.inference.SecondOrderLearner`): e.g. ``terms=["damping"]``.
+    config : SpMLConfig
+    progress : bool or None
+        The progress line with the loss (``None``: on a terminal, in a log every 30 s).
+
+    Attributes
+    ----------
+    operators_ : ReducedOperators
+        Step 1's terms with ``M^`` in place of its mass, :class:`LearnedPotential`,
+        :class:`LearnedDissipation` and the output map.
+    linear_ : LagrangianOpInf
+        The fitted step 1.
+    config_ : SpMLConfig
+        The settings used (``learn_dissipation`` decided).
+    mass_ : (r, r) ndarray
+    potential_ : LearnedPotential or None
+    dissipation_ : LearnedDissipation or None
+    history_ : list of dict
+        ``iteration``, ``loss`` (training), ``validation_loss`` at every check.
+    best_iteration_, iterations_ : int
+    loss_ : float
+        The relative training loss of the kept weights; ``linear_loss_`` step 1's.
+    training_seconds_ : float
+    """
+
+    method = "spml"
+
+    def __init__(self, terms=(), *, config: SpMLConfig = SpMLConfig(), regularization=0.0, solver: str = "fast",
+                 mass: np.ndarray | None = None, mass_orthonormal: bool = True, stiffness_margin: float = 1e-10,
+                 solver_options: dict | None = None, progress: bool | None = None):
+        if not torch_available():
+            raise ImportError(TORCH_MISSING)
+        if not isinstance(config, SpMLConfig):
+            raise TypeError(f"config must be an SpMLConfig, got {type(config).__name__}")
+        self.config, self.progress = config, progress
+        self.linear = LagrangianOpInf(terms, regularization=regularization, solver=solver, mass=mass,
+                                      mass_orthonormal=mass_orthonormal, stiffness_margin=stiffness_margin,
+                                      solver_options=solver_options)
+        self.linear_options = {"regularization": regularization, "solver": solver, "mass": mass,
+                               "mass_orthonormal": mass_orthonormal, "stiffness_margin": stiffness_margin,
+                               "solver_options": solver_options}
+
+    @property
+    def learned_terms(self):
+        return self.linear.learned_terms
+
+    @property
+    def known_terms(self):
+        return self.linear.known_terms
+
+    @classmethod
+    def for_system(cls, system, basis: np.ndarray | None = None, *, known_forces: bool = False, **options):
+        """An SpML with the learnable terms of ``system``'s effects (damping, ...).
+
+        A known nonlinear force is what SpML learns, so it is left out unless
+        ``known_forces`` (then it is projected with ``basis`` and kept, and SpML learns the rest).
+        """
+        system = getattr(system, "system", system)
+        terms = []
+        for effect in system.effects:
+            for term in registered_terms().values():
+                if term.effect != effect or term.name in ("stiffness", "mass", "input", "output"):
+                    continue
+                if term.learnable:
+                    terms.append(term)
+                elif term.structure == "known" and known_forces:
+                    if basis is None:
+                        raise ValueError(f"known_forces=True: for_system needs the basis to project {effect!r}")
+                    terms.append(term.galerkin(system, basis))
+        return cls(terms, **options)
+
+    # -- the regression's pieces on any data ------------------------------------------------
+    def _arrays(self, data: SecondOrderData):
+        """``(Q^T, Q'^T, Q''^T, Y^T, [D_j^T], ||Q''||_F^2)``: step 1's target (``M_0 Q''`` and
+        the known terms) and the data blocks of its learned linear terms, as (K, .) arrays."""
+        linear = self.linear
+        Y = linear._target(data)
+        blocks = [cls.datablock(data).T for cls in linear._learned(data)]
+        norm = float(np.sum(data.accelerations ** 2))
+        return (data.states.T, data.velocities.T, data.accelerations.T, Y.T, blocks,
+                max(norm, np.finfo(float).tiny))
+
+    def _linear_specs(self, data: SecondOrderData, arrays) -> list:
+        """Step 1's learned linear terms: name, structure, matrix, ``eps`` shift and a scale floor."""
+        force = np.sqrt(arrays[5] / data.states.size)
+        specs = []
+        for cls, D in zip(self.linear._learned(data), arrays[4]):
+            typical = force / max(float(np.sqrt(np.mean(D * D))), np.finfo(float).tiny)
+            structure = {"spd": "spd", "psd": "psd", "symmetric": "symmetric"}.get(cls.structure, "free")
+            specs.append({"name": cls.name, "structure": structure, "matrix": self.linear.coefficients_[cls.name],
+                          "shift": self.linear.stiffness_shift_ if structure == "spd" else 0.0,
+                          "floor": np.sqrt(1e-2 * typical) if structure == "psd" else 1e-2 * typical})
+        return specs
+
+    def _own(self, data: SecondOrderData) -> SecondOrderData:
+        """The data without projected known forces unless a known force term pairs with them: the
+        nonlinear force is what SpML learns, so it must not see its projection (a study's data carry
+        it for the learners that know the force)."""
+        if data.nonlinear_forces is not None and self.linear.nonlinear is None:
+            return replace(data, nonlinear_forces=None)
+        return data
+
+    def _mass0(self, r: int) -> np.ndarray:
+        return np.eye(r) if self.linear.mass is None else self.linear.mass
+
+    # -- fit ---------------------------------------------------------------------------------
+    def fit(self, data, validation=None) -> "SpML":
+        r"""Step 1 (L-OpInf) on ``data``, then step 2 (module docstring).
+
+        Parameters
+        ----------
+        data : SecondOrderData or list of SecondOrderData
+            Reduced training trajectories (with inputs when the model has inputs). Projected
+            known forces in them are ignored unless a known force term was given.
+        validation : SecondOrderData or list, optional
+            Trajectories not trained on: their loss picks the kept weights and stops
+            the fit (without them, the training loss does).
+
+        Returns
+        -------
+        self
+        """
+        backend = _backend()
+        import torch
+
+        tic = time.perf_counter()
+        data = self._own(concatenate(data) if isinstance(data, (list, tuple)) else data)
+        if validation is not None:
+            validation = self._own(concatenate(validation) if isinstance(validation, (list, tuple)) else validation)
+            if validation.r != data.r:
+                raise ValueError(f"validation data have r = {validation.r}, the training data r = {data.r}")
+        self.linear_ = self.linear.fit(data)
+        linear_ops = self.linear.operators_
+        r, cfg = data.r, self.config
+        train_arrays = self._arrays(data)
+        validation_arrays = None if validation is None else self._arrays(validation)
+        scales = _scales(data, train_arrays[5])
+        if cfg.learn_dissipation is None:
+            cfg = replace(cfg, learn_dissipation=self.linear.damping)
+        self.config_ = cfg
+        specs = self._linear_specs(data, train_arrays)
+        initial = _polynomial_start(train_arrays, specs, scales, cfg) \
+            if cfg.potential_degrees and cfg.polynomial_start else None
+        generator = torch.Generator().manual_seed(int(cfg.seed))
+        module = backend.SpMLModule(r, cfg, scales, self._mass0(r), specs, generator, initial)
+        with Progress(cfg.max_iterations, "SpML fit", enabled=self.progress) as progress:
+            result = backend.train(module, train_arrays, validation_arrays, cfg, progress)
+        mass, linear, polynomial, u_network, powers, f_network = module.export()
+        self.linear_matrices_ = linear
+        self.history_ = result["history"]
+        self.best_iteration_, self.iterations_ = result["best_iteration"], result["iterations"]
+        self.training_seconds_ = time.perf_counter() - tic
+        self.mass_ = mass
+        self.potential_ = None if polynomial is None and u_network is None else \
+            LearnedPotential(r, polynomial, u_network)
+        self.dissipation_ = None if powers is None and f_network is None else \
+            LearnedDissipation(r, powers, f_network)
+        self.linear_loss_ = self._loss(data, {n: self.linear.coefficients_[n] for n in linear}, step1=True)
+        self.loss_ = self._loss(data, linear)
+        self.operators_ = self._operators(linear_ops, data)
+        return self
+
+    def _operators(self, linear_ops: ReducedOperators, data) -> ReducedOperators:
+        refined = {cls.name: cls.from_coefficients(self.linear_matrices_[cls.name])
+                   for cls in self.linear._learned(data)}
+        terms = [refined.get(t.name, t) for t in linear_ops.terms if t.name != "mass"]
+        if self.config.learn_mass or self.linear.mass is not None:
+            terms.append(term_class("mass")(self.mass_))
+        terms += [t for t in (self.potential_, self.dissipation_) if t is not None]
+        return ReducedOperators(tuple(terms), self.describe())
+
+    def nonlinear_forces(self, Q: np.ndarray, Vel: np.ndarray | None = None) -> np.ndarray:
+        """(r, K) ``grad U^(Q) + grad F^(Vel)``: the learned nonlinear forces at columns."""
+        out = np.zeros(np.shape(Q))
+        if self.potential_ is not None:
+            out += self.potential_.forces(Q)
+        if self.dissipation_ is not None and Vel is not None:
+            out += self.dissipation_.forces(Q, Vel)
+        return out
+
+    def _loss(self, data: SecondOrderData, linear: dict, step1: bool = False) -> float:
+        """The relative residual ``||M^^-1 R||_F^2 / ||Q''||_F^2`` of the exported (numpy) model
+        (``step1``: of step 1's model alone)."""
+        q, v, a, Y, blocks, norm = self._arrays(data)
+        R = Y.T + sum(linear[cls.name] @ D.T for cls, D in zip(self.linear._learned(data), blocks))
+        mass = self._mass0(data.r)
+        if not step1:
+            R = R + (self.mass_ - mass) @ data.accelerations + self.nonlinear_forces(data.states, data.velocities)
+            mass = self.mass_
+        R = np.linalg.solve(mass, R)
+        return float(np.sum(R * R) / norm)
+
+    def describe(self) -> dict:
+        out = {"method": self.method, "config": asdict(getattr(self, "config_", self.config)),
+               "linear": self.linear.describe() if self.linear.is_fitted else {"method": self.linear.method}}
+        if getattr(self, "history_", None) is not None:
+            out.update(loss=self.loss_, linear_loss=self.linear_loss_, iterations=self.iterations_,
+                       best_iteration=self.best_iteration_, training_seconds=self.training_seconds_)
+        return out
+
+
+def _polynomial_start(arrays, specs: list, scales: dict, config, chunk: int = 2048) -> dict:
+    r"""The monomials' coefficients and corrections of step 1's linear terms, by linear least squares.
+
+    The monomials enter the residual linearly, and so do corrections ``dX_j`` of step 1's
+    linear terms: ``min || R_1 + sum_j dX_j D_j + sum_m alpha_m grad phi_m(Q) ||_F`` is an
+    least-squares problem, solved by its normal equations (accumulated over column chunks) with
+    a relative Tikhonov weight per block, ``polynomial_ridge`` times the block's mean Gram
+    diagonal: directions the data hardly see (a POD coordinate a symmetric motion never
+    excites) get no coefficient, which would otherwise fit round-off and blow up away from
+    the data. ``dX_j`` is symmetric for
+    ``spd``/``psd``/``symmetric`` terms; ``X_j + dX_j`` is projected back onto its cone
+    (eigenvalues clipped at ``eps`` or 0), and the coefficients are solved again with the
+    projected terms fixed. Step 1 fits a linear model to nonlinear data, so its ``K^`` and
+    ``C^`` carry part of the nonlinear force: without the corrections the monomials cannot take it back.
+    The solution is where L-BFGS starts: from zero, gradient descent on monomials whose
+    coordinates span orders of magnitude (POD) converges slowly (measured on the cubic beam,
+    four trajectories, monomials alone: a relative loss of 3e-5 after 1500 iterations from
+    zero, 1e-5 after 12 from here). Updates the ``matrix`` of
+    ``specs``; returns ``{"alpha": {degree: (n,)}}`` in the module's scaled units.
+    """
+    Q, V, A, Y, blocks, norm = arrays
+    R1 = Y + sum(D @ s["matrix"].T for s, D in zip(specs, blocks))          # (K, r)
+    K, r = Q.shape
+    sq, cU = scales["q"], scales["potential"]
+    x = Q / sq
+    maps = {d: derivative_map(r, d) for d in config.potential_degrees}
+    sizes = [len(multi_indices(r, d)) for d in config.potential_degrees]
+
+    def unknowns(spec, D):
+        if spec["structure"] in ("spd", "psd", "symmetric"):
+            return [(i, j) for i in range(r) for j in range(i, r)]
+        return [(i, j) for i in range(r) for j in range(D.shape[1])]
+
+    def design(rows: slice, refined: list) -> np.ndarray:
+        k = x[rows].shape[0]
+        parts = []
+        for d, n in zip(config.potential_degrees, sizes):
+            m, p, i, e = maps[d]
+            block = np.zeros((k, r, n))
+            np.add.at(block, (slice(None), i, m), (e * cU / sq[i])[None, :] * monomials(x[rows], d - 1)[:, p])
+            parts.append(block)
+        for spec, D in refined:
+            pairs = unknowns(spec, D)
+            block = np.zeros((k, r, len(pairs)))
+            for c, (i, j) in enumerate(pairs):
+                block[:, i, c] += D[rows, j]
+                if spec["structure"] != "free" and i != j:
+                    block[:, j, c] += D[rows, i]
+            parts.append(block)
+        return np.concatenate(parts, axis=2).reshape(k * r, -1)
+
+    def solve(refined: list) -> np.ndarray:
+        G, h = 0.0, 0.0
+        for start in range(0, K, chunk):
+            rows = slice(start, start + chunk)
+            D = design(rows, refined)
+            G, h = G + D.T @ D, h + D.T @ R1[rows].ravel()
+        widths = sizes + [len(unknowns(spec, D)) for spec, D in refined]
+        ridge, start = np.zeros(G.shape[0]), 0
+        for width in widths:                 # relative Tikhonov per block (monomials of one degree, a term)
+            block = slice(start, start + width)
+            ridge[block] = config.polynomial_ridge * max(float(np.mean(np.diag(G)[block])), np.finfo(float).tiny)
+            start += width
+        return -np.linalg.lstsq(G + np.diag(ridge), h, rcond=None)[0]
+
+    refined = [(spec, D) for spec, D in zip(specs, blocks)] if config.refine_linear else []
+    if refined:
+        theta = solve(refined)
+        start = sum(sizes)
+        for spec, D in refined:
+            pairs = unknowns(spec, D)
+            dX = np.zeros_like(spec["matrix"])
+            for c, (i, j) in enumerate(pairs):
+                dX[i, j] = theta[start + c]
+                if spec["structure"] != "free":
+                    dX[j, i] = theta[start + c]
+            start += len(pairs)
+            X = spec["matrix"] + dX
+            if spec["structure"] in ("spd", "psd"):          # back into the cone: eigenvalues >= eps (or 0)
+                w, U = np.linalg.eigh(0.5 * (X + X.T))
+                X = (U * np.maximum(w, spec["shift"] if spec["structure"] == "spd" else 0.0)) @ U.T
+            spec["matrix"] = X
+        R1 = Y + sum(D @ s["matrix"].T for s, D in zip(specs, blocks))
+    theta = solve([])
+    out, start = {}, 0
+    for d, n in zip(config.potential_degrees, sizes):
+        out[d] = theta[start:start + n]
+        start += n
+    return {"alpha": out}
+
+
+def _scales(data: SecondOrderData, target_norm2: float) -> dict:
+    """Scales of the training coordinates (module :mod:`._spml_torch`): one RMS for all of
+    ``q^`` and one for all of ``q^'`` (isotropic: POD coordinates span orders of magnitude,
+    and a per-coordinate scale would blow the random initial forces of a small coordinate up
+    by ``1 / s_i``), and the energy scales ``f s`` from the RMS force ``f``."""
+    r = data.r
+    sq = max(float(np.sqrt(np.mean(data.states ** 2))), np.finfo(float).tiny)
+    sv = max(float(np.sqrt(np.mean(data.velocities ** 2))), np.finfo(float).tiny)
+    force = np.sqrt(target_norm2 / data.states.size)
+    return {"q": np.full(r, sq), "v": np.full(r, sv), "potential": force * sq, "dissipation": force * sv}
