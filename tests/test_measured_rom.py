@@ -7,13 +7,11 @@ skipped when the data folder is absent: ``$FEMROM_BRB_DATA`` or ``../shared/data
 
 from __future__ import annotations
 
-import importlib.util
-from pathlib import Path
-
 import numpy as np
 import pytest
 
-from femrom.post import band_limited_integrals, modal_record, read_hammer_impact
+from femrom.cli import load_case
+from femrom.post import band_limited_integrals, brb_data_dir, modal_record
 
 RATE = 2000.0
 BAND = (60.0, 100.0)
@@ -78,3 +76,72 @@ def test_bad_arguments_raise_one_line(kwargs, word):
     acc = np.random.default_rng(0).standard_normal((3, 1000))
     with pytest.raises(ValueError, match=word):
         modal_record(acc, RATE, BAND, **kwargs)
+
+
+# ----------------------------------------------------------------------------- measured data
+
+
+@pytest.fixture(scope="module")
+def measured(tmp_path_factory):
+    try:
+        brb_data_dir()
+    except FileNotFoundError as missing:
+        pytest.skip(f"jointed-beam data absent: {missing}")
+    case = load_case("jointed_beam_measured")
+    return case.run(case.MeasuredRomCase(), tmp_path_factory.mktemp("brb_measured"), progress=lambda line: None)
+
+
+def test_the_three_sensors_support_one_coordinate_in_the_mode_1_band(measured):
+    ranks = measured["rank_check"]
+    s = ranks["relative"]
+    # band displacements 60-100 Hz, 0.25 s trimmed: observed 1, 5.3e-3, 2.7e-4. The second
+    # and third directions hold under 0.6 % of the amplitude (noise, phase between sensors):
+    # 1e-2 and 1e-3 bound them; a second mode in the band would stand near 1e-1 or above
+    assert s[1] < 1e-2 and s[2] < 1e-3
+    # the first coordinate is mode 1 alone: one periodogram peak in 40-140 Hz, at 80.50 Hz
+    # (the README's 80.5 Hz; 0.1 Hz is a few bins of the 5.1 s record)
+    assert len(ranks["coordinate_peaks_hz"][0]) == 1
+    assert ranks["coordinate_peaks_hz"][0][0] == pytest.approx(80.5, abs=0.1)
+    # the other coordinates show no line of their own (many peaks of similar height: noise)
+    assert all(len(p) > 3 for p in ranks["coordinate_peaks_hz"][1:])
+
+
+def test_split_by_amplitude_and_the_measured_shift_on_the_untrained_amplitudes(measured):
+    # half the log range of acc1's envelope (23.9 -> 0.654 m/s^2): observed 2.31 s, 3.95 m/s^2
+    assert measured["split_amplitude_m_s2"] == pytest.approx(np.sqrt(23.9 * 0.654), rel=0.02)
+    forward = measured["splits"]["forward"]["models"]
+    # measured frequency rise over the untrained low amplitudes (about 2.7 -> 0.7 m/s^2):
+    # observed +0.061 Hz; 0.04-0.08 Hz is the backbone table of docs/backbone.md
+    for result in forward.values():
+        assert 0.04 < result["shift_measured_hz"] < 0.08
+
+
+def test_spml_bends_the_backbone_the_right_way_but_misses_the_shift_l_opinf_is_flat(measured):
+    forward = measured["splits"]["forward"]["models"]
+    lopinf, spml = forward["L-OpInf"], forward["SpML"]
+    # L-OpInf is linear: a flat backbone by construction (observed 3e-6 Hz: Hilbert round-off)
+    assert abs(lopinf["shift_predicted_hz"]) < 1e-3
+    # SpML's learned quartic softens: its frequency rises as the amplitude falls (observed
+    # +5.5e-4 Hz), so it is closer to the measured shift than L-OpInf's, but a smooth
+    # potential's shift falls as the amplitude squared and the issue's 30 % target is missed
+    # (observed error 99 %, docs/cases/jointed_beam_measured.md): the band is 0 < shift < 0.1 x measured
+    assert 0 < spml["shift_predicted_hz"] < 0.1 * spml["shift_measured_hz"]
+    assert spml["shift_relative_error"] < lopinf["shift_relative_error"]
+
+
+def test_spml_damping_against_l_opinf_on_untrained_amplitudes(measured):
+    splits = measured["splits"]
+    # forward (train high, test low): both keep the training part's damping (observed max
+    # relative errors: SpML 0.44, L-OpInf 0.48; measured 0.152 -> 0.139 %, predicted ~0.20 %)
+    forward = splits["forward"]["models"]
+    assert forward["SpML"]["damping_relative_error_max"] <= forward["L-OpInf"]["damping_relative_error_max"]
+    assert 0.3 < forward["SpML"]["damping_relative_error_max"] < 0.6     # target missed: both sides stated
+    # reverse (train low, test high): SpML's dissipation grows with the amplitude (observed
+    # 0.158 -> 0.184 % against the measured 0.167 -> 0.207 %), max error 0.11 against
+    # L-OpInf's flat 0.150 % (0.30): within the 30 % target; 0.2 leaves room for the fit
+    reverse = splits["reverse"]["models"]
+    low, high = reverse["SpML"]["damping_predicted_percent"][1], reverse["SpML"]["damping_predicted_percent"][0]
+    assert high > 1.05 * low
+    assert reverse["SpML"]["damping_relative_error_max"] < 0.2 < reverse["L-OpInf"]["damping_relative_error_max"]
+    # upward, the quartic overshoots the frequency shift (observed 0.95 Hz against 0.049 Hz measured)
+    assert reverse["SpML"]["shift_relative_error"] > 1.0
