@@ -67,7 +67,8 @@ class MeasuredRomCase:
     top in the forward split); validation : seconds at the end of the training part held
     out for SpML's early stopping; predict_every : the ROM's step in samples;
     reverse : also train on the low amplitudes and predict the high ones;
-    spml : the SpML settings.
+    in_sample : also predict the training part from its first state (how well each model
+    reproduces the backbone it was trained on); spml : the SpML settings.
     """
 
     band: tuple = (60.0, 100.0)
@@ -79,6 +80,7 @@ class MeasuredRomCase:
     validation: float = 0.3
     predict_every: int = 4
     reverse: bool = True
+    in_sample: bool = True
     spml: SpMLConfig = SpMLConfig(seed=0, potential_widths=(), dissipation_widths=(), polynomial_start=True,
                                   max_iterations=400)
 
@@ -222,6 +224,17 @@ def run(config: MeasuredRomCase, out: Path, progress=print, data_dir=None) -> di
                          f"{result['shift_measured_hz']:+.4f}, error {100 * result['shift_relative_error']:.0f} %), "
                          f"damping error max {100 * result['damping_relative_error_max']:.0f} %, "
                          f"offset {result['frequency_offset_hz']:+.4f} Hz")
+            if config.in_sample:
+                first = _segment(data, *train_span)
+                fitted, _ = predict_backbone(learner, record, first.states[:, 0], first.velocities[:, 0],
+                                             train_span[0], train_span[1] - train_span[0], config, rate)
+                in_train = (measured.time >= train_span[0]) & (measured.time <= train_span[1])
+                result["in_sample"] = compare(fitted, measured, float(measured.amplitude[in_train].min()),
+                                              float(measured.amplitude[in_train].max()))
+                if "shift_relative_error" in result["in_sample"]:
+                    progress(f"    in sample: shift {result['in_sample']['shift_predicted_hz']:+.4f} Hz (measured "
+                             f"{result['in_sample']['shift_measured_hz']:+.4f}), damping error max "
+                             f"{100 * result['in_sample']['damping_relative_error_max']:.0f} %")
         plot_backbones(out / f"backbones_{name}.png", curves)
         metrics["splits"][name] = entry
     write_metrics(out / "metrics.json", metrics)
