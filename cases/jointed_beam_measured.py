@@ -142,6 +142,27 @@ def rank_check(record, coordinates, rate: float) -> dict:
     return {"singular_values": s.tolist(), "relative": (s / s[0]).tolist(), "coordinate_peaks_hz": peaks}
 
 
+def linear_fits_by_rank(acc, rate: float, t0: float, train_span, config: "MeasuredRomCase") -> list[dict]:
+    """L-OpInf at every rank 1..c on the training part: its modes (frequency, damping) and the
+    relative residual of each coordinate's equation (how well a linear oscillator explains it)."""
+    rows = []
+    for r in range(1, acc.shape[0] + 1):
+        data = modal_record(acc, rate, config.band, rank=r, trim=config.trim, every=config.every,
+                            start_time=t0).data
+        train = _segment(data, *train_span)
+        ops = LagrangianOpInf(["damping"]).fit(train).operators_
+        M, C, K = ops.mass_matrix, ops.damping, ops.stiffness
+        A = np.block([[np.zeros((r, r)), np.eye(r)], [-np.linalg.solve(M, K), -np.linalg.solve(M, C)]])
+        poles = np.linalg.eigvals(A)
+        poles = poles[poles.imag > 0]
+        residual = M @ train.accelerations + C @ train.velocities + K @ train.states
+        relative = np.linalg.norm(residual, axis=1) / np.linalg.norm(M @ train.accelerations, axis=1)
+        rows.append({"rank": r, "frequencies_hz": (poles.imag / (2 * np.pi)).tolist(),
+                     "damping_percent": (-100 * poles.real / np.abs(poles)).tolist(),
+                     "coordinate_residuals": relative.tolist()})
+    return rows
+
+
 def fit_models(train: SecondOrderData, validation: SecondOrderData, config: MeasuredRomCase, progress) -> dict:
     models = {}
     started = time.perf_counter()
@@ -198,6 +219,11 @@ def run(config: MeasuredRomCase, out: Path, progress=print, data_dir=None) -> di
     splits = {"forward": ((t_first, t_split), (t_split, t_last), (a_split, np.inf), (0.0, a_split))}
     if config.reverse:
         splits["reverse"] = ((t_split, t_last), (t_first, t_split), (0.0, a_split), (a_split, np.inf))
+    ranks["linear_fits"] = linear_fits_by_rank(acc, rate, t0, (t_first, t_split), config)
+    for row in ranks["linear_fits"]:
+        progress(f"L-OpInf at r = {row['rank']} (forward training part): modes "
+                 + ", ".join(f"{f:.2f} Hz / {z:.3f} %" for f, z in zip(row["frequencies_hz"], row["damping_percent"]))
+                 + "; residual per coordinate " + ", ".join(f"{x:.2g}" for x in row["coordinate_residuals"]))
     metrics = {"config": dataclasses.asdict(config), "rank_check": ranks, "shape": record.shapes[:, 0].tolist(),
                "split_time_s": t_split, "split_amplitude_m_s2": a_split, "measured": measured.rows(), "splits": {}}
     for name, (train_span, test_span, _, test_amplitudes) in splits.items():
