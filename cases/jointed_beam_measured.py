@@ -216,9 +216,9 @@ def run(config: MeasuredRomCase, out: Path, progress=print, data_dir=None) -> di
     t_split = split_time(measured, config.split)
     a_split = float(np.exp(np.interp(t_split, measured.time, np.log(measured.amplitude))))
     progress(f"split at {t_split:.2f} s (acc1 {a_split:.2f} m/s^2)")
-    splits = {"forward": ((t_first, t_split), (t_split, t_last), (a_split, np.inf), (0.0, a_split))}
+    splits = {"forward": ((t_first, t_split), (t_split, t_last))}       # (train, test) spans [s]
     if config.reverse:
-        splits["reverse"] = ((t_split, t_last), (t_first, t_split), (0.0, a_split), (a_split, np.inf))
+        splits["reverse"] = ((t_split, t_last), (t_first, t_split))
     ranks["linear_fits"] = linear_fits_by_rank(acc, rate, t0, (t_first, t_split), config)
     for row in ranks["linear_fits"]:
         progress(f"L-OpInf at r = {row['rank']} (forward training part): modes "
@@ -226,7 +226,7 @@ def run(config: MeasuredRomCase, out: Path, progress=print, data_dir=None) -> di
                  + "; residual per coordinate " + ", ".join(f"{x:.2g}" for x in row["coordinate_residuals"]))
     metrics = {"config": dataclasses.asdict(config), "rank_check": ranks, "shape": record.shapes[:, 0].tolist(),
                "split_time_s": t_split, "split_amplitude_m_s2": a_split, "measured": measured.rows(), "splits": {}}
-    for name, (train_span, test_span, _, test_amplitudes) in splits.items():
+    for name, (train_span, test_span) in splits.items():
         progress(f"{name}: train {train_span[0]:.2f}-{train_span[1]:.2f} s, test {test_span[0]:.2f}-{test_span[1]:.2f} s")
         train = _segment(data, train_span[0], train_span[1] - config.validation)
         validation = _segment(data, train_span[1] - config.validation, train_span[1])
