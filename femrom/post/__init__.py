@@ -15,7 +15,7 @@ from femrom.post._backbone import (
     spectral_peaks,
 )
 from femrom.post._export import export_prediction
-from femrom.post._integrate import BandIntegrals, band_limited_integrals, band_weights
+from femrom.post._integrate import BandIntegrals, ModalRecord, band_limited_integrals, band_weights, modal_record
 from femrom.post._impact import (
     ImpactRecord,
     brb_data_dir,
@@ -46,7 +46,8 @@ from femrom.post._report import (
 )
 
 __all__ = [
-    "BandIntegrals", "band_limited_integrals", "band_weights","accuracy_cost_table", "Backbone", "brb_data_dir", "default_trim", "export_prediction",
+    "BandIntegrals", "band_limited_integrals", "band_weights", "ModalRecord", "modal_record",
+           "accuracy_cost_table", "Backbone", "brb_data_dir", "default_trim", "export_prediction",
            "hilbert_backbone", "ImpactRecord", "jsonable", "machine_description", "masing_damping", "measured_backbone",
            "measured_spectral_peaks", "mesh_arrays", "OutputFolderError", "peak_backbone",
            "plot_accuracy_cost", "plot_accuracy_cost_groups", "plot_backbones", "plot_response",
