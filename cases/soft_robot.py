@@ -44,7 +44,7 @@ from femrom.inference import system_impulse_response
 from femrom.post import accuracy_cost_table, mesh_arrays, pyplot, render_available, render_grid, save_figure, \
     staged_output, vertex_displacements
 from femrom.scene import BasisSpec, Derivatives, InputConfig, LearnerSpec, ReportSpec, RomConfig, RunSpec, Scene, \
-    band_limited_noise, chirp, multisine, onset
+    TimingSpec, band_limited_noise, chirp, multisine, onset
 from femrom.study import LinearModelSpec, linear_model_rows, relative_error, run_study, solver_factory
 
 SCENE = Path(__file__).with_suffix(".toml")
@@ -83,19 +83,25 @@ class SoftRobotCase:
     control_window: float = 2.5
     horizon: int = 50
     rate_weight: float = 1e-3                     # S = rate_weight / b^2
-    measurement_noise: float = 1e-4               # V = this * mean(y_ref^2) I (process noise W = I)
-    disturbance: str | None = None
-    wave_tip_amplitude: float = 0.03              # a(x) = this (x / L)^2 [m]
+    measurement_noise: float = 1e-2               # V = this * mean(y_ref^2) I (process noise W = I)
+    disturbance: str | None = "output"            # offset-free: a constant output disturbance per output
+    wave_tip_amplitude: float = 0.015             # a(x) = this (x / L)^2 [m]
     wave_frequency: float = 0.5
-    wave_length: float = 1.0                      # [m]: k = 2 pi / wave_length
+    wave_length: float = 1.5                      # [m]: k = 2 pi / wave_length
+    timing_repeats: int = 5                       # ROM step costs: timed blocks (interleaved) ...
+    timing_block_seconds: float = 0.1             # ... of at least this long each
     render: bool = True
     seed: int = 0
 
     @classmethod
     def quick(cls, **changes) -> "SoftRobotCase":
-        """A coarse mesh and short windows (tests): about a minute on 2 cores."""
-        settings = dict(mesh_size=0.09, train_window=4.0, random_train_window=2.0, test_window=1.5,
-                        ranks=(2, 4, 6, 10), era_samples=101, extension=5.0, control_window=0.8)
+        """A coarse mesh (9,414 dofs), short test and control windows (tests): about a minute on 2 cores.
+
+        The training runs keep their default length: with 4 s + 2 s of training on this mesh, L-OpInf
+        at r = 6-10 was off by 0.2-0.8 (a near-zero eigenvalue of K^), with 10 s + 5 s by 5e-4.
+        """
+        settings = dict(mesh_size=0.09, test_window=1.5, ranks=(2, 4, 6, 10), era_samples=101, extension=5.0,
+                        control_window=0.8, timing_repeats=3, timing_block_seconds=0.02)
         return cls(**(settings | changes))
 
     @classmethod
@@ -153,7 +159,8 @@ def rom_config(config: SoftRobotCase, dt: float) -> RomConfig:
     stored = Derivatives("stored")
     learners = tuple(LearnerSpec(m, m, stored) for m in ("galerkin", "lopinf") if m in config.models)
     return RomConfig(train=tuple(train), test=test, learners=learners, basis=BasisSpec(tuple(config.ranks)),
-                     extension=config.extension, report=ReportSpec(render=config.render, paraview=False))
+                     extension=config.extension, report=ReportSpec(render=config.render, paraview=False),
+                     timing=TimingSpec(config.timing_repeats, config.timing_block_seconds))
 
 
 def output_positions(scene: Scene) -> np.ndarray:
@@ -345,14 +352,16 @@ def run(out_dir, config: SoftRobotCase = SoftRobotCase(), *, progress=None, scen
         rows, models = linear_model_rows([MODELS[m] for m in config.models], config.ranks, tests,
                                          system=system, basis=state.basis, product=state.product,
                                          data=state.data, markov=markov, extension=config.extension,
-                                         progress=say)
+                                         repeats=config.timing_repeats,
+                                         min_block_seconds=config.timing_block_seconds, progress=say)
         metrics["comparison"] = rows
         title = f"soft robot: {system.n_dofs} dofs, unseen inputs"
         plot_comparison(out_dir / "comparison.png", rows, list(tests), title)
         table = comparison_table_rows(rows)
         sections.append("## Linear models as discrete state spaces (output error on unseen inputs)\n\n"
-                        "Every model run from rest on each test input; stable: spectral radius <= 1 and the outputs "
-                        f"over {config.extension:g}x the test window (input zero after it) below 10x the FOM's peak. "
+                        "Every model run from rest on each test input; stable: spectral radius <= 1 and, over "
+                        f"{config.extension:g}x the test window (the input zero after it), the free response in the "
+                        "second half no larger than the driven peak. "
                         "Seconds per step: the state-space step, all models timed together.\n\n"
                         + accuracy_cost_table(table, COMPARISON_COLUMNS) + "\n\n![comparison](comparison.png)")
         control, results = control_rows(state, config, models, say)
