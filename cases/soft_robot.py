@@ -349,12 +349,14 @@ def run(out_dir, config: SoftRobotCase = SoftRobotCase(), *, progress=None, scen
             metrics["era_impulse_seconds"] = time.perf_counter() - tic
         tests = {s.name: state.runs[s.name] for s in state.config.test}
         say(f"linear models {', '.join(config.models)} at r = {', '.join(map(str, config.ranks))}")
+        tic = time.perf_counter()
         rows, models = linear_model_rows([MODELS[m] for m in config.models], config.ranks, tests,
                                          system=system, basis=state.basis, product=state.product,
                                          data=state.data, markov=markov, extension=config.extension,
                                          repeats=config.timing_repeats,
                                          min_block_seconds=config.timing_block_seconds, progress=say)
         metrics["comparison"] = rows
+        metrics["linear_models_seconds"] = time.perf_counter() - tic
         title = f"soft robot: {system.n_dofs} dofs, unseen inputs"
         plot_comparison(out_dir / "comparison.png", rows, list(tests), title)
         table = comparison_table_rows(rows)
@@ -364,7 +366,9 @@ def run(out_dir, config: SoftRobotCase = SoftRobotCase(), *, progress=None, scen
                         "second half no larger than the driven peak. "
                         "Seconds per step: the state-space step, all models timed together.\n\n"
                         + accuracy_cost_table(table, COMPARISON_COLUMNS) + "\n\n![comparison](comparison.png)")
+        tic = time.perf_counter()
         control, results = control_rows(state, config, models, say)
+        metrics["control_seconds"] = time.perf_counter() - tic
         metrics["control"] = control
         plot_control(out_dir / "control.png", results, dt, f"MPC on the FOM, horizon {config.horizon}")
         sections.append("## MPC closed loops on the FOM\n\n" + accuracy_cost_table(control, CONTROL_COLUMNS)

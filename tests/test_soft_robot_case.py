@@ -1,4 +1,4 @@
-"""The soft-robot case end to end (quick settings: coarse mesh, short windows): the comparison of
+"""The soft-robot case end to end (quick settings: coarse mesh, short test and control windows): the comparison of
 L-OpInf with Galerkin, DMDc, ERA and OKID, and MPC closed loops on the FOM."""
 
 import json
