@@ -188,9 +188,6 @@ def control_rows(state, config: SoftRobotCase, models: dict, progress) -> tuple[
     n_steps = int(round(config.control_window / dt))
     K = n_steps + 1 + config.horizon
     feasible = state.runs["test_sines"]
-    if feasible.times.size < K:
-        raise ValueError(f"test_window {config.test_window} s is shorter than control_window + horizon "
-                         f"({(K - 1) * dt:g} s): the feasible reference needs the horizon beyond the loop")
     times = dt * np.arange(K)
     references = {"feasible": feasible.outputs[:, :K], "travelling_wave": wave_reference(config, state.scene, times)}
     solver = solver_factory(state.model)        # one factorisation for every closed loop
@@ -210,7 +207,8 @@ def control_rows(state, config: SoftRobotCase, models: dict, progress) -> tuple[
                 observer = KalmanObserver(model, measurement_noise=config.measurement_noise * size ** 2,
                                           disturbance=config.disturbance)
                 plant = FullOrderPlant(system, dt, solver=solver)
-                record = (lambda p: p.last.q) if (label, name) == (config.controllers[0][0], "travelling_wave") \
+                # the FOM's displacements of the first controller's wave loop, for the render
+                record = (lambda p: p.last.q) if (label, r, name) == (*config.controllers[0], "travelling_wave") \
                     else None
                 tic = time.perf_counter()
                 result = closed_loop(plant, mpc, observer, reference, n_steps, record_state=record, progress=False)
@@ -278,7 +276,7 @@ def plot_comparison(path, rows: list[dict], runs, title: str) -> Path:
     return save_figure(fig, path, dpi=110)
 
 
-def plot_control(path, results: dict, dt: float, title: str) -> Path:
+def plot_control(path, results: dict, dt: float, bound: float, title: str) -> Path:
     """Tail-tip lateral output (reference and closed loops) and the applied inputs, one column per reference."""
     plt = pyplot()
     references = list(dict.fromkeys(key[2] for key in results))
@@ -301,8 +299,8 @@ def plot_control(path, results: dict, dt: float, title: str) -> Path:
         top.set_ylabel("z [mm]")
         bottom.set_ylabel("pair inputs v_i")
         bottom.set_xlabel("t [s]")
-        bottom.axhline(0.1, color="r", lw=0.6, ls=":")
-        bottom.axhline(-0.1, color="r", lw=0.6, ls=":")
+        bottom.axhline(bound, color="r", lw=0.6, ls=":")
+        bottom.axhline(-bound, color="r", lw=0.6, ls=":")
         for ax in (top, bottom):
             ax.grid(alpha=0.3)
         top.legend(fontsize=7)
@@ -336,6 +334,11 @@ def run(out_dir, config: SoftRobotCase = SoftRobotCase(), *, progress=None, scen
     if bad:
         raise ValueError(f"controllers {bad} are not among the compared models {config.models} at r = {config.ranks}")
     scene = pair_scene(config, scene_path)
+    needed = config.control_window + config.horizon * scene.time.dt
+    if config.controllers and config.test_window < needed - 1e-9:
+        raise ValueError(f"test_window {config.test_window} s is shorter than control_window + horizon steps "
+                         f"({needed:g} s): the feasible reference (the FOM's response on test_sines) needs the "
+                         "horizon beyond the loop")
     scene = dataclasses.replace(scene, rom=rom_config(config, scene.time.dt))
 
     def extend(state):
@@ -370,7 +373,7 @@ def run(out_dir, config: SoftRobotCase = SoftRobotCase(), *, progress=None, scen
         control, results = control_rows(state, config, models, say)
         metrics["control_seconds"] = time.perf_counter() - tic
         metrics["control"] = control
-        plot_control(out_dir / "control.png", results, dt, f"MPC on the FOM, horizon {config.horizon}")
+        plot_control(out_dir / "control.png", results, dt, config.amplitude, f"MPC on the FOM, horizon {config.horizon}")
         sections.append("## MPC closed loops on the FOM\n\n" + accuracy_cost_table(control, CONTROL_COLUMNS)
                         + "\n\n![control](control.png)")
         label, r = config.controllers[0]

@@ -106,3 +106,15 @@ def test_mpc_on_the_fom_tracks_the_feasible_reference_within_its_bounds(case):
     # for both; the loops follow it in part (a loop that did nothing would have error 1)
     for model in ("lopinf", "era"):
         assert 0.1 < rows[(model, "travelling_wave")]["tracking_error"] < 0.5
+
+
+def test_a_bad_configuration_is_refused_before_anything_runs(tmp_path):
+    module = load_case("soft_robot")
+    out = tmp_path / "never"
+    with pytest.raises(ValueError, match="test_window 1.0 s is shorter than control_window"):
+        module.run(out, module.SoftRobotCase.quick(test_window=1.0))
+    with pytest.raises(ValueError, match=r"controllers \[\('dmdc', 3\)\] are not among"):
+        module.run(out, module.SoftRobotCase.quick(controllers=(("dmdc", 3),)))
+    with pytest.raises(ValueError, match="models must include 'lopinf'"):
+        module.run(out, module.SoftRobotCase.quick(models=("galerkin", "era"), controllers=()))
+    assert not out.exists()
