@@ -40,9 +40,6 @@ from femrom.study._timing import repeated_costs
 GROWTH_TOLERANCE = 1e-6
 #: spectral radii up to ``1 + RADIUS_TOLERANCE`` count as stable (an undamped direction sits at 1 to round-off)
 RADIUS_TOLERANCE = 1e-9
-IDENTIFIED = ("dmdc", "era", "okid")
-
-
 @dataclass(frozen=True)
 class LinearModelSpec:
     """One kind of linear model of the comparison.
@@ -75,23 +72,36 @@ def state_space_data(data: dict, r: int, states: str = "phase") -> InputOutputDa
                                   for d in data.values()])
 
 
+def _dmdc(r, options, data, markov):
+    return DMDc(input_samples="both", **options), state_space_data(data, r)
+
+
+def _okid(r, options, data, markov):
+    return OKID(order=2 * r, **options), state_space_data(data, r, "none")
+
+
+def _era(r, options, data, markov):
+    if markov is None:
+        raise ValueError("ERA needs Markov parameters: pass markov=")
+    return ERA(order=2 * r, **options), markov
+
+
+#: how an identified learner is made at size ``r`` (2 r states) and what it is fitted on:
+#: ``name -> make(r, options, data, markov) -> (learner, its data)``; a new identified learner is one entry
+IDENTIFIED = {"dmdc": _dmdc, "era": _era, "okid": _okid}
+
+
 def fit_linear_model(spec: LinearModelSpec, r: int, *, system, basis, product, data: dict, dt: float,
                      markov=None):
     """The :class:`~femrom.rom.DiscreteStateSpace` of ``spec`` at size ``r``, and the fitted model."""
     options = dict(spec.options)
-    if spec.learner == "dmdc":
-        rom = StateSpaceROM(learner=DMDc(input_samples="both", **options)).fit(state_space_data(data, r))
-    elif spec.learner == "okid":
-        rom = StateSpaceROM(learner=OKID(order=2 * r, **options)).fit(state_space_data(data, r, "none"))
-    elif spec.learner == "era":
-        if markov is None:
-            raise ValueError(f"linear model {spec.label!r} (ERA) needs Markov parameters: pass markov=")
-        rom = StateSpaceROM(learner=ERA(order=2 * r, **options)).fit(markov)
-    else:
-        learner = LearnerSpec(spec.label, spec.learner, Derivatives("stored"), **options)
-        rom = fit_rom(system, basis, product, r, learner, data)
-        return rom.to_state_space(dt), rom
-    return rom.to_state_space(), rom
+    if spec.learner in IDENTIFIED:
+        learner, training = IDENTIFIED[spec.learner](r, options, data, markov)
+        rom = StateSpaceROM(learner=learner).fit(training)
+        return rom.to_state_space(), rom
+    rom = fit_rom(system, basis, product, r, LearnerSpec(spec.label, spec.learner, Derivatives("stored"), **options),
+                  data)
+    return rom.to_state_space(dt), rom
 
 
 def _simulate(model, inputs: np.ndarray) -> np.ndarray:
