@@ -373,7 +373,8 @@ def run(out_dir, config: SoftRobotCase = SoftRobotCase(), *, progress=None, scen
         control, results = control_rows(state, config, models, say)
         metrics["control_seconds"] = time.perf_counter() - tic
         metrics["control"] = control
-        plot_control(out_dir / "control.png", results, dt, config.amplitude, f"MPC on the FOM, horizon {config.horizon}")
+        plot_control(out_dir / "control.png", results, dt, config.amplitude,
+                     f"MPC on the FOM, horizon {config.horizon}")
         sections.append("## MPC closed loops on the FOM\n\n" + accuracy_cost_table(control, CONTROL_COLUMNS)
                         + "\n\n![control](control.png)")
         label, r = config.controllers[0]

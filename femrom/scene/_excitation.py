@@ -103,5 +103,6 @@ def band_limited_noise(rms: float, band, t_end: float, dt: float, *, seed: int =
     u = np.fft.irfft(spectrum, n=t.size)
     size = np.sqrt(np.mean(u ** 2))
     if size == 0:
-        raise ValueError(f"band {band} Hz holds no frequency of a {t_end} s window (resolution {1 / (t.size * dt):g} Hz)")
+        raise ValueError(f"band {band} Hz holds no frequency of a {t_end} s window "
+                         f"(resolution {1 / (t.size * dt):g} Hz)")
     return sampled_signal(t, onset(t, ramp) * u * (rms / size))
