@@ -7,7 +7,9 @@ A scene has one ``[material]`` (:class:`MaterialConfig`) or ``[materials]``, a m
 region of the mesh (:class:`RegionMaterialConfig`), resolved to constants per element by
 :func:`element_materials` (every element exactly one material). Its outputs are point probes,
 region averages and lines of probes (:class:`LineConfig`: n points along a polyline, each
-the mean of a component over its nearest nodes).
+the mean of a component over its nearest nodes). Inputs sampled on a grid for training and
+tests: :func:`multisine`, :func:`chirp`, :func:`band_limited_noise` (``array`` signals with a
+raised-cosine onset, :func:`onset`).
 """
 
 from femrom.scene._build import FullOrderModel, build
@@ -30,6 +32,7 @@ from femrom.scene._config import (
 from femrom.scene._craig_bampton import CraigBampton, boundary_dofs_of, craig_bampton
 from femrom.scene._effects import EFFECTS, Assembly, Effect, effect_class, register_effect, registered_effects
 from femrom.scene._errors import SceneError
+from femrom.scene._excitation import band_limited_noise, chirp, multisine, onset, sample_times, sampled_signal
 from femrom.scene._materials import element_materials
 from femrom.scene._modal import BeamModeShape, Modes, beam_mode_shape, linearized_modes, tangent_stiffness
 from femrom.scene._projection import project_system
@@ -46,6 +49,7 @@ __all__ = [
     "InputConfig", "LineConfig", "LoadConfig", "MaterialConfig", "OutputConfig", "ProbeConfig",
     "RegionMaterialConfig", "Scene", "element_materials",
     "SceneError", "SecondOrderSystem", "Signal", "SignalVector", "SweepConfig", "StructureConfig", "TimeConfig", "build",
+    "band_limited_noise", "chirp", "multisine", "onset", "sample_times", "sampled_signal",
     "effect_class", "half_sine_spectrum", "register_effect", "registered_effects",
     "BeamModeShape", "Modes", "Preload", "StaticSolution", "beam_mode_shape", "linearized_modes",
     "point_supports", "preload", "project_system", "solve_static", "tangent_stiffness", "with_friction_coefficient",

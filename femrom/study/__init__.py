@@ -30,6 +30,10 @@ What the case scripts share, for any scene (``femrom run scene.toml`` with a
   (a case's own ROMs as study rows, timed interleaved with the study's);
 - learned nonlinear forces against a reference (the Galerkin-projected force):
   :func:`force_error`, :func:`conservative_acceleration`, :func:`nonlinear_forces`;
+- linear models in one form (:mod:`femrom.study._linear_models`): :class:`LinearModelSpec`,
+  :func:`fit_linear_model`, :func:`linear_model_rows` (second-order ROMs and identified DMDc, ERA,
+  OKID models as discrete state spaces on every run: output errors, spectral radii, long-window
+  stability, fit and step costs), :func:`state_space_data`;
 - hyper-reduction: :func:`hyper_reduced_rows` (a learned ROM's known conservative force
   replaced by its ECSW-sampled potential, :data:`HYPER_COLUMNS`);
 - costs: :class:`Cost` (the fastest of several timed blocks, and their quartiles),
@@ -100,6 +104,7 @@ from femrom.study._ladders import (
     time_step_ladder,
     time_step_section,
 )
+from femrom.study._linear_models import LinearModelSpec, fit_linear_model, linear_model_rows, state_space_data
 from femrom.study._metrics import Projection, energy_ratio, invariant_drift, mass_norm, project_run, relative_error
 from femrom.study._pipeline import ROW_COLUMNS, StudyState, peak_rss_gb, public_rows, run_study, write_report
 from femrom.study._runs import FOMRun, run_fom, solver_factory
@@ -135,7 +140,8 @@ __all__ = [
     "call_cost", "canonical_rows", "canonical_time_step_ladder", "check_canonical_learners",
     "check_rom_config", "energy_ratio", "evaluate", "evaluate_runs", "extra_rom_rows", "extrapolation_config", "extrapolation_scene",
     "final_state", "final_state_ladders", "final_state_section", "fit_canonical_rom", "fit_rom", "fom_runs", "frequency_ladder", "frequency_section", "hyper_reduced_rows", "invariant_drift",
-    "ladder_section", "ladder_table", "linear_operator", "mass_generator", "mass_norm", "natural_frequencies",
+    "ladder_section", "ladder_table", "linear_model_rows", "linear_operator", "LinearModelSpec", "fit_linear_model",
+    "state_space_data", "mass_generator", "mass_norm", "natural_frequencies",
     "observed_order", "operator_checks", "peak_rss_gb", "plot_accuracy_cost", "plot_energy",
     "plot_energy_error_history", "plot_error_history", "plot_errors", "plot_histories",
     "plot_invariant_drifts", "plot_output_history", "plot_outputs", "pod_basis", "product_matrix",

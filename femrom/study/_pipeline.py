@@ -50,6 +50,9 @@ class StudyState:
     out_dir: Path
     progress: object
     timings: dict
+    data: dict | None = None
+    """The training runs' reduced data in the largest basis (:class:`~femrom.inference.SecondOrderData` by run
+    name): what a case's own learners (identified state-space models) fit on."""
 
 
 def run_study(scene: Scene, out_dir, *, model=None, store_path=None, extend=None, progress=print) -> dict:
@@ -127,7 +130,7 @@ def run_study(scene: Scene, out_dir, *, model=None, store_path=None, extend=None
         extra, sections = {}, []
         if extend is not None:
             extra, sections = extend(StudyState(scene, model, config, store, runs, W, pod.basis_, rows,
-                                                evaluations, projections, out_dir, say, timings))
+                                                evaluations, projections, out_dir, say, timings, data))
     finally:
         store.close()
     if not config.report.keep_snapshots:
