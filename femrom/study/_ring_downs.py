@@ -136,6 +136,8 @@ class RingDownComparison:
     band: tuple = (60.0, 100.0)            #: band-pass of the Hilbert backbone [Hz]
     window: float = 0.2                    #: its window [s]
     learned_scheme: str = "discrete_gradient"
+    range_window: float | None = None      #: Hilbert window of the training runs' amplitude range (default window)
+    range_trim: float | None = None        #: and its trim (default: hilbert_backbone's)
 
 
 def _stable(signal: np.ndarray) -> bool:
@@ -184,7 +186,9 @@ def compare_ring_downs(system, rest_state, training, validation, tests, settings
         return correction(hilbert_backbone(signal, 1.0 / dt, settings.band, window=settings.window))
 
     if amplitude_range is None:     # the amplitudes the training runs' own backbones span
-        curves = [backbone(run.outputs[o], run.dt) for run in training]
+        curves = [hilbert_backbone(run.outputs[o], 1.0 / run.dt, settings.band,
+                                   window=settings.range_window or settings.window, trim=settings.range_trim)
+                  for run in training]
         amplitude_range = (float(min(np.min(c.amplitude) for c in curves)),
                            float(max(np.max(c.amplitude) for c in curves)))
 
