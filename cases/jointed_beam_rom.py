@@ -1,0 +1,184 @@
+"""Jointed beam ROMs from model data: SpML, L-OpInf and Galerkin against the hyper-reduced Iwan model.
+
+Issue 17, part 3. The reference ("FOM" of this study) is the jointed-beam case's 10-mode model with
+its ECSW-sampled ``clamped_iwan`` joint (``cases/jointed_beam.py``; it stands in for the 24,522-dof
+model, against which it is validated in ``docs/cases/jointed_beam.md``). Its ring-downs after hammer
+blows at two levels train the models; a third level is the (interpolation) test, predicted from rest
+over ten times the training window. Per r: POD of the 10 modal coordinates, SpML and L-OpInf fitted
+on the projected ``q^, q^', q^''`` and the hammer input, Galerkin the reference projected on the same
+directions with its sampled joint (``femrom.study.compare_ring_downs``). Once, the per-step cost of the
+24,522-dof model with the joint (condensed Newton) is measured, so that step costs compare with the
+true FOM too.
+
+Run ``python -m femrom run jointed_beam_rom [-o results/jointed_beam_rom] [--quick] [--extrapolation]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from femrom.cli import load_case
+from femrom.inference import SpMLConfig
+from femrom.integrators import Newmark, Newton, StepResult, integrate
+from femrom.post import plot_backbones, staged_output, write_metrics
+from femrom.rom import ecsw_joint, hyper_reduced_system
+from femrom.scene import Signal, SignalVector, point_supports
+from femrom.study import RING_DOWN_COLUMNS, RingDownComparison, compare_ring_downs, reference_ring_down
+
+jb = load_case("jointed_beam")
+
+
+@dataclass(frozen=True)
+class JointedBeamRomCase:
+    """What the study runs (defaults: about ten minutes on 2 shared cores)."""
+
+    training_blows: tuple = (150.0, 600.0)      #: hammer peaks [N] of the training ring-downs
+    training_window: float = 0.3                #: their length [s]
+    validation_blow: float = 400.0              #: SpML's early-stopping trajectory [N]
+    validation_window: float = 0.15
+    test_blows: tuple = (300.0,)                #: predicted from rest (300 N: between the training levels)
+    horizon_factor: float = 10.0                #: test length / training window
+    ranks: tuple = (1, 3, 5)
+    models: tuple = ("galerkin", "lopinf", "spml")
+    spml_iterations: int = 2000
+    full_model_steps: int = 30                  #: steps of the 24,522-dof model for its step cost (0: skip)
+    damping_ratio: float = 0.00139              #: linear modal damping (the measured lowest-amplitude ratio)
+
+
+def full_model_step_cost(model, q0, z0, dt: float, steps: int, progress=print) -> dict:
+    """Seconds per step of the full model with the joint (Newmark, condensed Newton) after a 300 N blow,
+    from the step times after the first (the factorisation and the first step excluded)."""
+    hammer = Signal.from_dict({"kind": "impulse", "amplitude": 300.0, "start": 0.0, "duration": 3e-4})
+    shaker = Signal.from_dict({"kind": "sine", "amplitude": 0.0, "frequency": 80.5})
+    full = dataclasses.replace(model, inputs=SignalVector([hammer, shaker]))
+    n = full.n_dofs
+    stamps = []
+    start = StepResult(step=0, t=0.0, q=q0.copy(), v=np.zeros(n), a=np.zeros(n), state=z0)
+    tic = time.perf_counter()
+    summary = integrate(full, Newmark(newton=Newton(method="condensed")), None, None, dt, steps,
+                        consumers=[lambda result: stamps.append(time.perf_counter())], start=start, progress=None)
+    total = time.perf_counter() - tic
+    per_step = (stamps[-1] - stamps[0]) / max(len(stamps) - 1, 1)
+    progress(f"  full model: {n} dofs, {steps} steps in {total:.1f} s, {per_step:.3g} s/step after the first")
+    return {"n_dofs": n, "steps": steps, "seconds_total": total, "seconds_per_step": per_step,
+            "newton_iterations": getattr(summary, "newton_iterations", None)}
+
+
+def run(config: JointedBeamRomCase, out: Path, progress=print) -> dict:
+    tic = time.perf_counter()
+    case = jb.JointedBeamCase(fit_iwan=False, forced=False)
+    progress("jointed beam ROMs: preload, k_t calibration, the Iwan joint (chi, beta: the case's fit) ...")
+    setup = jb.prestressed(case)
+    beam, system = setup["beam"], setup["system"]
+    left_face = point_supports(beam.fom.space, system.condensation, jb.prestress.SUPPORTS[:3])
+    model, q_iwan, z_iwan = jb.iwan_joint(setup, left_face, mu=case.friction_coefficient, chi=case.iwan_chi,
+                                          beta=case.iwan_beta)
+    reduced = jb.reduced_model(setup, case, model, q_iwan, z_iwan, config.damping_ratio)
+    f1 = float(setup["modes"].frequencies[6])
+    dt = 1.0 / (f1 * case.steps_per_period)
+    seconds = {"setup": time.perf_counter() - tic}
+
+    progress("jointed beam ROMs: ECSW sample of the joint (the case's training) ...")
+    tic_ecsw = time.perf_counter()
+    snapshots = []
+    for peak in case.training_impacts:
+        *_, kept = jb.ring_down(jb.with_blow(reduced, peak, case.impact_width), z_iwan, case.training_window, dt,
+                                keep_every=4)
+        snapshots += kept
+    sampling = ecsw_joint(reduced, snapshots, z_iwan, tolerance=case.ecsw_tolerance)
+    hyper, z_hyper = hyper_reduced_system(reduced, sampling, z_iwan)
+    seconds["ecsw"] = time.perf_counter() - tic_ecsw
+    progress(f"  {sampling.pairs.size} of {sampling.n_pairs} pairs")
+
+    full_cost = None
+    if config.full_model_steps:
+        progress(f"jointed beam ROMs: {config.full_model_steps} steps of the full model with the joint ...")
+        full_cost = full_model_step_cost(model, q_iwan, z_iwan, dt, config.full_model_steps, progress)
+
+    def blow(peak):
+        return jb.with_blow(hyper, peak, case.impact_width)
+
+    progress("jointed beam ROMs: reference ring-downs (10 modes, sampled joint) ...")
+    tic_ref = time.perf_counter()
+    training = [reference_ring_down(blow(p), z_hyper, config.training_window, dt, label=f"{p:g} N")
+                for p in config.training_blows]
+    validation = [reference_ring_down(blow(config.validation_blow), z_hyper, config.validation_window, dt,
+                                      label=f"{config.validation_blow:g} N")]
+    horizon = config.horizon_factor * config.training_window
+    tests = [(reference_ring_down(blow(p), z_hyper, horizon, dt, label=f"{p:g} N"), blow(p))
+             for p in config.test_blows]
+    seconds["reference_runs"] = time.perf_counter() - tic_ref
+    reference_step = tests[0][0].seconds_per_step
+
+    settings = RingDownComparison(ranks=config.ranks, models=config.models, band=jb.BAND, window=jb.WINDOW,
+                                  spml=SpMLConfig(max_iterations=config.spml_iterations, seed=0),
+                                  range_window=0.05, range_trim=0.05)
+    progress(f"jointed beam ROMs: models at r = {', '.join(map(str, config.ranks))} ...")
+    tic_cmp = time.perf_counter()
+    comparison = compare_ring_downs(hyper, z_hyper, training, validation, tests, settings,
+                                    correction=lambda b: jb.newmark_corrected(b, dt),
+                                    progress=lambda line: progress(line))
+    seconds["comparison"] = time.perf_counter() - tic_cmp
+    rows = comparison["rows"]
+    for row in rows:
+        row["speedup_vs_reference"] = reference_step / row["seconds_per_step"]
+        if full_cost is not None:
+            row["speedup_vs_full_model"] = full_cost["seconds_per_step"] / row["seconds_per_step"]
+
+    out.mkdir(parents=True, exist_ok=True)
+    for run_, _ in tests:
+        curves = {("reference" if m == "reference" else f"{m} r={r}"): b
+                  for (m, r, label), b in comparison["backbones"].items() if label == run_.label}
+        plot_backbones(out / f"backbone_{run_.label.replace(' ', '')}.png", curves,
+                       title=f"jointed beam ROMs, {run_.label} blow, acc1", amplitude_label="acc1 amplitude [m/s^2]")
+    backbones = {f"{m}/{r}/{label}": [{"amplitude_m_s2": x["amplitude"], "frequency_hz": x["frequency_hz"],
+                                       "damping_ratio": x["damping_ratio"]} for x in b.rows()]
+                 for (m, r, label), b in comparison["backbones"].items()}
+    metrics = {
+        "case": "jointed_beam_rom", "columns": list(RING_DOWN_COLUMNS),
+        "reference": f"{case.n_modes}-mode model about the preload, clamped_iwan joint sampled on "
+                     f"{sampling.pairs.size} of {sampling.n_pairs} pairs (ECSW)",
+        "config": dataclasses.asdict(config), "dt": dt, "f1_hz": f1,
+        "trained_amplitude_range_m_s2": comparison["amplitude_range"],
+        "pod_singular_values": [float(s) for s in comparison["singular_values"]],
+        "reference_seconds_per_step": reference_step,
+        "full_model": full_cost,
+        "rows": rows, "backbones": backbones,
+        "seconds": {**seconds, "total": time.perf_counter() - tic},
+    }
+    write_metrics(out / "metrics.json", metrics)
+    return metrics
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(prog="femrom run jointed_beam_rom", description=__doc__.split("\n")[0])
+    parser.add_argument("-o", "--out", type=Path, default=Path("results") / "jointed_beam_rom")
+    parser.add_argument("--quick", action="store_true", help="r = 2 only, short fits, no full-model steps")
+    parser.add_argument("--extrapolation", action="store_true", help="also test a 1000 N blow (outside training)")
+    parser.add_argument("--ranks", type=int, nargs="+", help="reduced dimensions (default 1 3 5)")
+    args = parser.parse_args(argv)
+    config = JointedBeamRomCase()
+    if args.quick:
+        config = dataclasses.replace(config, ranks=(2,), spml_iterations=200, full_model_steps=0, horizon_factor=3.0)
+    if args.ranks:
+        config = dataclasses.replace(config, ranks=tuple(args.ranks))
+    if args.extrapolation:
+        config = dataclasses.replace(config, test_blows=config.test_blows + (1000.0,))
+    with staged_output(args.out) as folder:
+        metrics = run(config, folder, progress=lambda line: print(line, file=sys.stderr, flush=True))
+    for row in metrics["rows"]:
+        print(f"{row['model']:9s} r={row['r']} {row['test']}: shift error {row['frequency_shift_error']}, "
+              f"damping error {row['damping_max_error']}, time error {row['time_domain_error']:.3g}, "
+              f"{1e3 * row['seconds_per_step']:.3g} ms/step, fit {row['fit_seconds']:.1f} s, stable {row['stable']}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
