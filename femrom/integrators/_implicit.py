@@ -169,7 +169,7 @@ class ImplicitSolve:
     def _dense(self, b, q0, v0, state, guess):
         """Newton with dense arrays: force and tangent from one evaluation per iteration (a small system)."""
         S, w, c_q, c_v, options = self._S_dense, self.w, self.c_q, self.c_v, self.newton
-        x = np.array(guess, dtype=float)
+        x = np.zeros_like(b, dtype=float) if guess is None else np.array(guess, dtype=float)
         eps = np.finfo(float).eps
         for iteration in range(options.max_iterations + 1):
             f, dfdq, dfdv = self._force_and_tangent(q0 + c_q * x, v0 + c_v * x, state)
