@@ -74,10 +74,7 @@ def main() -> None:
     reduced = case.reduced_model(setup, case.JointedBeamCase(), model, q0, z0, damping)
     f1 = float(modes.frequencies[6])
     dt = 1.0 / (config.steps_per_period * f1)
-    snapshots = []
-    for peak in config.training_impacts:
-        snapshots += case.ring_down(case.with_blow(reduced, peak, config.impact_width), z0,
-                                    config.training_window, dt, keep_every=4)[3]
+    snapshots = case.ecsw_training(reduced, z0, config, dt)[0]
     all_curve, _ = case.reduced_qsma(reduced, z0, config.qsma_amplitudes, damping)
     blow = case.with_blow(reduced, 300.0, config.impact_width)
     models = {"all": (blow, z0)}

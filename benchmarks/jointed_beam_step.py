@@ -66,10 +66,7 @@ def main() -> None:
     all_pairs = case.reduced_model(setup, config, model, q0, z0, damping)
     f1 = float(setup["modes"].frequencies[6])
     dt = 1.0 / (128 * f1)
-    snapshots = []
-    for peak in config.training_impacts:
-        snapshots += case.ring_down(case.with_blow(all_pairs, peak, config.impact_width), z0,
-                                    config.training_window, dt, keep_every=4)[3]
+    snapshots = case.ecsw_training(all_pairs, z0, config, dt)[0]
     sampling = ecsw_joint(all_pairs, snapshots, z0, tolerance=config.ecsw_tolerance)
     hyper, z_hyper = hyper_reduced_system(all_pairs, sampling, z0)
     D0 = all_pairs.nonlinear.tangent(np.zeros(all_pairs.n_dofs), None, z0)[0]

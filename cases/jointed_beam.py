@@ -208,6 +208,23 @@ def ring_down(reduced, z0, duration: float, dt: float, keep_every: int = 0):
     return acc, time.perf_counter() - tic, summary.newton_iterations, kept
 
 
+def ecsw_training(reduced, z0, config: JointedBeamCase, dt: float, progress=None):
+    """The all-pair ring-downs ECSW trains on (``config.training_impacts``, ``training_window``, every 4th
+    step kept): ``(snapshots [(q^, state)], {peak: acc (3, k)}, seconds)``."""
+    snapshots, training, seconds = [], {}, {}
+    for peak in config.training_impacts:
+        if progress is not None:
+            progress(f"jointed beam: all {reduced.nonlinear.force_model.n_pairs} pairs, {peak:g} N blow, "
+                     f"{config.training_window:g} s (ECSW training) ...")
+        acc, sec, _, kept = ring_down(with_blow(reduced, peak, config.impact_width), z0,
+                                      config.training_window, dt, keep_every=4)
+        snapshots += kept
+        training[peak] = acc
+        seconds[f"training_{peak:g}_n"] = sec
+        seconds.setdefault("all_pairs_ms_per_step", 1e3 * sec / max(acc.shape[1] - 1, 1))
+    return snapshots, training, seconds
+
+
 def reduced_qsma(reduced, z0, amplitudes, damping_ratio: float):
     """QSMA of the first reduced coordinate (mode 1: ``V^T M V = I``), linear damping added: ``(Backbone, s)``."""
     phi = np.zeros(reduced.n_dofs)
@@ -367,16 +384,8 @@ def run(config: JointedBeamCase, out: Path, progress=print, data_dir=None) -> di
 
     # hyper-reduction: ECSW trained on short all-pair ring-downs
     dt = 1.0 / (f1 * config.steps_per_period)
-    snapshots, training = [], {}
-    for peak in config.training_impacts:
-        progress(f"jointed beam: all {system.nonlinear.n_pairs} pairs, {peak:g} N blow, "
-                 f"{config.training_window:g} s (ECSW training) ...")
-        acc, sec, newton, kept = ring_down(with_blow(reduced, peak, config.impact_width), z_iwan,
-                                           config.training_window, dt, keep_every=4)
-        snapshots += kept
-        training[peak] = acc
-        seconds[f"training_{peak:g}_n"] = sec
-        seconds.setdefault("all_pairs_ms_per_step", 1e3 * sec / max(acc.shape[1] - 1, 1))
+    snapshots, training, training_seconds = ecsw_training(reduced, z_iwan, config, dt, progress=progress)
+    seconds.update(training_seconds)
     sampling = ecsw_joint(reduced, snapshots, z_iwan, tolerance=config.ecsw_tolerance)
     hyper, z_hyper = hyper_reduced_system(reduced, sampling, z_iwan)
     progress(f"  {sampling.pairs.size} of {sampling.n_pairs} pairs, training residual {sampling.residual:.2g}")
