@@ -116,7 +116,7 @@ def test_galerkin_refuses_an_effect_no_term_projects():
 def test_learners_are_found_by_name_and_fit_only_named_terms():
     assert {"galerkin", "lopinf", "opinf", "hopinf"} <= set(registered_learners())
     assert learner_class("lopinf") is LagrangianOpInf
-    with pytest.raises(ValueError, match="unknown learner 'dmd'; registered: canonical_opinf, dmdc, era, galerkin, hopinf, lopinf, okid, opinf, spml"):
+    with pytest.raises(ValueError, match="unknown learner 'dmd'; registered: canonical_opinf, dmdc, era, galerkin, hopinf, iwan_lopinf, lopinf, okid, opinf, spml"):
         learner_class("dmd")
     with pytest.raises(ValueError, match="unknown reduced term 'gravity'; registered: mass"):
         LagrangianOpInf(["gravity"])

@@ -104,6 +104,7 @@ from femrom.inference.learners.dmdc import DMDc
 from femrom.inference.learners.era import ERA
 from femrom.inference.learners.galerkin import GalerkinProjection
 from femrom.inference.learners.hopinf import HamiltonianOpInf
+from femrom.inference.learners.iwan_lopinf import IwanLOpInf
 from femrom.inference.learners.canonical_opinf import CanonicalOpInf
 from femrom.inference.learners.lopinf import LagrangianOpInf
 from femrom.inference.learners.okid import OKID
@@ -113,6 +114,7 @@ from femrom.inference._networks import ConvexPowers, NetworkLayer, ScalarNetwork
 from femrom.inference.terms.damping import Damping
 from femrom.inference.terms.input import Input
 from femrom.inference.terms.learned_dissipation import LearnedDissipation
+from femrom.inference.terms.learned_hysteresis import LearnedHysteresis, SliderState, slider_stretches
 from femrom.inference.terms.learned_potential import LearnedPotential
 from femrom.inference.terms.mass import Mass
 from femrom.inference.terms.output import Output
@@ -137,4 +139,5 @@ __all__ = [
     "block_hankel", "era_realization", "impulse_response", "markov_parameters", "observer_markov_parameters",
     "markov_from_observer", "okid_markov_parameters", "okid_observer_gain", "system_impulse_response",
     "system_markov_from_observer",
+    "IwanLOpInf", "LearnedHysteresis", "SliderState", "slider_stretches",
 ]
