@@ -42,7 +42,7 @@ from pathlib import Path
 
 import numpy as np
 
-from femrom.inference import LagrangianOpInf, SecondOrderData, SpML, SpMLConfig
+from femrom.inference import IwanLOpInf, LagrangianOpInf, SecondOrderData, SpML, SpMLConfig
 from femrom.post import (
     Backbone,
     hilbert_backbone,
@@ -81,6 +81,7 @@ class MeasuredRomCase:
     predict_every: int = 4
     reverse: bool = True
     in_sample: bool = True
+    iwan: tuple = (("thresholds", 32),)
     spml: SpMLConfig = SpMLConfig(seed=0, potential_widths=(), dissipation_widths=(), polynomial_start=True,
                                   max_iterations=400)
 
@@ -171,6 +172,11 @@ def fit_models(train: SecondOrderData, validation: SecondOrderData, config: Meas
     learner = SpML(["damping"], config=config.spml, progress=False).fit(train, validation=validation)
     models["SpML"] = (learner, time.perf_counter() - started)
     progress(f"  SpML: loss {learner.loss_:.3g} (L-OpInf {learner.linear_loss_:.3g}), {models['SpML'][1]:.1f} s")
+    started = time.perf_counter()
+    learner = IwanLOpInf(["damping"], **dict(config.iwan)).fit(train, validation=validation)
+    models["Iwan-L-OpInf"] = (learner, time.perf_counter() - started)
+    progress(f"  Iwan-L-OpInf: residual {learner.residual_:.3g} (linear {learner.linear_residual_:.3g}), "
+             f"{learner.hysteresis_.describe()['active_sliders']} sliders, {models['Iwan-L-OpInf'][1]:.1f} s")
     return models
 
 
@@ -180,7 +186,10 @@ def predict_backbone(learner, record, q0, v0, start: float, duration: float, con
     times = start + np.arange(int(duration / dt)) * dt
     rom = SecondOrderROM(learner.operators_, np.eye(config.rank))
     started = time.perf_counter()
-    solution = rom.predict(q0, times, v0=v0, scheme="discrete_gradient")
+    nonlinear = learner.operators_.nonlinear
+    stateful = nonlinear is not None and nonlinear.stateful
+    # the sliders' return mapping steps with Newmark (the same period error as the midpoint rule)
+    solution = rom.predict(q0, times, v0=v0, scheme="newmark" if stateful else "discrete_gradient")
     seconds = time.perf_counter() - started
     acc1 = record.channel_acceleration(solution.a, 0)
     backbone = hilbert_backbone(acc1, 1 / dt, config.band, window=config.window, start_time=start)

@@ -283,10 +283,23 @@ class SecondOrderData:
                        times=None if self.times is None else self.times[1:-1], diagnostics=d)
 
 
+def sampling_step(data: SecondOrderData) -> float | None:
+    """The uniform time step between the columns of each trajectory of ``data`` (``None`` if unknown
+    or not uniform): from its times, or from ``diagnostics["sampling_step"]`` of concatenated data."""
+    if data.times is None:
+        return data.diagnostics.get("sampling_step")
+    t = np.asarray(data.times, dtype=float)
+    if t.size < 2:
+        return None
+    h = np.diff(t)
+    return float(h[0]) if np.allclose(h, h[0], rtol=1e-6, atol=0) else None
+
+
 def concatenate(datasets) -> SecondOrderData:
     """One data set from several trajectories (columns side by side).
 
-    Diagnostics are combined as root-mean-square of the relative errors.
+    Diagnostics are combined as root-mean-square of the relative errors; a step shared by every
+    trajectory is kept as ``diagnostics["sampling_step"]`` (:func:`sampling_step`).
     """
     datasets = list(datasets)
     if not datasets:
@@ -313,6 +326,9 @@ def concatenate(datasets) -> SecondOrderData:
     trimmed = max(d.diagnostics.get("trimmed_columns", 0) for d in datasets)
     if trimmed:
         diagnostics["trimmed_columns"] = trimmed
+    steps = [sampling_step(d) for d in datasets]
+    if steps[0] is not None and all(h is not None and np.isclose(h, steps[0], rtol=1e-9) for h in steps):
+        diagnostics["sampling_step"] = steps[0]
     offsets = np.cumsum([0] + [d.n_samples for d in datasets[:-1]])
     starts = tuple(int(o + s) for o, d in zip(offsets, datasets) for s in d.starts)
     return SecondOrderData(states=cat("states"), velocities=cat("velocities"),

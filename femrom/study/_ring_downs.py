@@ -9,7 +9,9 @@ hyper-reduced joint) at rest in a committed force state. :func:`reference_ring_d
 - data ``Q^ = V^T M Q`` with the stored derivatives projected the same way, and the inputs;
 - models: ``"lopinf"`` (:class:`~femrom.inference.LagrangianOpInf`, linear: a flat backbone),
   ``"spml"`` (:class:`~femrom.inference.SpML`, a learned potential and a history-free convex
-  dissipation ``F^(q')``), both predicted with the discrete-gradient scheme, and ``"galerkin"``,
+  dissipation ``F^(q')``), both predicted with the discrete-gradient scheme, the variants of
+  ``settings.iwan`` (:class:`~femrom.inference.IwanLOpInf`, learned Jenkins sliders along the
+  leading coordinate, stepped by Newmark with their return mapping), and ``"galerkin"``,
   the reference projected on ``V`` with its stateful force (:func:`~femrom.scene.project_system`:
   the force keeps its law and its state on its own coordinates), stepped by Newmark;
 - each test run predicted from rest with the test input, over the test run's duration;
@@ -27,7 +29,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from femrom.inference import LagrangianOpInf, SecondOrderData, SpML, SpMLConfig, concatenate
+from femrom.inference import IwanLOpInf, LagrangianOpInf, SecondOrderData, SpML, SpMLConfig, concatenate
 from femrom.integrators import Newmark, StepResult, Trajectory, integrate
 from femrom.post import Backbone, hilbert_backbone
 from femrom.rom import SecondOrderROM
@@ -132,12 +134,26 @@ class RingDownComparison:
     ranks: tuple = (1, 2, 3, 5)
     models: tuple = ("galerkin", "lopinf", "spml")
     spml: SpMLConfig = SpMLConfig()
+    #: IwanLOpInf variants: (model name, ((keyword, value), ...)) pairs
+    iwan: tuple = (("iwan", ()),)
     output: int = 0                        #: the output row whose backbone is compared
     band: tuple = (60.0, 100.0)            #: band-pass of the Hilbert backbone [Hz]
     window: float = 0.2                    #: its window [s]
     learned_scheme: str = "discrete_gradient"
     range_window: float | None = None      #: Hilbert window of the training runs' amplitude range (default window)
     range_trim: float | None = None        #: and its trim (default: hilbert_backbone's)
+
+
+def _learner(name: str, settings: "RingDownComparison"):
+    """The learner a model name stands for (``"lopinf"``, ``"spml"`` or a variant of ``settings.iwan``)."""
+    if name == "spml":
+        return SpML(["damping", "input"], config=settings.spml)
+    variants = dict(settings.iwan)
+    if name in variants:
+        return IwanLOpInf(["damping", "input"], **dict(variants[name]))
+    if name == "lopinf":
+        return LagrangianOpInf(["damping", "input"])
+    raise ValueError(f"unknown model {name!r}; valid: galerkin, lopinf, spml, {', '.join(variants)}")
 
 
 def _stable(signal: np.ndarray) -> bool:
@@ -204,11 +220,10 @@ def compare_ring_downs(system, rest_state, training, validation, tests, settings
             if name == "galerkin":
                 model = project_system(system, V)
             else:
-                learner = (SpML(["damping", "input"], config=settings.spml) if name == "spml"
-                           else LagrangianOpInf(["damping", "input"]))
+                learner = _learner(name, settings)
                 tic = time.perf_counter()
                 rom = SecondOrderROM(basis=V, learner=learner)
-                rom = rom.fit(data, validation=valid) if name == "spml" else rom.fit(data)
+                rom = rom.fit(data, validation=valid) if name not in ("lopinf",) else rom.fit(data)
                 fit_seconds = time.perf_counter() - tic
             for run, reference in tests:
                 if name == "galerkin":
@@ -217,8 +232,10 @@ def compare_ring_downs(system, rest_state, training, validation, tests, settings
                     signal, seconds_per_step = E @ (V @ rd.a), rd.seconds_per_step
                 else:
                     tic = time.perf_counter()
+                    # a stateful (hysteretic) model steps by Newmark with its sliders' return mapping
+                    stateful = rom.operators_.nonlinear is not None and rom.operators_.nonlinear.stateful
                     solution = rom.predict(np.zeros(r), run.times, inputs=reference.inputs,
-                                           scheme=settings.learned_scheme)
+                                           scheme="newmark" if stateful else settings.learned_scheme)
                     seconds = time.perf_counter() - tic
                     signal = E @ (V @ np.asarray(solution.a))
                     seconds_per_step = seconds / max(run.times.size - 1, 1)

@@ -6,7 +6,7 @@ import time
 
 import numpy as np
 
-from femrom.inference._data import SecondOrderData, concatenate
+from femrom.inference._data import SecondOrderData, concatenate, sampling_step
 from femrom.inference._learner import Learner, register_learner
 from femrom.inference._operators import ReducedOperators
 from femrom.inference._terms import term_class
@@ -49,6 +49,18 @@ class IwanLOpInf(Learner):
     threshold_span : (2,) floats
     direction : (r,) array, optional
         ``a``; default ``e_1``, the leading coordinate (of a POD basis: the most energetic).
+    monotone : bool
+        With generated thresholds, the shape of Segalman's densities (a power law ``phi^chi``,
+        ``chi > -1``, up to ``phi_max``, a delta there, nothing above): ``k_1 <= ... <= k_{j-1}``,
+        ``k_j`` free, ``k_i = 0`` above ``j``, linear constraints for each top slider ``j``, the
+        ``j`` of the smallest residual kept (``p - 1`` solves). Without it the fit on the jointed
+        beam put its largest weight on the weakest slider, a Coulomb element whose damping falls
+        with the amplitude.
+    band : (2,) floats [Hz], optional
+        Fit on the rows of the balance band-passed to ``band`` (zero-phase Butterworth of order 4,
+        each trajectory from rest): the balance is linear in the unknowns, so the filtered rows obey
+        it too, and what the ``r`` coordinates cannot close outside the band (higher modes, the
+        blow's broadband content) stops biasing the hysteresis. Needs uniformly sampled data.
     regularization : float
         ``rho``, relative to the scaled problem (rows of the data scaled to unit norm).
     stiffness_margin : float
@@ -71,8 +83,9 @@ class IwanLOpInf(Learner):
 
     method = "iwan_lopinf"
 
-    def __init__(self, terms=("damping",), *, thresholds=16, threshold_span=(1e-3, 1.0), direction=None,
-                 regularization: float = 1e-9, stiffness_margin: float = 1e-10, solver: str = "CLARABEL"):
+    def __init__(self, terms=("damping",), *, thresholds=32, threshold_span=(1e-3, 1.0), direction=None,
+                 monotone: bool = True, band=None, regularization: float = 1e-9, stiffness_margin: float = 1e-10,
+                 solver: str = "CLARABEL"):
         terms = (terms,) if isinstance(terms, str) else tuple(terms)
         unknown = [t for t in terms if t not in LINEAR_TERMS]
         if unknown:
@@ -94,6 +107,8 @@ class IwanLOpInf(Learner):
         if not float(regularization) >= 0:
             raise ValueError(f"regularization must be >= 0, got {regularization!r}")
         self.regularization = float(regularization)
+        self.monotone = bool(monotone)
+        self.band = None if band is None else tuple(float(b) for b in band)
         self.stiffness_margin = float(stiffness_margin)
         self.solver = str(solver)
 
@@ -157,7 +172,7 @@ class IwanLOpInf(Learner):
                 layout.append((n, D.shape[0]))
         return np.column_stack(cols), layout
 
-    def _solve(self, Y: np.ndarray, blocks: dict, a: np.ndarray, hysteresis: bool) -> dict:
+    def _solve(self, Y: np.ndarray, blocks: dict, a: np.ndarray, hysteresis: bool, top: int | None = None) -> dict:
         import cvxpy as cp
 
         r = Y.shape[0]
@@ -189,7 +204,13 @@ class IwanLOpInf(Learner):
                 X = cp.bmat([[entries[i][j] for j in range(r)] for i in range(r)])
                 constraints.append((X - eps * np.eye(r) if n == "stiffness" else X) >> 0)
         if hysteresis:
-            constraints.append(x[slices["hysteresis"]] >= 0)
+            k = physical[slices["hysteresis"]]
+            constraints.append(k >= 0)
+            if top is not None:        # nondecreasing below the top slider, nothing above it
+                if top > 1:
+                    constraints.append(cp.diff(k[:top]) >= 0)
+                if top + 1 < k.size:
+                    constraints.append(k[top + 1:] == 0)
         # the norm itself (a second-order cone), not its square: the solver's tolerance then
         # bounds the residual, not the residual squared
         residual = Rf @ x + c
@@ -217,6 +238,27 @@ class IwanLOpInf(Learner):
         out["status"] = problem.status
         return out
 
+    def _filtered(self, data: SecondOrderData, Y: np.ndarray, blocks: dict) -> tuple:
+        """Every row of the target and the blocks through the same zero-phase band-pass, trajectory by
+        trajectory (the slider stretches are computed before, from the unfiltered coordinate): the
+        balance is linear in the unknowns, so it holds for the filtered rows as well, and the
+        regression then weighs only the band where the model has to be right."""
+        from scipy.signal import butter, sosfiltfilt
+
+        dt = sampling_step(data)
+        if dt is None:
+            raise ValueError("iwan_lopinf: band filtering needs data sampled at one uniform time step")
+        bounds = list(data.starts) + [Y.shape[1]]
+        sos = butter(4, self.band, btype="bandpass", fs=1.0 / dt, output="sos")
+
+        def filt(X):
+            out = np.empty_like(X)
+            for begin, end in zip(bounds[:-1], bounds[1:]):
+                out[:, begin:end] = sosfiltfilt(sos, X[:, begin:end], axis=1, padtype="constant")
+            return out
+
+        return filt(Y), {n: filt(D) for n, D in blocks.items()}
+
     # -- fit -----------------------------------------------------------------------------
     def fit(self, data, validation=None) -> "IwanLOpInf":
         """Learn ``K^, C^, B^`` and the sliders' stiffnesses from ``data`` (one or a list of trajectories).
@@ -233,8 +275,17 @@ class IwanLOpInf(Learner):
         phi = self._threshold_values(a @ data.states)
         blocks = self._blocks(data, a, phi)
         Y = data.accelerations
-        fit = self._solve(Y, blocks, a, hysteresis=True)
+        if self.band is not None:
+            Y, blocks = self._filtered(data, Y, blocks)
         linear = self._solve(Y, blocks, a, hysteresis=False)
+        if self.monotone and np.ndim(self.thresholds) == 0:
+            trials = [self._solve(Y, blocks, a, hysteresis=True, top=top) for top in range(1, phi.size)]
+            best = int(np.argmin([trial["residual"] for trial in trials]))
+            fit = trials[best]
+            self.top_threshold_ = float(phi[1 + best])
+        else:
+            fit = self._solve(Y, blocks, a, hysteresis=True)
+            self.top_threshold_ = None
         self.hysteresis_ = LearnedHysteresis(a, phi, fit["hysteresis"])
         terms = [term_class("stiffness")(fit["stiffness"])]
         if "damping" in fit:
