@@ -28,8 +28,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from femrom.inference import LearnedPotential, SpMLConfig
-from femrom.inference._spml_torch import SpMLModule
+from femrom.inference import LearnedPotential, SpMLConfig, spml_module
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -55,8 +54,7 @@ def main(argv=None) -> int:
     rows = []
     for r in args.sizes:
         config = SpMLConfig()
-        scales = {"q": np.ones(r), "v": np.ones(r), "potential": 1.0, "dissipation": 1.0}
-        module = SpMLModule(r, config, scales, np.eye(r), [], torch.Generator().manual_seed(0))
+        module = spml_module(r, config, seed=0)
         with torch.no_grad():
             for p in module.parameters():
                 p.add_(0.1 * torch.randn(p.shape, dtype=p.dtype, generator=torch.Generator().manual_seed(1)))

@@ -25,12 +25,27 @@ from pathlib import Path
 import numpy as np
 
 from femrom.cli import load_case
-from femrom.inference import SpMLConfig
-from femrom.integrators import Newmark, Newton, StepResult, integrate
+from femrom.inference import Output, SpMLConfig
+from femrom.integrators import (
+    Newmark,
+    Newton,
+    SteadyStateCriterion,
+    SteppedSine,
+    StepperPlant,
+    StepResult,
+    SystemPlant,
+    integrate,
+)
 from femrom.post import plot_backbones, staged_output, write_metrics
-from femrom.rom import ecsw_joint, hyper_reduced_system
+from femrom.rom import SecondOrderROM, ecsw_joint, hyper_reduced_system
 from femrom.scene import Signal, SignalVector, point_supports
-from femrom.study import RING_DOWN_COLUMNS, RingDownComparison, compare_ring_downs, reference_ring_down
+from femrom.study import (
+    RING_DOWN_COLUMNS,
+    RingDownComparison,
+    compare_ring_downs,
+    compare_stepped_sines,
+    reference_ring_down,
+)
 
 jb = load_case("jointed_beam")
 
@@ -45,9 +60,17 @@ class JointedBeamRomCase:
     validation_window: float = 0.15
     test_blows: tuple = (300.0,)                #: predicted from rest (300 N: between the training levels)
     horizon_factor: float = 10.0                #: test length / training window
+    shaker_training: tuple = (1.0, 80.2)       #: a training run driven by the shaker: (amplitude [N], frequency [Hz])
     ranks: tuple = (1, 3, 5)
-    models: tuple = ("galerkin", "lopinf", "spml")
+    models: tuple = ("galerkin", "lopinf", "spml", "iwan", "iwan_band")
+    #: IwanLOpInf variants: the regression on all rows, and on rows band-passed around mode 1
+    iwan: tuple = (("iwan", ()), ("iwan_band", (("band", (40.0, 150.0)),)))
     spml_iterations: int = 2000
+    forced_rank: int = 3                        #: the ROMs that run the stepped sine (0: none)
+    forced_levels: tuple = (0.2, 1.5)           #: shaker amplitudes [N] (the jointed-beam case's)
+    forced_frequencies: tuple = tuple(np.round(np.arange(79.6, 80.6 + 1e-9, 0.2), 3))
+    forced_steps_per_period: int = 32
+    forced_tolerance: float = 1e-2
     full_model_steps: int = 30                  #: steps of the 24,522-dof model for its step cost (0: skip)
     damping_ratio: float = 0.00139              #: linear modal damping (the measured lowest-amplitude ratio)
 
@@ -69,6 +92,35 @@ def full_model_step_cost(model, q0, z0, dt: float, steps: int, progress=print) -
     progress(f"  full model: {n} dofs, {steps} steps in {total:.1f} s, {per_step:.3g} s/step after the first")
     return {"n_dofs": n, "steps": steps, "seconds_total": total, "seconds_per_step": per_step,
             "newton_iterations": getattr(summary, "newton_iterations", None)}
+
+
+def stepped_sines(hyper, rest_state, comparison: dict, config: JointedBeamRomCase, progress=print) -> dict:
+    """The stepped sine at the shaker on the reference and on the ROMs of rank ``config.forced_rank``.
+
+    The reference and the Galerkin ROM (a projected system) step with the full integrators from their
+    committed rest state; the learned ROMs are reduced steppers (Newmark) whose output is
+    ``E V q^''`` (the sensors through the basis, as in the ring-down comparison)."""
+    r = config.forced_rank
+    shaker = np.asarray(hyper.input_matrix[:, 1]).ravel()
+    V = comparison["basis"][:, :r]
+    E = hyper.output_matrix.toarray() if hasattr(hyper.output_matrix, "toarray") else np.asarray(hyper.output_matrix)
+
+    def rest(n):
+        return StepResult(step=0, t=0.0, q=np.zeros(n), v=np.zeros(n), a=np.zeros(n), state=rest_state)
+
+    plants = {}
+    for (name, rank), model in comparison["models"].items():
+        if rank != r:
+            continue
+        if name == "galerkin":
+            plants[name] = SystemPlant(model, V.T @ shaker, rest=rest(r))
+        else:
+            sensed = SecondOrderROM(model.operators_.with_terms(Output(E @ V)), model.basis)
+            plants[name] = StepperPlant(sensed, input_index=1, scheme="newmark", output_names=hyper.output_names)
+    sweep = SteppedSine(np.asarray(config.forced_frequencies), steps_per_period=config.forced_steps_per_period,
+                        steady_state=SteadyStateCriterion(tolerance=config.forced_tolerance))
+    reference = SystemPlant(hyper, shaker, rest=rest(hyper.n_dofs))
+    return compare_stepped_sines(reference, plants, sweep, config.forced_levels, progress=progress)
 
 
 def run(config: JointedBeamRomCase, out: Path, progress=print) -> dict:
@@ -105,10 +157,20 @@ def run(config: JointedBeamRomCase, out: Path, progress=print) -> dict:
     def blow(peak):
         return jb.with_blow(hyper, peak, case.impact_width)
 
+    def shaken(amplitude, frequency):
+        """The reference driven by the shaker alone (a sine from rest, zero at t = 0)."""
+        sine = Signal.from_dict({"kind": "sine", "amplitude": float(amplitude), "frequency": float(frequency)})
+        silent = Signal.from_dict({"kind": "impulse", "amplitude": 0.0, "start": 0.0, "duration": case.impact_width})
+        return dataclasses.replace(hyper, inputs=SignalVector([silent, sine]))
+
     progress("jointed beam ROMs: reference ring-downs (10 modes, sampled joint) ...")
     tic_ref = time.perf_counter()
     training = [reference_ring_down(blow(p), z_hyper, config.training_window, dt, label=f"{p:g} N")
                 for p in config.training_blows]
+    if config.shaker_training:
+        amplitude, frequency = config.shaker_training
+        training.append(reference_ring_down(shaken(amplitude, frequency), z_hyper, config.training_window, dt,
+                                            label=f"shaker {amplitude:g} N {frequency:g} Hz"))
     validation = [reference_ring_down(blow(config.validation_blow), z_hyper, config.validation_window, dt,
                                       label=f"{config.validation_blow:g} N")]
     horizon = config.horizon_factor * config.training_window
@@ -118,7 +180,7 @@ def run(config: JointedBeamRomCase, out: Path, progress=print) -> dict:
     reference_step = tests[0][0].seconds_per_step
 
     settings = RingDownComparison(ranks=config.ranks, models=config.models, band=jb.BAND, window=jb.WINDOW,
-                                  spml=SpMLConfig(max_iterations=config.spml_iterations, seed=0),
+                                  spml=SpMLConfig(max_iterations=config.spml_iterations, seed=0), iwan=config.iwan,
                                   range_window=0.05, range_trim=0.05)
     progress(f"jointed beam ROMs: models at r = {', '.join(map(str, config.ranks))} ...")
     tic_cmp = time.perf_counter()
@@ -131,6 +193,14 @@ def run(config: JointedBeamRomCase, out: Path, progress=print) -> dict:
         row["speedup_vs_reference"] = reference_step / row["seconds_per_step"]
         if full_cost is not None:
             row["speedup_vs_full_model"] = full_cost["seconds_per_step"] / row["seconds_per_step"]
+
+    forced = None
+    if config.forced_rank and config.forced_levels:
+        progress(f"jointed beam ROMs: stepped sine at {', '.join(f'{F:g}' for F in config.forced_levels)} N, "
+                 f"{len(config.forced_frequencies)} frequencies, reference and r = {config.forced_rank} ROMs ...")
+        tic_forced = time.perf_counter()
+        forced = stepped_sines(hyper, z_hyper, comparison, config, progress)
+        seconds["stepped_sine"] = time.perf_counter() - tic_forced
 
     out.mkdir(parents=True, exist_ok=True)
     for run_, _ in tests:
@@ -151,6 +221,9 @@ def run(config: JointedBeamRomCase, out: Path, progress=print) -> dict:
         "reference_seconds_per_step": reference_step,
         "full_model": full_cost,
         "rows": rows, "backbones": backbones,
+        "stepped_sine": None if forced is None else {
+            "rank": config.forced_rank, "rows": forced["rows"],
+            "responses": {name: result.rows() for name, result in forced["results"].items()}},
         "seconds": {**seconds, "total": time.perf_counter() - tic},
     }
     write_metrics(out / "metrics.json", metrics)
@@ -160,15 +233,19 @@ def run(config: JointedBeamRomCase, out: Path, progress=print) -> dict:
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="femrom run jointed_beam_rom", description=__doc__.split("\n")[0])
     parser.add_argument("-o", "--out", type=Path, default=Path("results") / "jointed_beam_rom")
-    parser.add_argument("--quick", action="store_true", help="r = 2 only, short fits, no full-model steps")
+    parser.add_argument("--quick", action="store_true", help="r = 2 only, short fits, no full-model steps, "
+                        "a two-frequency stepped sine at 0.2 N")
     parser.add_argument("--extrapolation", action="store_true", help="also test a 1000 N blow (outside training)")
     parser.add_argument("--ranks", type=int, nargs="+", help="reduced dimensions (default 1 3 5)")
     args = parser.parse_args(argv)
     config = JointedBeamRomCase()
     if args.quick:
-        config = dataclasses.replace(config, ranks=(2,), spml_iterations=200, full_model_steps=0, horizon_factor=3.0)
+        config = dataclasses.replace(config, ranks=(2,), spml_iterations=200, full_model_steps=0, horizon_factor=3.0,
+                                     forced_rank=2, forced_levels=(0.2,), forced_frequencies=(79.8, 80.2))
     if args.ranks:
         config = dataclasses.replace(config, ranks=tuple(args.ranks))
+    if config.forced_rank not in config.ranks:
+        config = dataclasses.replace(config, forced_rank=0)
     if args.extrapolation:
         config = dataclasses.replace(config, test_blows=config.test_blows + (1000.0,))
     with staged_output(args.out) as folder:
@@ -177,6 +254,10 @@ def main(argv=None) -> int:
         print(f"{row['model']:9s} r={row['r']} {row['test']}: shift error {row['frequency_shift_error']}, "
               f"damping error {row['damping_max_error']}, time error {row['time_domain_error']:.3g}, "
               f"{1e3 * row['seconds_per_step']:.3g} ms/step, fit {row['fit_seconds']:.1f} s, stable {row['stable']}")
+    for row in (metrics["stepped_sine"] or {}).get("rows", []):
+        print(f"stepped sine {row['model']:9s} {row['force_n']:g} N: peak {row['peak_frequency_hz']:.3f} Hz "
+              f"({row['peak_frequency_difference_hz']:+.3f} from the reference), amplitude error "
+              f"{100 * row['peak_amplitude_error']:+.1f} % at the peak, {100 * row['amplitude_max_error']:.1f} % worst")
     return 0
 
 

@@ -109,7 +109,7 @@ from femrom.inference.learners.canonical_opinf import CanonicalOpInf
 from femrom.inference.learners.lopinf import LagrangianOpInf
 from femrom.inference.learners.okid import OKID
 from femrom.inference.learners.opinf import SecondOrderOpInf
-from femrom.inference.learners.spml import TORCH_MISSING, SpML, SpMLConfig, torch_available
+from femrom.inference.learners.spml import TORCH_MISSING, SpML, SpMLConfig, spml_module, torch_available
 from femrom.inference._networks import ConvexPowers, NetworkLayer, ScalarNetwork, SymmetricPolynomial, multi_indices
 from femrom.inference.terms.damping import Damping
 from femrom.inference.terms.input import Input
@@ -139,5 +139,5 @@ __all__ = [
     "block_hankel", "era_realization", "impulse_response", "markov_parameters", "observer_markov_parameters",
     "markov_from_observer", "okid_markov_parameters", "okid_observer_gain", "system_impulse_response",
     "system_markov_from_observer",
-    "IwanLOpInf", "LearnedHysteresis", "SliderState", "slider_stretches",
+    "IwanLOpInf", "LearnedHysteresis", "SliderState", "slider_stretches", "spml_module",
 ]

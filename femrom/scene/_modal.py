@@ -90,10 +90,14 @@ def linearized_modes(system: SecondOrderSystem, displacement: np.ndarray | None 
     if asymmetry > SYMMETRY_TOLERANCE:
         raise ValueError(f"the tangent stiffness is not symmetric (relative {asymmetry:.2g}): a slipping contact; "
                          "linearise about a stuck state (friction on from the committed preload)")
+    # a fixed start vector (ARPACK's default is random) and a sign convention (largest entry positive):
+    # the same system gives the same modes, run after run
     values, vectors = eigsh(Kt.tocsc(), k=int(n_modes), M=sp.csc_matrix(system.mass), sigma=float(shift),
-                            which="LM")
+                            which="LM", v0=np.ones(n))
     order = np.argsort(values)
-    return Modes(values[order], vectors[:, order])
+    vectors = vectors[:, order]
+    signs = np.sign(vectors[np.argmax(np.abs(vectors), axis=0), np.arange(vectors.shape[1])])
+    return Modes(values[order], vectors * np.where(signs == 0, 1.0, signs))
 
 
 @dataclass(frozen=True)

@@ -107,6 +107,7 @@ from femrom.study._ladders import (
 from femrom.study._linear_models import LinearModelSpec, fit_linear_model, linear_model_rows, state_space_data
 from femrom.study._metrics import Projection, energy_ratio, invariant_drift, mass_norm, project_run, relative_error
 from femrom.study._pipeline import ROW_COLUMNS, StudyState, peak_rss_gb, public_rows, run_study, write_report
+from femrom.study._forced import compare_stepped_sines
 from femrom.study._ring_downs import (
     RING_DOWN_COLUMNS,
     RingDown,
@@ -147,7 +148,7 @@ __all__ = [
     "conservative_acceleration", "force_error", "nonlinear_forces",
     "CanonicalRun", "CanonicalSpec", "Cost", "Evaluation", "FINAL_STATE_COLUMNS", "FOMRun", "FREQUENCY_COLUMNS", "HYPER_COLUMNS", "LEARNERS", "LEARNER_NAMES",
     "Projection", "RING_DOWN_COLUMNS", "ROW_COLUMNS", "RingDown", "RingDownComparison", "backbone_errors",
-    "compare_ring_downs", "mass_pod", "reference_ring_down", "ring_down_data", "SceneHamiltonianROM", "SceneRun", "StudyState", "SweepRun", "TIME_STEP_COLUMNS", "blocked_cost",
+    "compare_ring_downs", "compare_stepped_sines", "mass_pod", "reference_ring_down", "ring_down_data", "SceneHamiltonianROM", "SceneRun", "StudyState", "SweepRun", "TIME_STEP_COLUMNS", "blocked_cost",
     "call_cost", "canonical_rows", "canonical_time_step_ladder", "check_canonical_learners",
     "check_rom_config", "energy_ratio", "evaluate", "evaluate_runs", "extra_rom_rows", "extrapolation_config", "extrapolation_scene",
     "final_state", "final_state_ladders", "final_state_section", "fit_canonical_rom", "fit_rom", "fom_runs", "frequency_ladder", "frequency_section", "hyper_reduced_rows", "invariant_drift",

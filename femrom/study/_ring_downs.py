@@ -187,7 +187,8 @@ def compare_ring_downs(system, rest_state, training, validation, tests, settings
     -------
     dict with ``rows`` (one per model, r and test: :data:`RING_DOWN_COLUMNS` and more), ``backbones``
     (``{(model, r, test): Backbone}``, the reference's under ``("reference", None, test)``), ``predictions``
-    (``{(model, r, test): (p, k) outputs}``), ``singular_values``.
+    (``{(model, r, test): (p, k) outputs}``), ``singular_values``, ``basis`` (n, r_max) and ``models``
+    (``{(model, r): SecondOrderROM}``, the Galerkin ones as projected systems).
     """
     correction = correction or (lambda b: b)
     E = _dense(system.output_matrix)
@@ -208,7 +209,7 @@ def compare_ring_downs(system, rest_state, training, validation, tests, settings
         amplitude_range = (float(min(np.min(c.amplitude) for c in curves)),
                            float(max(np.max(c.amplitude) for c in curves)))
 
-    backbones, predictions, rows = {}, {}, []
+    backbones, predictions, rows, fitted = {}, {}, [], {}
     for run, _ in tests:
         backbones[("reference", None, run.label)] = backbone(run.outputs[o], run.dt)
     for r in settings.ranks:
@@ -225,6 +226,7 @@ def compare_ring_downs(system, rest_state, training, validation, tests, settings
                 rom = SecondOrderROM(basis=V, learner=learner)
                 rom = rom.fit(data, validation=valid) if name not in ("lopinf",) else rom.fit(data)
                 fit_seconds = time.perf_counter() - tic
+            fitted[(name, r)] = model if name == "galerkin" else rom
             for run, reference in tests:
                 if name == "galerkin":
                     test_system = dataclasses.replace(model, inputs=reference.inputs)
@@ -262,4 +264,4 @@ def compare_ring_downs(system, rest_state, training, validation, tests, settings
                          f"{1e3 * seconds_per_step:.3g} ms/step, fit {fit_seconds:.1f} s, stable {row['stable']}")
     return {"rows": rows, "backbones": backbones, "predictions": predictions,
             "singular_values": singular_values, "amplitude_range": [float(a) for a in amplitude_range],
-            "basis": V_all}
+            "basis": V_all, "models": fitted}

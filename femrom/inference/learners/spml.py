@@ -31,6 +31,17 @@ def torch_available() -> bool:
         return False
 
 
+def spml_module(r: int, config: "SpMLConfig | None" = None, *, seed: int = 0):
+    """SpML's torch model of ``r`` coordinates (mass, potential, dissipation) at its initial weights,
+    in unit scales (``export()`` gives the numpy terms): what a fit trains, for benchmarks and tests
+    that time or inspect it. Needs torch."""
+    import torch
+
+    config = SpMLConfig() if config is None else config
+    scales = {"q": np.ones(r), "v": np.ones(r), "potential": 1.0, "dissipation": 1.0}
+    return _backend().SpMLModule(r, config, scales, np.eye(r), [], torch.Generator().manual_seed(seed))
+
+
 def _backend():
     try:
         return importlib.import_module("femrom.inference._spml_torch")

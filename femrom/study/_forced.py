@@ -1,0 +1,55 @@
+r"""Stepped-sine forced responses of several models, compared with a reference's.
+
+Every plant (:class:`~femrom.integrators.SystemPlant` for a system stepped by the full
+integrators, :class:`~femrom.integrators.StepperPlant` for a reduced model) runs the same
+:class:`~femrom.integrators.SteppedSine` at the same force levels. Per model and level, the
+first-harmonic amplitude of one output is compared with the reference's: the peak (parabolic
+interpolation around the discrete maximum) in frequency and in amplitude, and the worst relative
+amplitude difference over the frequencies.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from femrom.integrators import SteppedSine
+
+
+def compare_stepped_sines(reference, plants: dict, sweep: SteppedSine, levels, *, output: int = 0,
+                          progress=None) -> dict:
+    """Run ``sweep`` on ``reference`` and on every plant of ``plants`` (by name) at the force ``levels``.
+
+    Returns
+    -------
+    dict with ``results`` (``{name: SteppedSineResult}``, the reference under ``"reference"``),
+    ``seconds`` (per plant) and ``rows``: one per model and level with ``peak_frequency_hz``,
+    ``peak_amplitude``, ``peak_frequency_difference_hz`` (model - reference),
+    ``peak_amplitude_error`` (relative, signed) and ``amplitude_max_error`` (max over frequencies of
+    ``|A_model / A_reference - 1|``).
+    """
+    results, seconds = {}, {}
+    for name, plant in {"reference": reference, **plants}.items():
+        tic = time.perf_counter()
+        results[name] = sweep.run(plant, list(levels))
+        seconds[name] = time.perf_counter() - tic
+        if progress is not None:
+            peaks = ", ".join(f"{level.force_n:g} N: {level.peaks()[output].frequency_hz:.3f} Hz / "
+                              f"{level.peaks()[output].amplitude:.4g}" for level in results[name].levels)
+            progress(f"  stepped sine {name}: {peaks} ({seconds[name]:.1f} s)")
+    rows = []
+    for name in plants:
+        for model_level, reference_level in zip(results[name].levels, results["reference"].levels):
+            peak, peak_ref = model_level.peaks()[output], reference_level.peaks()[output]
+            A, A_ref = model_level.amplitude[output], reference_level.amplitude[output]
+            rows.append({"model": name, "force_n": model_level.force_n,
+                         "peak_frequency_hz": peak.frequency_hz, "peak_amplitude": peak.amplitude,
+                         "reference_peak_frequency_hz": peak_ref.frequency_hz,
+                         "reference_peak_amplitude": peak_ref.amplitude,
+                         "peak_frequency_difference_hz": peak.frequency_hz - peak_ref.frequency_hz,
+                         "peak_amplitude_error": peak.amplitude / peak_ref.amplitude - 1.0,
+                         "amplitude_max_error": float(np.max(np.abs(A / A_ref - 1.0))),
+                         "all_converged": bool(np.all(model_level.converged)),
+                         "seconds": seconds[name]})
+    return {"results": results, "rows": rows, "seconds": seconds}
