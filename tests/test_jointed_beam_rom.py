@@ -59,7 +59,7 @@ def comparison():
     training = [reference_ring_down(runs[p], z0, 1.0, dt, label=f"{p:g} N") for p in (150.0, 600.0)]
     validation = [reference_ring_down(runs[400.0], z0, 0.3, dt, label="400 N")]
     test = reference_ring_down(runs[300.0], z0, 1.0, dt, label="300 N")
-    settings = RingDownComparison(ranks=(2,), models=("lopinf", "spml"), band=(0.5 * f1, 1.6 * f1), window=0.1,
+    settings = RingDownComparison(ranks=(2,), models=("lopinf", "spml", "iwan"), band=(0.5 * f1, 1.6 * f1), window=0.1,
                                   spml=SpMLConfig(max_iterations=200))
     out = compare_ring_downs(reference, z0, training, validation, [(test, runs[300.0])], settings,
                              progress=lambda line: None)
@@ -84,3 +84,18 @@ def test_spml_tracks_the_frequency_shift_that_lopinf_misses(comparison):
     assert spml["frequency_shift_error"] < 0.5 * lopinf["frequency_shift_error"]
     # both stay bounded and decay (no energy from a dissipation that is convex by construction)
     assert spml["stable"] and lopinf["stable"]
+
+
+def test_learned_sliders_follow_the_joint_where_a_history_free_dissipation_cannot(comparison):
+    rows, _ = comparison
+    iwan, spml = rows["iwan"], rows["spml"]
+    # IwanLOpInf (learned Jenkins sliders along the leading coordinate) on the same data: the shift
+    # within 5 % (observed 1.0 %) and the damping curve within the 15 % (observed 4.6 %), where
+    # SpML's history-free dissipation misses the damping by more than 100 % (observed 131 %)
+    assert iwan["frequency_shift_hz"] > 0
+    assert iwan["frequency_shift_error"] < 0.05
+    assert iwan["damping_max_error"] < 0.15
+    assert spml["damping_max_error"] > 4 * iwan["damping_max_error"]
+    # in time too (observed 0.063 against SpML's 0.46), and it decays
+    assert iwan["time_domain_error"] < 0.5 * spml["time_domain_error"]
+    assert iwan["stable"]

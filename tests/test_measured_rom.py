@@ -155,3 +155,21 @@ def test_spml_damping_against_l_opinf_on_untrained_amplitudes(measured):
     assert reverse["SpML"]["damping_relative_error_max"] < 0.2 < reverse["L-OpInf"]["damping_relative_error_max"]
     # upward, the quartic overshoots the frequency shift (observed 0.95 Hz against 0.049 Hz measured)
     assert reverse["SpML"]["shift_relative_error"] > 1.0
+
+
+def test_learned_sliders_on_the_untrained_amplitudes(measured):
+    splits = measured["splits"]
+    forward, reverse = splits["forward"]["models"], splits["reverse"]["models"]
+    iwan, spml = forward["Iwan-L-OpInf"], forward["SpML"]
+    # forward (train high, test low): the sliders learned on the high amplitudes bend the backbone
+    # the measured way, ten times more than SpML's quartic (observed +0.0084 Hz against +0.0005 Hz),
+    # but keep only 13 % of the measured +0.064 Hz: the 30 % target is missed (both sides stated)
+    assert 10 * spml["shift_predicted_hz"] < iwan["shift_predicted_hz"] < 0.3 * iwan["shift_measured_hz"]
+    # and the damping on the low amplitudes is closer than SpML's and L-OpInf's (observed max
+    # relative error 0.27 against 0.44 and 0.48)
+    assert iwan["damping_relative_error_max"] < 0.8 * min(spml["damping_relative_error_max"],
+                                                          forward["L-OpInf"]["damping_relative_error_max"])
+    # reverse (train low, test high): the shift stays bounded (observed error 0.65: 0.015 Hz against
+    # 0.043 Hz) where SpML's quartic overshoots 18-fold; 1.0 separates the two
+    assert reverse["Iwan-L-OpInf"]["shift_relative_error"] < 1.0 < reverse["SpML"]["shift_relative_error"]
+    assert reverse["Iwan-L-OpInf"]["shift_predicted_hz"] > 0
