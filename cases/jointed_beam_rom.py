@@ -60,7 +60,7 @@ class JointedBeamRomCase:
     validation_window: float = 0.15
     test_blows: tuple = (300.0,)                #: predicted from rest (300 N: between the training levels)
     horizon_factor: float = 10.0                #: test length / training window
-    shaker_training: tuple = (1.0, 80.2)       #: a training run driven by the shaker: (amplitude [N], frequency [Hz])
+    shaker_training: tuple = (5.0, 80.0)       #: a training run driven by the shaker: (amplitude [N], frequency [Hz])
     ranks: tuple = (1, 3, 5)
     models: tuple = ("galerkin", "lopinf", "spml", "iwan", "iwan_band")
     #: IwanLOpInf variants: the regression on all rows, and on rows band-passed around mode 1

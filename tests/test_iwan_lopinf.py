@@ -145,6 +145,7 @@ def test_save_load_and_registry(tmp_path):
     ({"threshold_span": (1.0, 0.1)}, "threshold_span"),
     ({"terms": ["mass"]}, "unknown terms"),
     ({"regularization": -1.0}, "regularization"),
+    ({"band": (10.0, 5.0)}, "band must be"),
 ])
 def test_learner_bad_settings(kwargs, match):
     with pytest.raises(ValueError, match=match):

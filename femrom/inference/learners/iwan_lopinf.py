@@ -3,6 +3,7 @@ r"""L-OpInf with a learned Iwan element: a reduced model of a jointed structure 
 from __future__ import annotations
 
 import time
+import warnings
 
 import numpy as np
 
@@ -109,6 +110,8 @@ class IwanLOpInf(Learner):
         self.regularization = float(regularization)
         self.monotone = bool(monotone)
         self.band = None if band is None else tuple(float(b) for b in band)
+        if self.band is not None and not (len(self.band) == 2 and 0 < self.band[0] < self.band[1]):
+            raise ValueError(f"band must be (low, high) in Hz with 0 < low < high, got {band!r}")
         self.stiffness_margin = float(stiffness_margin)
         self.solver = str(solver)
 
@@ -218,7 +221,9 @@ class IwanLOpInf(Learner):
             residual = cp.hstack([residual, np.sqrt(self.regularization) * x[slices["hysteresis"]]])
         objective = cp.norm(residual)
         problem = cp.Problem(cp.Minimize(objective), constraints)
-        problem.solve(solver=self.solver)
+        with warnings.catch_warnings():         # the status is kept; the chosen fit's is reported by fit
+            warnings.filterwarnings("ignore", message="Solution may be inaccurate")
+            problem.solve(solver=self.solver)
         if x.value is None:
             raise RuntimeError(f"iwan_lopinf: the {self.solver} solve failed ({problem.status})")
         values = np.asarray(x.value, dtype=float) * y_scale / scale
@@ -286,6 +291,9 @@ class IwanLOpInf(Learner):
         else:
             fit = self._solve(Y, blocks, a, hysteresis=True)
             self.top_threshold_ = None
+        if fit["status"] != "optimal":
+            warnings.warn(f"iwan_lopinf: {self.solver} ended {fit['status']!r} (relative residual "
+                          f"{fit['residual']:.3g}); another solver= may settle it", UserWarning, stacklevel=2)
         self.hysteresis_ = LearnedHysteresis(a, phi, fit["hysteresis"])
         terms = [term_class("stiffness")(fit["stiffness"])]
         if "damping" in fit:
@@ -303,7 +311,7 @@ class IwanLOpInf(Learner):
             valid = concatenate(validation) if isinstance(validation, (list, tuple)) else validation
             vb = self._blocks(valid, a, phi)
             R = valid.accelerations + sum((np.outer(a, fit[n]) if n == "hysteresis" else fit[n]) @ vb[n]
-                                          for n in vb)
+                                          for n in vb if n in fit)
             self.validation_residual_ = float(np.linalg.norm(R) / np.linalg.norm(valid.accelerations))
         self.fit_seconds_ = time.perf_counter() - tic
         self.operators_ = ReducedOperators(tuple(terms), self.describe())
@@ -311,7 +319,8 @@ class IwanLOpInf(Learner):
 
     def describe(self) -> dict:
         out = {"method": self.method, "terms": ["stiffness", *self.terms, "learned_hysteresis"],
-               "threshold_span": list(self.threshold_span), "regularization": self.regularization,
+               "threshold_span": list(self.threshold_span), "monotone": self.monotone,
+               "band": None if self.band is None else list(self.band), "regularization": self.regularization,
                "solver": self.solver}
         if getattr(self, "hysteresis_", None) is not None:
             out.update(hysteresis=self.hysteresis_.describe(), residual=self.residual_,
