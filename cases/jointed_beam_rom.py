@@ -123,7 +123,10 @@ def stepped_sines(hyper, rest_state, comparison: dict, config: JointedBeamRomCas
     return compare_stepped_sines(reference, plants, sweep, config.forced_levels, progress=progress)
 
 
-def run(config: JointedBeamRomCase, out: Path, progress=print) -> dict:
+def reference_models(config: JointedBeamRomCase, progress=print) -> dict:
+    """The jointed-beam case's models: the full model with the Iwan joint at its preloaded rest
+    (``model``, ``q0``, ``z0``), the 10-mode model with the ECSW-sampled joint (``hyper``, ``z_hyper``,
+    the reference of this study), ``dt = 1 / (128 f1)``, the case's settings and the seconds taken."""
     tic = time.perf_counter()
     case = jb.JointedBeamCase(fit_iwan=False, forced=False)
     progress("jointed beam ROMs: preload, k_t calibration, the Iwan joint (chi, beta: the case's fit) ...")
@@ -148,11 +151,13 @@ def run(config: JointedBeamRomCase, out: Path, progress=print) -> dict:
     hyper, z_hyper = hyper_reduced_system(reduced, sampling, z_iwan)
     seconds["ecsw"] = time.perf_counter() - tic_ecsw
     progress(f"  {sampling.pairs.size} of {sampling.n_pairs} pairs")
+    return {"case": case, "model": model, "q0": q_iwan, "z0": z_iwan, "hyper": hyper, "z_hyper": z_hyper,
+            "sampling": sampling, "dt": dt, "f1": f1, "seconds": seconds}
 
-    full_cost = None
-    if config.full_model_steps:
-        progress(f"jointed beam ROMs: {config.full_model_steps} steps of the full model with the joint ...")
-        full_cost = full_model_step_cost(model, q_iwan, z_iwan, dt, config.full_model_steps, progress)
+
+def reference_runs(models: dict, config: JointedBeamRomCase, progress=print) -> tuple[list, list, list]:
+    """The reference's training runs (the blows and the shaker), validation run and tests ``(run, system)``."""
+    case, hyper, z_hyper, dt = models["case"], models["hyper"], models["z_hyper"], models["dt"]
 
     def blow(peak):
         return jb.with_blow(hyper, peak, case.impact_width)
@@ -164,7 +169,6 @@ def run(config: JointedBeamRomCase, out: Path, progress=print) -> dict:
         return dataclasses.replace(hyper, inputs=SignalVector([silent, sine]))
 
     progress("jointed beam ROMs: reference ring-downs (10 modes, sampled joint) ...")
-    tic_ref = time.perf_counter()
     training = [reference_ring_down(blow(p), z_hyper, config.training_window, dt, label=f"{p:g} N")
                 for p in config.training_blows]
     if config.shaker_training:
@@ -176,6 +180,23 @@ def run(config: JointedBeamRomCase, out: Path, progress=print) -> dict:
     horizon = config.horizon_factor * config.training_window
     tests = [(reference_ring_down(blow(p), z_hyper, horizon, dt, label=f"{p:g} N"), blow(p))
              for p in config.test_blows]
+    return training, validation, tests
+
+
+def run(config: JointedBeamRomCase, out: Path, progress=print) -> dict:
+    tic = time.perf_counter()
+    models = reference_models(config, progress)
+    case, model, q_iwan, z_iwan = models["case"], models["model"], models["q0"], models["z0"]
+    hyper, z_hyper, sampling, dt, f1 = (models[k] for k in ("hyper", "z_hyper", "sampling", "dt", "f1"))
+    seconds = dict(models["seconds"])
+
+    full_cost = None
+    if config.full_model_steps:
+        progress(f"jointed beam ROMs: {config.full_model_steps} steps of the full model with the joint ...")
+        full_cost = full_model_step_cost(model, q_iwan, z_iwan, dt, config.full_model_steps, progress)
+
+    tic_ref = time.perf_counter()
+    training, validation, tests = reference_runs(models, config, progress)
     seconds["reference_runs"] = time.perf_counter() - tic_ref
     reference_step = tests[0][0].seconds_per_step
 
