@@ -29,8 +29,9 @@ class IwanLOpInf(Learner):
 
     ``E`` (p, K) the stretches of ``p`` Jenkins sliders of thresholds ``phi_i`` driven by the
     data's coordinate ``x = a . q^`` (:func:`slider_stretches`, each trajectory loaded from rest
-    to its first column). For fixed ``a`` and thresholds the slider stretches are data, so the
-    problem is a convex quadratic program over ``(K^, C^, B^, k)``, solved by cvxpy (Clarabel):
+    to its first column), ``M^ = I`` (a mass-orthonormal basis). For fixed ``a`` and thresholds
+    the slider stretches are data, so the problem is convex in ``(K^, C^, B^, k)``; it is solved as
+    a second-order cone program (cvxpy, Clarabel) on the QR factor of the column-scaled design:
     the hysteresis of a history-dependent joint is learned by the same regression as the linear
     operators. Structure by construction: ``K^`` SPD, ``C^`` PSD and ``k >= 0`` make the
     learned model passive (:class:`LearnedHysteresis`), for any data.
@@ -63,7 +64,8 @@ class IwanLOpInf(Learner):
         it too, and what the ``r`` coordinates cannot close outside the band (higher modes, the
         blow's broadband content) stops biasing the hysteresis. Needs uniformly sampled data.
     regularization : float
-        ``rho``, relative to the scaled problem (rows of the data scaled to unit norm).
+        ``rho``, on the weights in the scaled problem (each unknown's data column scaled to unit
+        norm, the target to norm 1).
     stiffness_margin : float
         ``eps = margin ||Q''|| / ||Q^||``.
     solver : str
