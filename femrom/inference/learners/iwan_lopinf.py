@@ -177,20 +177,26 @@ class IwanLOpInf(Learner):
                 layout.append((n, D.shape[0]))
         return np.column_stack(cols), layout
 
-    def _solve(self, Y: np.ndarray, blocks: dict, a: np.ndarray, hysteresis: bool, top: int | None = None) -> dict:
-        import cvxpy as cp
-
+    def _prepare(self, Y: np.ndarray, blocks: dict, a: np.ndarray, hysteresis: bool) -> dict:
+        """The design, its column scales and its QR factor, once for every solve on the same blocks."""
         r = Y.shape[0]
         names = [n for n in blocks if hysteresis or n != "hysteresis"]
         A, layout = self._design(blocks, names, a, r)
-        y = Y.ravel()
-        y_scale = max(float(np.linalg.norm(y)), np.finfo(float).tiny)
+        y_scale = max(float(np.linalg.norm(Y)), np.finfo(float).tiny)
         scale = np.linalg.norm(A, axis=0)
         scale[scale == 0] = 1.0
         # QR of the column-scaled design: the conic problem sees cond(A), not cond(A)^2
         Qf, Rf = np.linalg.qr(A / scale, mode="reduced")
-        c = Qf.T @ (y / y_scale)
-        x = cp.Variable(A.shape[1])
+        return {"hysteresis": hysteresis, "layout": layout, "y_scale": y_scale, "scale": scale, "R": Rf,
+                "c": Qf.T @ (Y.ravel() / y_scale)}
+
+    def _solve(self, Y: np.ndarray, blocks: dict, a: np.ndarray, prepared: dict, top: int | None = None) -> dict:
+        import cvxpy as cp
+
+        r = Y.shape[0]
+        hysteresis, layout, y_scale, scale = (prepared[k] for k in ("hysteresis", "layout", "y_scale", "scale"))
+        Rf, c = prepared["R"], prepared["c"]
+        x = cp.Variable(Rf.shape[1])
         constraints, offset, slices = [], 0, {}
         eps = self.stiffness_margin * y_scale / max(float(np.linalg.norm(blocks["stiffness"])), np.finfo(float).tiny)
         for n, size in layout:
@@ -284,14 +290,15 @@ class IwanLOpInf(Learner):
         Y = data.accelerations
         if self.band is not None:
             Y, blocks = self._filtered(data, Y, blocks)
-        linear = self._solve(Y, blocks, a, hysteresis=False)
+        linear = self._solve(Y, blocks, a, self._prepare(Y, blocks, a, hysteresis=False))
+        prepared = self._prepare(Y, blocks, a, hysteresis=True)
         if self.monotone and np.ndim(self.thresholds) == 0:
-            trials = [self._solve(Y, blocks, a, hysteresis=True, top=top) for top in range(1, phi.size)]
+            trials = [self._solve(Y, blocks, a, prepared, top=top) for top in range(1, phi.size)]
             best = int(np.argmin([trial["residual"] for trial in trials]))
             fit = trials[best]
             self.top_threshold_ = float(phi[1 + best])
         else:
-            fit = self._solve(Y, blocks, a, hysteresis=True)
+            fit = self._solve(Y, blocks, a, prepared)
             self.top_threshold_ = None
         if fit["status"] != "optimal":
             warnings.warn(f"iwan_lopinf: {self.solver} ended {fit['status']!r} (relative residual "
