@@ -73,6 +73,25 @@ class ErrorSplit:
     optimization: float
 
 
+def system_terms(system, basis: np.ndarray | None = None, *, known_forces: bool = True) -> list:
+    """The terms of ``system``'s effects beyond the stiffness, mass, input and output: the learnable
+    term classes (damping, a constant load, ...) and, with ``known_forces``, the known nonlinear
+    forces projected on ``basis`` (which they need). Only which effects exist is read."""
+    terms = []
+    for effect in system.effects:
+        for term in registered_terms().values():
+            if term.effect != effect or term.name in ("stiffness", "mass", "input", "output"):
+                continue
+            if term.learnable:
+                terms.append(term)
+            elif term.structure == "known" and known_forces:
+                if basis is None:
+                    raise ValueError(f"the system has a {effect!r} effect: for_system needs the "
+                                     "basis to project its known force")
+                terms.append(term.galerkin(system, basis))
+    return terms
+
+
 class SecondOrderLearner(Learner):
     """Shared machinery of :class:`LagrangianOpInf` and :class:`SecondOrderOpInf`.
 
@@ -165,19 +184,7 @@ class SecondOrderLearner(Learner):
         if "terms" in options or "damping" in options:
             raise TypeError(f"for_system sets the terms from the system's effects; "
                             f"use {cls.__name__}(terms=...) to choose them by hand")
-        terms = []
-        for effect in system.effects:
-            for term in registered_terms().values():
-                if term.effect != effect or term.name in ("stiffness", "mass", "input", "output"):
-                    continue
-                if term.learnable:
-                    terms.append(term)
-                elif term.structure == "known":
-                    if basis is None:
-                        raise ValueError(f"the system has a {effect!r} effect: for_system needs the "
-                                         "basis to project its known force")
-                    terms.append(term.galerkin(system, basis))
-        return cls(terms, **options)
+        return cls(system_terms(system, basis), **options)
 
     # -- views -------------------------------------------------------------------------
     @property

@@ -14,7 +14,8 @@ from femrom.inference._data import SecondOrderData, concatenate
 from femrom.inference._learner import Learner, register_learner
 from femrom.inference._networks import derivative_map, monomials, multi_indices
 from femrom.inference._operators import ReducedOperators
-from femrom.inference._terms import registered_terms, term_class
+from femrom.inference._second_order import system_terms
+from femrom.inference._terms import term_class
 from femrom.inference.learners.lopinf import LagrangianOpInf
 from femrom.inference.terms.learned_dissipation import LearnedDissipation
 from femrom.inference.terms.learned_potential import LearnedPotential
@@ -245,18 +246,7 @@ class SpML(Learner):
         ``known_forces`` (then it is projected with ``basis`` and kept, and SpML learns the rest).
         """
         system = getattr(system, "system", system)
-        terms = []
-        for effect in system.effects:
-            for term in registered_terms().values():
-                if term.effect != effect or term.name in ("stiffness", "mass", "input", "output"):
-                    continue
-                if term.learnable:
-                    terms.append(term)
-                elif term.structure == "known" and known_forces:
-                    if basis is None:
-                        raise ValueError(f"known_forces=True: for_system needs the basis to project {effect!r}")
-                    terms.append(term.galerkin(system, basis))
-        return cls(terms, **options)
+        return cls(system_terms(system, basis, known_forces=known_forces), **options)
 
     # -- the regression's pieces on any data ------------------------------------------------
     def _arrays(self, data: SecondOrderData):
