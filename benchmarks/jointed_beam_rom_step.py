@@ -64,8 +64,8 @@ def main() -> None:
 
     def learned(name):
         rom = roms[name]
-        stateful = rom.operators_.nonlinear is not None and rom.operators_.nonlinear.stateful
-        scheme = "newmark" if stateful or rom.operators_.nonlinear is None else "discrete_gradient"
+        ops = rom.operators_
+        scheme = "newmark" if ops.stateful or ops.is_linear else "discrete_gradient"
         solution = rom.predict(np.zeros(rom.operators_.r), times, inputs=blow.inputs, scheme=scheme)
         return solution.info["stepping_seconds"] / args.steps
 

@@ -186,10 +186,9 @@ def predict_backbone(learner, record, q0, v0, start: float, duration: float, con
     times = start + np.arange(int(duration / dt)) * dt
     rom = SecondOrderROM(learner.operators_, np.eye(config.rank))
     started = time.perf_counter()
-    nonlinear = learner.operators_.nonlinear
-    stateful = nonlinear is not None and nonlinear.stateful
     # the sliders' return mapping steps with Newmark (the same period error as the midpoint rule)
-    solution = rom.predict(q0, times, v0=v0, scheme="newmark" if stateful else "discrete_gradient")
+    solution = rom.predict(q0, times, v0=v0,
+                           scheme="newmark" if learner.operators_.stateful else "discrete_gradient")
     seconds = time.perf_counter() - started
     acc1 = record.channel_acceleration(solution.a, 0)
     backbone = hilbert_backbone(acc1, 1 / dt, config.band, window=config.window, start_time=start)

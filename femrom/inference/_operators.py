@@ -196,6 +196,11 @@ class ReducedOperators:
     def is_linear(self) -> bool:
         return self.nonlinear is None
 
+    @property
+    def stateful(self) -> bool:
+        """Whether a term carries a state from step to step (e.g. learned sliders)."""
+        return any(t.stateful for t in self.terms)
+
     def eigenvalues(self) -> dict:
         """Eigenvalues of the symmetric parts of ``K^`` and ``C^`` (ascending)."""
         out = {"stiffness": np.linalg.eigvalsh(0.5 * (self.stiffness + self.stiffness.T))}

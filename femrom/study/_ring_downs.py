@@ -235,9 +235,8 @@ def compare_ring_downs(system, rest_state, training, validation, tests, settings
                 else:
                     tic = time.perf_counter()
                     # a stateful (hysteretic) model steps by Newmark with its sliders' return mapping
-                    stateful = rom.operators_.nonlinear is not None and rom.operators_.nonlinear.stateful
                     solution = rom.predict(np.zeros(r), run.times, inputs=reference.inputs,
-                                           scheme="newmark" if stateful else settings.learned_scheme)
+                                           scheme="newmark" if rom.operators_.stateful else settings.learned_scheme)
                     seconds = time.perf_counter() - tic
                     signal = E @ (V @ np.asarray(solution.a))
                     seconds_per_step = seconds / max(run.times.size - 1, 1)
