@@ -8,9 +8,11 @@ Layers import downward only::
 
 from importlib.metadata import PackageNotFoundError, version
 
+from femrom._errors import FemromError, FemromRuntimeError, FemromTypeError, FemromValueError
+
 try:
     __version__ = version("femrom")
 except PackageNotFoundError:  # running from a source tree that is not installed
     __version__ = "0.0.0+unknown"
 
-__all__ = ["__version__"]
+__all__ = ["FemromError", "FemromRuntimeError", "FemromTypeError", "FemromValueError", "__version__"]

@@ -1,4 +1,7 @@
-class SceneError(ValueError):
+from femrom._errors import FemromValueError
+
+
+class SceneError(FemromValueError):
     """A scene file or dictionary that cannot be built; the message names the culprit."""
 
 

@@ -22,12 +22,8 @@ def discrete_gradient(term, q0: np.ndarray, q1: np.ndarray, potential0: float | 
 
     .. math::
 
-        ar
-abla U(q_0, q_1) = \int_0^1 
-abla U(q_0 + s \Delta)\, ds, \qquad
-        rac{\partial ar
-abla U}{\partial q_1} = \int_0^1 s\, 
-abla^2 U(q_0 + s \Delta)\, ds,
+        \bar\nabla U(q_0, q_1) = \int_0^1 \nabla U(q_0 + s \Delta)\, ds, \qquad
+        \frac{\partial \bar\nabla U}{\partial q_1} = \int_0^1 s\, \nabla^2 U(q_0 + s \Delta)\, ds,
         \qquad \Delta = q_1 - q_0,
 
     so that ``grad . Delta = U(q1) - U(q0)`` (Quispel & McLaren, J. Phys. A 41, 2008), with the
