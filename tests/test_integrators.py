@@ -24,7 +24,7 @@ from femrom.integrators import (
     integrate,
     iterate,
 )
-from femrom.integrators import _midpoint, _newmark
+from femrom.integrators.schemes import generalized_alpha, implicit_midpoint, newmark
 from femrom.scene import SecondOrderSystem
 from femrom.solvers import make_solver
 
@@ -149,7 +149,8 @@ def test_central_difference_with_lagged_damping_is_first_order():
 
 def test_newmark_names_and_parameters():
     assert NewmarkAverageAcceleration() == Newmark()
-    assert Newmark().name == "NewmarkAverageAcceleration" and Newmark().order == 2
+    assert Newmark().label == "NewmarkAverageAcceleration" and Newmark().order == 2
+    assert Newmark().name == "newmark" and GeneralizedAlpha(0.5).name == "generalized_alpha"
     assert Newmark(gamma=0.6, beta=0.3).order == 1  # gamma != 1/2 is first order
     ga = GeneralizedAlpha(0.5)
     # Chung & Hulbert (1993), eq. 25: rho = 1/2 gives alpha_m = 0, alpha_f = 1/3
@@ -440,8 +441,8 @@ def test_linear_system_factorises_once_and_never_runs_newton(scheme, monkeypatch
     def forbidden(*args, **kwargs):
         raise AssertionError("Newton ran on a linear system")
 
-    monkeypatch.setattr(_newmark, "ImplicitSolve", forbidden)
-    monkeypatch.setattr(_midpoint, "ImplicitSolve", forbidden)
+    monkeypatch.setattr(newmark, "ImplicitSolve", forbidden)
+    monkeypatch.setattr(implicit_midpoint, "ImplicitSolve", forbidden)
     system = chain()
     for n_steps in (10, 100):
         calls = []

@@ -13,7 +13,8 @@ from femrom.inference import (TORCH_MISSING, ConvexPowers, LagrangianOpInf, Lear
                               NetworkLayer, ProjectedNonlinearForce, ReducedOperators, ScalarNetwork, SecondOrderData,
                               SpML, SpMLConfig, SymmetricPolynomial, galerkin, learner_class, multi_indices,
                               reduce_snapshots)
-from femrom.rom import ReducedNewton, SecondOrderROM
+from femrom.integrators import DiscreteGradient, ImplicitMidpoint, Newton
+from femrom.rom import SecondOrderROM
 from femrom.study import force_error
 
 torch = pytest.importorskip("torch")
@@ -308,12 +309,12 @@ def test_discrete_gradient_energy_never_increases_without_input():
     here: 1e4 steps of each would take 40 s of the default run.)"""
     rng = np.random.default_rng(7)
     r, n_steps, h = 4, 4000, 0.05
-    newton = ReducedNewton()                      # tol 1e-10: far above the round-off of the discrete gradient
+    newton = Newton(rtol=1e-10)                   # far above the round-off of the discrete gradient
     for damped, steps in ((True, 2000), (False, n_steps)):
         rom = SecondOrderROM(_random_model(rng, r, damped))
         q0, v0 = rng.standard_normal(r), rng.standard_normal(r)
         t = h * np.arange(steps + 1)
-        E = rom.predict(q0, t, v0=v0, scheme="discrete_gradient", newton=newton).energy
+        E = rom.predict(q0, t, v0=v0, scheme=DiscreteGradient(newton=newton)).energy
         # round-off of E (|E| ~ 10, eps ~ 2e-16, a few dozen operations) and the Newton tolerance
         assert np.max(np.diff(E)) <= 1e-12 * abs(E[0]), (damped, np.max(np.diff(E)))
         if damped:
@@ -322,7 +323,7 @@ def test_discrete_gradient_energy_never_increases_without_input():
         else:
             assert np.max(np.abs(E - E[0])) <= 1e-11 * abs(E[0])
             # the plain midpoint rule on the same model drifts: the discrete gradient is what holds E
-            plain = rom.predict(q0, t[:1001], v0=v0, scheme="midpoint", newton=newton).energy
+            plain = rom.predict(q0, t[:1001], v0=v0, scheme=ImplicitMidpoint(newton=newton)).energy
             assert np.max(np.abs(plain - plain[0])) > 1e-6 * abs(E[0])
 
 

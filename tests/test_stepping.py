@@ -8,7 +8,8 @@ import scipy.sparse as sp
 import _constant_load  # noqa: F401  (registers the constant-load term a user would write)
 from femrom.fem import JenkinsForce, LocalPotential
 from femrom.inference import ProjectedNonlinearForce, ReducedOperators
-from femrom.rom import DiscreteStateSpace, SecondOrderROM, registered_schemes
+from femrom.integrators import registered_schemes
+from femrom.rom import DiscreteStateSpace, SecondOrderROM
 from femrom.scene import SecondOrderSystem
 
 
@@ -77,6 +78,10 @@ def test_stepper_follows_predict_one_input_at_a_time(scheme):
     stepper = rom.stepper(q0, dt=0.01, u0=U[:, 0], scheme=scheme)
     Y = np.column_stack([stepper.outputs] + [stepper.step(U[:, k]) for k in range(1, times.size)])
     assert relative(Y, solution.outputs) < 1e-12
+    if scheme == "generalized_alpha":      # its acceleration is a state of its own: no [q; v] state space
+        with pytest.raises(ValueError, match=r"no \[q; v\] state space"):
+            rom.to_state_space(0.01, scheme)
+        return
     ss = rom.to_state_space(0.01, scheme)
     Ua = np.vstack([U, np.ones_like(times)])
     plant = ss.stepper(ss.initial_state(np.concatenate([q0, np.zeros(8)]), Ua[:, 0]), Ua[:, 0])

@@ -13,11 +13,13 @@ mass-orthonormal basis only (``../shared/DESIGN.md``, "The reduced mass").
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from femrom.inference._terms import LinearTerm, ReducedTerm, registered_terms
+from femrom.scene import SecondOrderSystem
 
 
 class ReducedForces:
@@ -139,6 +141,15 @@ class ReducedOperators:
     @property
     def r(self) -> int:
         return self.term("stiffness").matrix.shape[0]
+
+    @functools.cached_property
+    def system(self):
+        """The model as a :class:`~femrom.scene.SecondOrderSystem` with dense (r, r) operators
+        (the identity mass when none is held; the nonlinear terms as its force): what every
+        time scheme steps."""
+        return SecondOrderSystem(mass=self.mass_matrix, stiffness=self.stiffness, damping=self.damping,
+                                 input_matrix=self.input_matrix, output_matrix=self.output_matrix,
+                                 nonlinear=self.nonlinear, load=self.load, metadata=dict(self.metadata))
 
     @property
     def stiffness(self) -> np.ndarray:

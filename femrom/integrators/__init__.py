@@ -2,15 +2,22 @@
 
 Three separate pieces:
 
-- a *scheme* takes one step and declares its ``order``: :class:`Newmark`
-  (average acceleration by default; its discrete frequencies :func:`newmark_frequencies`),
-  :class:`GeneralizedAlpha`,
-  :class:`CentralDifference` (explicit Stoermer-Verlet), :class:`ImplicitMidpoint`;
-  each is registered by the name a scene's ``[time] integrator`` uses
-  (:data:`SCHEMES`, :func:`register_scheme`, :func:`scheme_for`);
+- a *scheme* takes one step of any second-order model, full (sparse) or reduced
+  (dense), and declares its ``order``, its input time, the models it supports and
+  its frequency map: :class:`Newmark` (average acceleration by default; its discrete
+  frequencies :func:`newmark_frequencies`), :class:`GeneralizedAlpha`,
+  :class:`CentralDifference` (explicit Stoermer-Verlet), :class:`ImplicitMidpoint`,
+  :class:`DiscreteGradient` (the energy of conservative forces kept exactly); each is
+  one class in one module of ``femrom.integrators.schemes``, registered by the name a
+  scene's ``[time] integrator`` and ``predict(scheme=...)`` use (:class:`Scheme`,
+  :data:`SCHEMES`, :func:`register_scheme`, :func:`time_scheme`, :func:`scheme_for`);
+  a linear model with dense operators also steps by the scheme's precomputed
+  step map (:func:`run_linear`);
 - the *driver* :func:`iterate` loops and yields :class:`StepResult`;
   :func:`integrate` feeds them to *consumers* (:class:`Trajectory`,
   :class:`OutputRecorder`, :class:`EnergyRecorder`, or any callable);
+  :func:`march` steps a model over a grid with sampled inputs into arrays, and a
+  :class:`Stepper` one input at a time;
 - a *stepped sine* (:class:`SteppedSine`) drives a *plant* (:class:`SystemPlant`,
   :class:`StepperPlant`) frequency by frequency without restarting, whole periods at
   a time to a tested steady state (:class:`SteadyStateCriterion`), and reports the
@@ -23,7 +30,6 @@ runs only when the system has a nonlinear force, and only on that force's own
 coordinates when it acts on a few dofs (:class:`Newton`, ``method``).
 """
 
-from femrom.integrators._central_difference import CentralDifference
 from femrom.integrators._conditioning import (
     Conditioning,
     ConditioningError,
@@ -47,10 +53,22 @@ from femrom.integrators._hamiltonian import (
     integrate_canonical,
 )
 from femrom.integrators._implicit import ImplicitSolve
-from femrom.integrators._midpoint import ImplicitMidpoint
-from femrom.integrators._newmark import GeneralizedAlpha, Newmark, NewmarkAverageAcceleration, newmark_frequencies
-from femrom.integrators._newton import NEWTON_METHODS, ConvergenceError, Newton, solve_newton
-from femrom.integrators._schemes import SCHEMES, register_scheme, scheme_for
+from femrom.integrators._march import Stepper, march, run_linear, sampled_forcing, uniform_step
+from femrom.integrators._newton import NEWTON_METHODS, ConvergenceError, Newton, newton_loop, solve_newton
+from femrom.integrators._scheme import (
+    SCHEMES,
+    LinearParts,
+    Scheme,
+    register_scheme,
+    registered_schemes,
+    scheme_for,
+    time_scheme,
+)
+from femrom.integrators.schemes.central_difference import CentralDifference, verlet_bound
+from femrom.integrators.schemes.discrete_gradient import DiscreteGradient
+from femrom.integrators.schemes.generalized_alpha import GeneralizedAlpha
+from femrom.integrators.schemes.implicit_midpoint import ImplicitMidpoint
+from femrom.integrators.schemes.newmark import Newmark, NewmarkAverageAcceleration, newmark_frequencies
 from femrom.integrators._simulate import SimulationResult, simulate
 from femrom.integrators._sine_plants import StepperPlant, SystemPlant
 from femrom.integrators._stability import MaxFrequency, bound_max_frequency, estimate_max_frequency
@@ -71,11 +89,13 @@ __all__ = [
     "ConditioningWarning",
     "check_conditioning",
     "CANONICAL_SCHEMES", "NEWTON_METHODS", "SCHEMES", "CanonicalSystem", "CanonicalTrajectory",
-    "CentralDifference", "ConvergenceError", "EnergyBalance", "EnergyRecorder", "GeneralizedAlpha", "ImplicitMidpoint",
+    "CentralDifference", "ConvergenceError", "DiscreteGradient", "EnergyBalance", "EnergyRecorder", "GeneralizedAlpha", "ImplicitMidpoint",
     "ImplicitSolve", "Integration", "IntegrationError", "IntegrationSummary", "MaxFrequency", "Newmark",
     "NewmarkAverageAcceleration", "Newton", "OutputRecorder", "SimulationResult", "StepClock", "StepResult",
     "Trajectory", "bound_max_frequency", "estimate_max_frequency", "integrate", "integrate_canonical",
     "iterate", "newmark_frequencies", "register_scheme", "scheme_for", "simulate", "solve_newton",
+    "LinearParts", "Scheme", "Stepper", "march", "newton_loop", "registered_schemes", "run_linear",
+    "sampled_forcing", "time_scheme", "uniform_step", "verlet_bound",
     "FrequencyResponse", "Peak", "SteadyStateCriterion", "SteadyStateMonitor", "SteadyStateWarning",
     "SteppedSine", "SteppedSineResult", "StepperPlant", "SystemPlant", "first_harmonic", "parabolic_peak",
     "prewarped_frequency",

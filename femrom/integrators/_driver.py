@@ -271,8 +271,9 @@ class Integration(Iterator[StepResult]):
         if yield_first:
             yield current
         system, scheme, cache, dt = self.system, self.scheme, self._cache, self.dt
+        theta = float(scheme.input_time)
         step0 = current.step
-        progress = Progress(self.n_steps, label=getattr(scheme, "name", type(scheme).__name__),
+        progress = Progress(self.n_steps, label=getattr(scheme, "label", type(scheme).__name__),
                             enabled=self._progress)
         try:
             for k in range(1, self.n_steps + 1):
@@ -280,9 +281,11 @@ class Integration(Iterator[StepResult]):
                 # restart from any StepResult replays the same times bit for bit
                 step, t1 = step0 + k, current.t + dt
                 tic = time.perf_counter()
+                t0 = current.t
                 try:
                     q, v, a, state, iterations = scheme.step(
-                        system, cache, current.t, current.q, current.v, current.a, current.state)
+                        system, cache, t0, current.q, current.v, current.a, current.state,
+                        system.external_force(t0 + theta * dt), lambda t0=t0: system.external_force(t0 + dt))
                 except (ConvergenceError, LinearSolverError) as err:
                     raise IntegrationError(f"step {step} (t = {t1:.6g}) failed: {err}",
                                            step=step, t=t1) from err
@@ -304,7 +307,7 @@ class Integration(Iterator[StepResult]):
         """Timings and counts of the steps taken so far."""
         log = self._log
         return IntegrationSummary(
-            scheme=getattr(self.scheme, "name", type(self.scheme).__name__),
+            scheme=getattr(self.scheme, "label", type(self.scheme).__name__),
             solver="+".join(log.names) or "none",
             n_dofs=self.system.n_dofs, n_steps=self.steps_done, dt=self.dt,
             setup_seconds=self.setup_seconds,

@@ -65,12 +65,17 @@ import time
 
 import numpy as np
 import scipy.linalg as sl
+import scipy.sparse as sp
 
-from femrom.integrators._newton import ConvergenceError, Newton, TangentMatrix, solve_newton
+from femrom._errors import FemromValueError
+from femrom.integrators._newton import ConvergenceError, Newton, TangentMatrix, newton_loop, solve_newton
 
 
 def dense(system, newton: Newton) -> bool:
-    """Whether ``newton`` asks for (``"dense"``) or allows (``"auto"``, ``n <= dense_max``) dense Newton."""
+    """Whether the model is held in ndarrays (a reduced model: always dense), or ``newton`` asks for
+    (``"dense"``) or allows (``"auto"``, ``n <= dense_max``) dense Newton."""
+    if not sp.issparse(system.stiffness):
+        return True
     return newton.method == "dense" or (newton.method == "auto" and system.n_dofs <= newton.dense_max)
 
 
@@ -80,7 +85,7 @@ def condensable(system, newton: Newton) -> bool:
     L = getattr(force, "local_map", None)
     if newton.method in ("full", "dense") or L is None:
         if newton.method == "condensed":
-            raise ValueError(f"Newton(method='condensed') needs a force with a local map; "
+            raise FemromValueError(f"Newton(method='condensed') needs a force with a local map; "
                              f"{type(force).__name__} has none")
         return False
     if newton.method == "condensed":
@@ -168,33 +173,24 @@ class ImplicitSolve:
 
     def _dense(self, b, q0, v0, state, guess):
         """Newton with dense arrays: force and tangent from one evaluation per iteration (a small system)."""
-        S, w, c_q, c_v, options = self._S_dense, self.w, self.c_q, self.c_v, self.newton
-        x = np.zeros_like(b, dtype=float) if guess is None else np.array(guess, dtype=float)
-        eps = np.finfo(float).eps
-        for iteration in range(options.max_iterations + 1):
+        S, w, c_q, c_v = self._S_dense, self.w, self.c_q, self.c_v
+
+        def evaluate(x):
             f, dfdq, dfdv = self._force_and_tangent(q0 + c_q * x, v0 + c_v * x, state)
             Sx = S @ x
-            r = Sx - b + w * f
-            norm = float(np.linalg.norm(r))
-            tolerance = options.atol + options.rtol * float(np.linalg.norm(Sx) + np.linalg.norm(b)
-                                                            + w * np.linalg.norm(f))
-            if not np.isfinite(norm):
-                raise ConvergenceError(f"Newton residual is not finite at iteration {iteration}")
-            if norm <= tolerance:
-                return x, iteration
-            if iteration == options.max_iterations:
-                break
-            J = S.copy()
-            for c, D in ((w * c_q, dfdq), (w * c_v, dfdv)):
-                if D is not None:
-                    J += c * D
-            dx = np.linalg.solve(J, r)
-            x = x - dx
-            if np.linalg.norm(dx) <= 4.0 * eps * np.linalg.norm(x):
-                return x, iteration + 1
-        raise ConvergenceError(
-            f"Newton did not converge in {options.max_iterations} iterations: residual "
-            f"{norm:.3g} > tolerance {tolerance:.3g} (atol={options.atol:g}, rtol={options.rtol:g})")
+            scale = float(np.linalg.norm(Sx) + np.linalg.norm(b) + w * np.linalg.norm(f))
+
+            def solve(r):
+                J = S.copy()
+                for c, D in ((w * c_q, dfdq), (w * c_v, dfdv)):
+                    if D is not None:
+                        J += c * D
+                return np.linalg.solve(J, r)
+
+            return Sx - b + w * f, scale, solve
+
+        x0 = np.zeros_like(b, dtype=float) if guess is None else guess
+        return newton_loop(evaluate, x0, self.newton)
 
     # -- condensed Newton ------------------------------------------------------------
     def _setup_condensed(self):
@@ -220,7 +216,7 @@ class ImplicitSolve:
         try:
             factor = sl.cho_factor(G)
         except np.linalg.LinAlgError:
-            raise ValueError(f"the {n_local} local coordinates of {force.name!r} are linearly dependent "
+            raise FemromValueError(f"the {n_local} local coordinates of {force.name!r} are linearly dependent "
                              "(L S^-1 L^T is singular): condensation needs a full-rank local map; "
                              "use Newton(method='full')") from None
         self.L, self.Z, self.force = L, Z, force

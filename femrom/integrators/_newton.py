@@ -22,8 +22,10 @@ from typing import Callable
 import numpy as np
 import scipy.sparse as sp
 
+from femrom._errors import FemromRuntimeError, FemromValueError
 
-class ConvergenceError(RuntimeError):
+
+class ConvergenceError(FemromRuntimeError):
     """Newton did not converge (the driver adds the step and time)."""
 
 
@@ -81,21 +83,85 @@ class Newton:
 
     def __post_init__(self):
         if self.rtol < 0 or self.atol < 0 or (self.rtol == 0 and self.atol == 0):
-            raise ValueError(f"Newton needs rtol, atol >= 0 and not both 0, "
+            raise FemromValueError(f"Newton needs rtol, atol >= 0 and not both 0, "
                              f"got {self.rtol}, {self.atol}")
         if self.max_iterations < 1:
-            raise ValueError(f"Newton max_iterations must be >= 1, got {self.max_iterations}")
+            raise FemromValueError(f"Newton max_iterations must be >= 1, got {self.max_iterations}")
         if self.method not in NEWTON_METHODS:
-            raise ValueError(f"unknown Newton method {self.method!r}; valid: {', '.join(NEWTON_METHODS)}")
+            raise FemromValueError(f"unknown Newton method {self.method!r}; valid: {', '.join(NEWTON_METHODS)}")
         if not (self.condense_max >= 1 and 0 < self.condense_fraction <= 1 and self.condense_memory >= 0
                 and 0 <= self.refactor_ratio < 1 and self.dense_max >= 0):
-            raise ValueError("Newton needs condense_max >= 1, 0 < condense_fraction <= 1, "
+            raise FemromValueError("Newton needs condense_max >= 1, 0 < condense_fraction <= 1, "
                              "condense_memory >= 0, 0 <= refactor_ratio < 1, dense_max >= 0")
+
+
+def newton_loop(evaluate: Callable, x0: np.ndarray, options: Newton, *, update_scale: float | None = None,
+                stagnation: bool = False, where: str = "") -> tuple[np.ndarray, int]:
+    r"""The one Newton iteration of femrom: ``x <- x - J(x)^{-1} R(x)`` from ``x0``.
+
+    Parameters
+    ----------
+    evaluate : callable
+        ``x -> (R, scale, solve)``: the (n,) residual, the positive float it is measured
+        against (the norms of the force terms it balances) and ``solve(R) = J(x)^{-1} R``.
+    x0 : (n,) ndarray
+        The predictor.
+    options : Newton
+        ``rtol``, ``atol``, ``max_iterations``.
+    update_scale : float, optional
+        Judge convergence by the update instead of the residual: stop when
+        ``||dx|| <= rtol max(||x||, update_scale)`` (``update_scale``: the size the unknown
+        has in this step, when ``||x||`` itself can vanish at a turning point).
+    stagnation : bool
+        Also stop when, from the third iteration on, an update fails to halve the previous
+        one: with an exact Jacobian that is the round-off floor.
+    where : str
+        Appended to the error message (e.g. ``" at t = 0.3"``).
+
+    Returns
+    -------
+    x : (n,) ndarray
+    iterations : int
+        Jacobian solves (0 when ``x0`` already satisfies the residual test).
+
+    By default the residual test ``||R|| <= atol + rtol scale``; once an update no
+    longer changes ``x`` in floating point (``||dx|| <= 4 eps ||x||``) the residual is
+    at its round-off floor and the iterate is accepted as well.
+    """
+    x = np.array(x0, dtype=float)
+    eps = np.finfo(float).eps
+    previous = np.inf
+    norm = tolerance = float("nan")
+    for iteration in range(options.max_iterations + 1):
+        R, scale, solve = evaluate(x)
+        norm = float(np.linalg.norm(R))
+        if not np.isfinite(norm):
+            raise ConvergenceError(f"Newton residual is not finite at iteration {iteration}{where}")
+        tolerance = options.atol + options.rtol * scale
+        if update_scale is None and norm <= tolerance:
+            return x, iteration
+        if iteration == options.max_iterations:
+            break
+        dx = solve(R)
+        x = x - dx
+        size = float(np.linalg.norm(dx))
+        if update_scale is not None:
+            if size <= options.rtol * max(float(np.linalg.norm(x)), update_scale, 1e-300) or (
+                    stagnation and iteration >= 2 and size >= 0.5 * previous):
+                return x, iteration + 1
+        elif size <= 4.0 * eps * np.linalg.norm(x) or (stagnation and iteration >= 2 and size >= 0.5 * previous):
+            return x, iteration + 1
+        previous = size
+    if update_scale is not None:
+        raise ConvergenceError(f"Newton did not converge in {options.max_iterations} iterations{where}")
+    raise ConvergenceError(
+        f"Newton did not converge in {options.max_iterations} iterations{where}: residual "
+        f"{norm:.3g} > tolerance {tolerance:.3g} (atol={options.atol:g}, rtol={options.rtol:g})")
 
 
 def solve_newton(residual: Callable, jacobian: Callable, x0: np.ndarray, make_solver: Callable,
                  options: Newton) -> tuple[np.ndarray, int]:
-    r"""Solve ``R(x) = 0`` from ``x0``.
+    r"""Solve ``R(x) = 0`` from ``x0`` with a sparse Jacobian (:func:`newton_loop`).
 
     Parameters
     ----------
@@ -118,25 +184,11 @@ def solve_newton(residual: Callable, jacobian: Callable, x0: np.ndarray, make_so
     iterations : int
         Number of Jacobian solves (0 when ``x0`` already satisfies the test).
     """
-    x = x0
-    eps = np.finfo(float).eps
-    for iteration in range(options.max_iterations + 1):
-        r, scale = residual(x)
-        norm = float(np.linalg.norm(r))
-        tolerance = options.atol + options.rtol * scale
-        if not np.isfinite(norm):
-            raise ConvergenceError(f"Newton residual is not finite at iteration {iteration}")
-        if norm <= tolerance:
-            return x, iteration
-        if iteration == options.max_iterations:
-            break
-        dx = make_solver(jacobian(x), spd=False).solve(r)
-        x = x - dx
-        if np.linalg.norm(dx) <= 4.0 * eps * np.linalg.norm(x):
-            return x, iteration + 1
-    raise ConvergenceError(
-        f"Newton did not converge in {options.max_iterations} iterations: residual "
-        f"{norm:.3g} > tolerance {tolerance:.3g} (atol={options.atol:g}, rtol={options.rtol:g})")
+    def evaluate(x):
+        R, scale = residual(x)
+        return R, scale, lambda r: make_solver(jacobian(x), spd=False).solve(r)
+
+    return newton_loop(evaluate, x0, options)
 
 
 def _diagonal_values(D) -> np.ndarray | None:

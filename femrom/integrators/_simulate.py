@@ -10,7 +10,7 @@ import numpy as np
 from femrom.integrators._conditioning import ConditioningError, check_conditioning
 from femrom.integrators._consumers import EnergyRecorder, OutputRecorder, Trajectory
 from femrom.integrators._driver import integrate
-from femrom.integrators._schemes import scheme_for
+from femrom.integrators._scheme import scheme_for
 from femrom.solvers import make_solver
 
 _FIELD_KEYS = {"displacement": "q", "velocity": "v", "acceleration": "a"}

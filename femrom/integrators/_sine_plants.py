@@ -27,7 +27,7 @@ from typing import Iterator
 import numpy as np
 
 from femrom.integrators._driver import StepResult, iterate
-from femrom.integrators._newmark import Newmark
+from femrom.integrators.schemes.newmark import Newmark
 from femrom.scene import Signal, SignalVector
 
 QUANTITIES = ("acceleration", "displacement")

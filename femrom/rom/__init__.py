@@ -7,12 +7,11 @@
   outputs, reduced energy, lazy full-field reconstruction and HDF5
   ``save``/``load`` (term by term);
 - :class:`ReducedSolution`: what ``predict`` returns;
-- reduced schemes: registered classes (:func:`registered_schemes`,
-  :func:`register_reduced_scheme`): Newmark average acceleration, the implicit
-  midpoint rule, Stoermer-Verlet, and ``discrete_gradient`` (implicit midpoint with
-  the average-vector-field discrete gradient of every conservative force: the energy
-  never increases without input, the scheme of learned SpML models), each a
-  precomputed linear step map and a nonlinear step;
+- reduced models step with the time schemes of :mod:`femrom.integrators` (one
+  registry for the full and the reduced models: Newmark average acceleration, the
+  implicit midpoint rule, Stoermer-Verlet, and ``discrete_gradient``, implicit
+  midpoint with the average-vector-field discrete gradient of every conservative
+  force: the energy never increases without input, the scheme of learned SpML models);
 - :class:`DiscreteStateSpace`: ``z+ = A z + B u``, ``y = C z + D u``, with
   ``simulate``, a stepper and HDF5 (the form of identified first-order models);
 - :class:`StateSpaceROM`: an identified first-order model
@@ -53,26 +52,14 @@ from femrom.rom._identified import StateSpaceROM, StateSpaceSolution
 from femrom.rom._hyper import HyperReducedPotential, ecsw_weights, sparse_nnls
 from femrom.rom._hyper_joint import JointSampling, ecsw_joint, hyper_reduced_system
 from femrom.rom._model import ReducedSolution, SecondOrderROM
-from femrom.rom._schemes import (
-    REDUCED_SCHEMES,
-    LinearParts,
-    ReducedNewton,
-    ReducedScheme,
-    reduced_scheme,
-    register_reduced_scheme,
-    registered_schemes,
-)
 from femrom.rom._selection import RegularizationScore, select_regularization
 from femrom.rom._statespace import DiscreteStateSpace, StateSpaceStepper
-from femrom.rom._steppers import ReducedStepper, run_linear
-from femrom.rom.schemes.verlet import verlet_bound
 
 __all__ = [
-    "FIRST_ORDER_SCHEMES", "HAMILTONIAN_SCHEMES", "REDUCED_SCHEMES", "DiscreteStateSpace", "FirstOrderROM", "HamiltonianROM", "HamiltonianSolution", "HamiltonianStepper",
-    "HyperReducedPotential", "JointSampling", "LazyFields", "LinearParts", "ReducedModel", "ReducedNewton",
-    "ReducedScheme", "ReducedSolution", "ReducedStepper", "RegularizationScore", "SecondOrderROM", "StateSpaceROM",
+    "FIRST_ORDER_SCHEMES", "HAMILTONIAN_SCHEMES", "DiscreteStateSpace", "FirstOrderROM", "HamiltonianROM", "HamiltonianSolution", "HamiltonianStepper",
+    "HyperReducedPotential", "JointSampling", "LazyFields", "ReducedModel",
+    "ReducedSolution", "RegularizationScore", "SecondOrderROM", "StateSpaceROM",
     "StateSpaceSolution", "StateSpaceStepper",
-    "ecsw_joint", "ecsw_weights", "hamiltonian_step_matrix", "hyper_reduced_system", "reduced_scheme",
-    "register_reduced_scheme",
-    "registered_schemes", "run_linear", "select_regularization", "sparse_nnls", "uniform_step", "verlet_bound",
+    "ecsw_joint", "ecsw_weights", "hamiltonian_step_matrix", "hyper_reduced_system",
+    "select_regularization", "sparse_nnls", "uniform_step",
 ]

@@ -13,17 +13,7 @@ from typing import Iterator
 import numpy as np
 
 from femrom.inference import reduced_coordinates
-
-
-def uniform_step(times) -> tuple[np.ndarray, float]:
-    """``(times, h)`` of a uniform increasing grid of at least two points; one clear error otherwise."""
-    times = np.asarray(times, dtype=float)
-    if times.ndim != 1 or times.size < 2:
-        raise ValueError("times must be a 1-d grid of at least two points")
-    h = float(times[1] - times[0])
-    if not h > 0 or not np.allclose(np.diff(times), h, rtol=1e-9, atol=0.0):
-        raise ValueError("times must be uniformly spaced and increasing")
-    return times, h
+from femrom.integrators import uniform_step  # noqa: F401  (the time grid every reduced model checks)
 
 
 class ReducedModel:

@@ -46,10 +46,9 @@ import scipy.linalg as sl
 
 from femrom._json import dumps
 from femrom.inference import CanonicalData, HamiltonianOperators, HamiltonianOpInf, ProjectedPotential
-from femrom.integrators import CANONICAL_SCHEMES, CanonicalSystem, Newton, integrate_canonical
+from femrom.integrators import CANONICAL_SCHEMES, CanonicalSystem, Newton, integrate_canonical, run_linear
 from femrom.rom._base import LazyFields, ReducedModel, uniform_step
 from femrom.rom._statespace import DiscreteStateSpace
-from femrom.rom._steppers import run_linear
 
 #: Symplectic schemes for Hamiltonian ROMs.
 HAMILTONIAN_SCHEMES = ("symplectic_euler_a", "symplectic_euler_b", "verlet", "midpoint")

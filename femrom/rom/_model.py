@@ -5,9 +5,11 @@ r"""Reduced second-order models: fit, predict, step, state space, energy, recons
     \hat M \ddot{\hat q} + \hat C \dot{\hat q} + \hat K \hat q + \hat f(\hat q, \dot{\hat q}; s)
         = \hat B u(t) + \hat f_0, \qquad y = \hat E \hat q, \qquad q \approx V \hat q,
 
-the terms of a :class:`~femrom.inference.ReducedOperators`, integrated with a
-registered reduced scheme (:mod:`._schemes`: Newmark average acceleration by
-default, the implicit midpoint rule, Stoermer-Verlet).
+the terms of a :class:`~femrom.inference.ReducedOperators`, whose
+:attr:`~femrom.inference.ReducedOperators.system` (a
+:class:`~femrom.scene.SecondOrderSystem` with dense operators) any registered time
+scheme of :mod:`femrom.integrators` steps (Newmark average acceleration by
+default, the implicit midpoint rule, Stoermer-Verlet, the discrete gradient).
 """
 
 from __future__ import annotations
@@ -18,12 +20,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from femrom._errors import FemromValueError
 from femrom._json import dumps
 from femrom.inference import ReducedOperators, galerkin, term_class
-from femrom.rom._base import LazyFields, ReducedModel, uniform_step
-from femrom.rom._schemes import LinearParts, ReducedNewton, reduced_scheme
+from femrom.integrators import LinearParts, Stepper, march, time_scheme, uniform_step
+from femrom.rom._base import LazyFields, ReducedModel
 from femrom.rom._statespace import DiscreteStateSpace
-from femrom.rom._steppers import ReducedStepper, run_linear
 
 #: Version of the HDF5 layout :meth:`SecondOrderROM.save` writes (one group per term).
 FILE_VERSION = 2
@@ -127,46 +129,7 @@ class SecondOrderROM(ReducedModel):
         E = self._ops().output_matrix
         return None if E is None else E @ q
 
-    def _samples(self, inputs, times: np.ndarray) -> np.ndarray | None:
-        """(m, k) input samples on ``times`` (``None`` without inputs); checks the model has inputs."""
-        m = self._ops().n_inputs
-        if m == 0:
-            if inputs is not None:
-                raise ValueError("this model has no input operator, but inputs were given")
-            return None
-        if inputs is None:
-            raise ValueError(f"this model has {m} inputs: pass inputs (callable u(t) or (m, k) array)")
-        if callable(inputs):
-            return np.column_stack([np.atleast_1d(np.asarray(inputs(t), dtype=float)) for t in times])
-        U = np.atleast_2d(np.asarray(inputs, dtype=float))
-        if U.shape != (m, times.size):
-            raise ValueError(f"inputs have shape {U.shape}, expected ({m}, {times.size})")
-        return U
-
-    def _forcing(self, inputs, times: np.ndarray, scheme) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """``(F_grid, F_input, F_end)``: ``B^ u + f^_0`` on the grid (r, k), at each step's input time
-        and at its end (r, k - 1). A callable is evaluated at the input time itself; samples
-        are averaged for a mid-step input time (second order)."""
-        ops = self._ops()
-        U = self._samples(inputs, times)
-        B, f0 = ops.input_matrix, ops.load
-        grid = np.zeros((ops.r, times.size)) if U is None else B @ U
-        if f0 is not None:
-            grid = grid + f0[:, None]
-        end = grid[:, 1:]
-        if scheme.input_time == "end":
-            return grid, end, end
-        if callable(inputs):
-            middle = 0.5 * (times[1:] + times[:-1])
-            mid = B @ np.column_stack([np.atleast_1d(np.asarray(inputs(t), dtype=float)) for t in middle])
-            if f0 is not None:
-                mid = mid + f0[:, None]
-        else:
-            mid = 0.5 * (grid[:, 1:] + grid[:, :-1])
-        return grid, mid, end
-
-    def predict(self, q0, times, *, v0=None, inputs=None, scheme: str = "newmark",
-                newton: ReducedNewton = ReducedNewton()) -> ReducedSolution:
+    def predict(self, q0, times, *, v0=None, inputs=None, scheme="newmark") -> ReducedSolution:
         r"""Integrate the reduced model on a uniform time grid.
 
         Parameters
@@ -180,65 +143,40 @@ class SecondOrderROM(ReducedModel):
             Initial velocity (default zero).
         inputs : callable or (m, k) ndarray, optional
             ``u(t) -> (m,)`` or the sampled inputs on ``times``.
-        scheme : str
-            A registered reduced scheme (``"newmark"``, ``"midpoint"``, ``"verlet"``).
-        newton : ReducedNewton
-            Tolerances of the Newton iterations of a nonlinear model.
+        scheme : str or Scheme
+            A registered time scheme (``"newmark"``, ``"implicit_midpoint"``,
+            ``"central_difference"``, ``"discrete_gradient"``, ...; the aliases
+            ``"midpoint"`` and ``"verlet"``) or an instance with its own options (Newton).
 
         Returns
         -------
         ReducedSolution
         """
-        step = reduced_scheme(scheme)
         ops = self._ops()
+        step = time_scheme(scheme)
         times, h = uniform_step(times)
         q0, v0 = self._initial(q0, "q0"), self._initial(v0, "v0")
         tic = time.perf_counter()
-        F_grid, F_input, F_end = self._forcing(inputs, times, step)
-        parts = LinearParts(ops.mass_matrix, ops.damping, ops.stiffness)
-        step.check(parts, h)
-        n_steps, r = times.size - 1, ops.r
-        info = {"scheme": scheme, "dt": h, "n_steps": n_steps}
-        if ops.nonlinear is None:
-            A, G = step.step_map(parts, h, np.eye(r))
-            a0 = parts.acceleration(F_grid[:, 0], q0, v0)
-            x0 = np.concatenate([q0, v0, a0] if step.carries_acceleration else [q0, v0])
-            forcing = G @ F_input if (ops.input_matrix is not None or ops.load is not None) else None
-            loop = {}
-            X = run_linear(A, x0, n_steps, forcing, timing=loop)
-            stepping = loop["loop_seconds"]
-            Q, Vel = X[:r], X[r:2 * r]
-            if step.carries_acceleration:
-                Acc = X[2 * r:]
-            else:
-                # the scheme never needs accelerations: recover them from the equation of motion
-                Acc = np.linalg.solve(parts.mass, F_grid - parts.damping_matrix @ Vel - ops.stiffness @ Q)
-        else:
-            stepper = ReducedStepper(ops, step, h, q0, v0, t0=times[0], newton=newton)
-            stepper.a = parts.acceleration(F_grid[:, 0], q0, v0, stepper.nonlinear, stepper.state)
-            Q, Vel, Acc = (np.empty((r, times.size)) for _ in range(3))
-            Q[:, 0], Vel[:, 0], Acc[:, 0] = q0, v0, stepper.a
-            step_tic = time.perf_counter()
-            for k in range(n_steps):
-                stepper.advance(F_input[:, k], F_end[:, k])
-                Q[:, k + 1], Vel[:, k + 1], Acc[:, k + 1] = stepper.q, stepper.v, stepper.a
-            stepping = time.perf_counter() - step_tic
-            info["newton_iterations"] = stepper.iterations
+        run = march(ops.system, step, times, q0, v0, inputs=inputs)
+        info = {"scheme": step.name, "dt": h, "n_steps": times.size - 1}
+        if ops.nonlinear is not None:
+            info["newton_iterations"] = run["newton_iterations"]
+        stepping = run["stepping_seconds"]
         info.update(seconds=time.perf_counter() - tic, stepping_seconds=stepping,
-                    seconds_per_step=stepping / max(n_steps, 1))
-        return ReducedSolution(t=times, q=Q, v=Vel, a=Acc, energy=self.energy(Q, Vel),
+                    seconds_per_step=stepping / max(times.size - 1, 1))
+        Q, Vel = run["q"], run["v"]
+        return ReducedSolution(t=times, q=Q, v=Vel, a=run["a"], energy=self.energy(Q, Vel),
                                outputs=self.outputs(Q), basis=self.basis, info=info)
 
-    def stepper(self, q0=None, v0=None, *, dt: float, t0: float = 0.0, u0=None, scheme: str = "newmark",
-                newton: ReducedNewton = ReducedNewton()) -> ReducedStepper:
-        """A :class:`ReducedStepper` at ``(q0, v0)``: ``y = stepper.step(u)`` advances by ``dt``.
+    def stepper(self, q0=None, v0=None, *, dt: float, t0: float = 0.0, u0=None, scheme="newmark") -> Stepper:
+        """A :class:`~femrom.integrators.Stepper` at ``(q0, v0)``: ``y = stepper.step(u)`` advances by ``dt``.
 
         ``q0``, ``v0`` reduced or full (default zero); ``u0`` the input sample at ``t0``.
         """
-        return ReducedStepper(self._ops(), reduced_scheme(scheme), dt, self._initial(q0, "q0"),
-                              self._initial(v0, "v0"), t0=t0, u0=u0, newton=newton)
+        return Stepper(self._ops().system, scheme, dt, self._initial(q0, "q0"), self._initial(v0, "v0"),
+                       t0=t0, u0=u0)
 
-    def to_state_space(self, dt: float, scheme: str = "newmark") -> DiscreteStateSpace:
+    def to_state_space(self, dt: float, scheme="newmark") -> DiscreteStateSpace:
         r"""The discrete state space ``z+ = A z + B u``, ``y = C z + D u`` of a linear model.
 
         On the samples ``u_k = u(t_k)`` (and ``u = [u; 1]`` when the model has a
@@ -247,16 +185,21 @@ class SecondOrderROM(ReducedModel):
         through ``M a = B u + f_0 - C v - K q``) is ``x_{k+1} = A x_k + E_0 u_k
         + E u_{k+1}``, hence ``B = A E + E_0`` and ``D = C E``. ``y = E^ q``
         (``q`` without an output map). Equal to :meth:`predict` with sampled
-        inputs to round-off.
+        inputs to round-off. Schemes that sample the forcing at the step's end or
+        midpoint have this form.
         """
-        step = reduced_scheme(scheme)
+        step = time_scheme(scheme)
         ops = self._ops()
         if ops.nonlinear is not None:
             names = ", ".join(t.name for t in ops.terms if not hasattr(t, "matrix"))
-            raise ValueError(f"the model has nonlinear terms ({names}): it has no linear state-space form")
+            raise FemromValueError(f"the model has nonlinear terms ({names}): it has no linear state-space form")
+        if float(step.input_time) not in (0.5, 1.0) or not step.physical_acceleration:
+            raise FemromValueError(f"scheme {step.name!r} has no [q; v] state space: it samples the forcing at "
+                                   f"t + {step.input_time:g} h and carries an algorithmic acceleration; use "
+                                   "newmark, implicit_midpoint, central_difference or discrete_gradient")
         r, h = ops.r, float(dt)
         parts = LinearParts(ops.mass_matrix, ops.damping, ops.stiffness)
-        step.check(parts, h)
+        step.check_step(parts, h)
         columns = [c for c in (ops.input_matrix, None if ops.load is None else ops.load[:, None]) if c is not None]
         forcing = np.hstack(columns) if columns else np.zeros((r, 0))
         A_full, G = step.step_map(parts, h, forcing)
@@ -271,7 +214,7 @@ class SecondOrderROM(ReducedModel):
         E = ops.output_matrix
         C = np.hstack([np.eye(r) if E is None else E, np.zeros((r if E is None else E.shape[0], r))])
         return DiscreteStateSpace(A=A2, B=A2 @ E1 + E0, C=C, D=C @ E1, dt=h, input_offset=E1, metadata={
-            "scheme": scheme, "state": "[q; v] - input_offset u", "r": r,
+            "scheme": step.name, "state": "[q; v] - input_offset u", "r": r,
             "constant_input": ops.load is not None, "outputs": "E q" if E is not None else "q"})
 
     # -- storage -----------------------------------------------------------------------

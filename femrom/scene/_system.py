@@ -8,34 +8,41 @@ from typing import Any, Callable
 import numpy as np
 import scipy.sparse as sp
 
+from femrom._errors import FemromTypeError, FemromValueError
 from femrom.fem import Condensation, ForceSum, NonlinearForce, sum_of_forces
 
 
 @dataclass(frozen=True, eq=False)
 class SecondOrderSystem:
-    r"""``M q'' + C q' + K q + f_nl(q, q'; s) = B u(t) + f_0``,  ``y = E q``  on the free dofs.
+    r"""``M q'' + C q' + K q + f_nl(q, q'; s) = B u(t) + f_0``,  ``y = E q``: the one model type.
 
-    Only the operators of the effects a scene lists are present; an absent
+    The full-order model a scene builds (sparse operators on the free dofs), its
+    Galerkin projections, learned and hyper-reduced models (dense (r, r) operators)
+    are all instances: every time scheme, stepper, stepped sine and plant runs on
+    any of them. Only the operators of the effects present are held; an absent
     effect is ``None`` and costs nothing downstream.
 
     Attributes
     ----------
-    mass : (n, n) sparse
+    mass : (n, n) sparse or ndarray
         Consistent or lumped mass ``M`` (SPD).
-    stiffness : (n, n) sparse
+    stiffness : (n, n) sparse or ndarray
         Stiffness ``K`` (symmetric; SPD once rigid-body modes are constrained).
-    damping : (n, n) sparse or None
+    damping : (n, n) sparse or ndarray, or None
         Damping ``C`` (symmetric positive semidefinite), e.g. Rayleigh ``a M + b K``.
     input_matrix : (n, m) ndarray or sparse, or None
         Input columns ``B``.
     inputs : callable or None
-        ``u(t) -> (m,) ndarray``; required when ``input_matrix`` is given.
-    output_matrix : (p, n) sparse or None
+        ``u(t) -> (m,) ndarray``: the model's own inputs (a scene's signals); without
+        them the inputs are zero unless a caller supplies samples (a prediction).
+    output_matrix : (p, n) sparse or ndarray, or None
         Output rows ``E``.
     nonlinear : NonlinearForce, sequence of them, or None
         Nonlinear internal forces, each on its own local coordinates with its
         own state; several are kept as one :class:`~femrom.fem.ForceSum`
-        (:attr:`nonlinear_forces` lists them).
+        (:attr:`nonlinear_forces` lists them). A reduced model's learned terms are
+        accepted as they are: any object with ``force``, ``tangent``,
+        ``initial_state`` and ``commit`` (``femrom.inference`` holds them).
     load : (n,) ndarray or None
         A constant external force ``f_0`` (gravity, a preload).
     condensation : Condensation
@@ -63,36 +70,40 @@ class SecondOrderSystem:
         for name in ("mass", "stiffness", "damping"):
             A = getattr(self, name)
             if A is not None and A.shape != (n, n):
-                raise ValueError(f"{name} has shape {A.shape}, expected ({n}, {n})")
+                raise FemromValueError(f"{name} has shape {A.shape}, expected ({n}, {n})")
         for name in ("mass", "stiffness", "damping", "input_matrix", "output_matrix"):
             A = getattr(self, name)
             if A is None:
                 continue
             values = A.data if sp.issparse(A) else np.asarray(A)
             if not np.issubdtype(values.dtype, np.number) or np.iscomplexobj(values):
-                raise ValueError(f"{name} must be a real matrix, got dtype {values.dtype}")
+                raise FemromValueError(f"{name} must be a real matrix, got dtype {values.dtype}")
             if not np.all(np.isfinite(values)):
-                raise ValueError(f"{name} has non-finite entries")
-        if (self.input_matrix is None) != (self.inputs is None):
-            raise ValueError("input_matrix and inputs must be given together")
+                raise FemromValueError(f"{name} has non-finite entries")
+        if self.inputs is not None and self.input_matrix is None:
+            raise FemromValueError("inputs were given without an input_matrix")
         if self.input_matrix is not None and self.input_matrix.shape[0] != n:
-            raise ValueError(f"input_matrix has {self.input_matrix.shape[0]} rows, expected {n}")
+            raise FemromValueError(f"input_matrix has {self.input_matrix.shape[0]} rows, expected {n}")
         if self.output_matrix is not None and self.output_matrix.shape[1] != n:
-            raise ValueError(f"output_matrix has {self.output_matrix.shape[1]} columns, expected {n}")
-        if self.nonlinear is not None and not isinstance(self.nonlinear, NonlinearForce):
+            raise FemromValueError(f"output_matrix has {self.output_matrix.shape[1]} columns, expected {n}")
+        if isinstance(self.nonlinear, (list, tuple)):
             object.__setattr__(self, "nonlinear", sum_of_forces(self.nonlinear))
+        if self.nonlinear is not None and not isinstance(self.nonlinear, NonlinearForce) and not all(
+                callable(getattr(self.nonlinear, name, None)) for name in ("force", "tangent", "initial_state", "commit")):
+            raise FemromTypeError(f"nonlinear must be a NonlinearForce, a sequence of them, or a reduced force "
+                                  f"with force, tangent, initial_state and commit; got {type(self.nonlinear).__name__}")
         size = getattr(self.nonlinear, "n_dofs", n)
         if size != n:
-            raise ValueError(f"nonlinear force acts on {size} dofs, expected {n}")
+            raise FemromValueError(f"nonlinear force acts on {size} dofs, expected {n}")
         if self.load is not None:
             load = np.asarray(self.load, dtype=float).ravel()
             if load.shape != (n,):
-                raise ValueError(f"load has shape {load.shape}, expected ({n},)")
+                raise FemromValueError(f"load has shape {load.shape}, expected ({n},)")
             object.__setattr__(self, "load", load)
         if self.condensation is None:
             object.__setattr__(self, "condensation", Condensation.none(n))
         elif self.condensation.n_free != n:
-            raise ValueError(f"condensation has {self.condensation.n_free} free dofs, expected {n}")
+            raise FemromValueError(f"condensation has {self.condensation.n_free} free dofs, expected {n}")
 
     # -- sizes and flags -------------------------------------------------
     @property
@@ -112,16 +123,25 @@ class SecondOrderSystem:
         return self.nonlinear is None
 
     @property
-    def nonlinear_forces(self) -> tuple[NonlinearForce, ...]:
-        """The nonlinear forces one by one (empty for a linear system)."""
+    def is_dense(self) -> bool:
+        """Whether the operators are ndarrays (a reduced model) rather than sparse matrices."""
+        return not sp.issparse(self.stiffness)
+
+    @property
+    def nonlinear_forces(self) -> tuple:
+        """The nonlinear forces one by one (empty for a linear system; a reduced model's terms)."""
         if self.nonlinear is None:
             return ()
         if isinstance(self.nonlinear, ForceSum):
             return self.nonlinear.forces
-        return (self.nonlinear,)
+        terms = getattr(self.nonlinear, "terms", None)
+        return tuple(terms) if isinstance(terms, (tuple, list)) else (self.nonlinear,)
 
     @property
     def has_diagonal_mass(self) -> bool:
+        if self.is_dense:
+            M = np.asarray(self.mass)
+            return bool(np.all(M == np.diag(np.diag(M))))
         M = sp.csr_matrix(self.mass)
         return M.nnz == np.count_nonzero(M.diagonal()) and M.nnz <= M.shape[0]
 
@@ -143,8 +163,8 @@ class SecondOrderSystem:
 
     # -- evaluations -----------------------------------------------------
     def external_force(self, t: float) -> np.ndarray | None:
-        """(n,) ndarray ``B u(t) + f_0``, or ``None`` without inputs or load."""
-        if self.input_matrix is None:
+        """(n,) ndarray ``B u(t) + f_0``, or ``None`` without inputs or load (no ``u(t)``: zero inputs)."""
+        if self.input_matrix is None or self.inputs is None:
             return self.load
         u = np.atleast_1d(np.asarray(self.inputs(t), dtype=float))
         f = np.asarray(self.input_matrix @ u).ravel()

@@ -15,7 +15,7 @@ from femrom.solvers._base import (
     is_diagonal,
     register_strategy,
 )
-from femrom.solvers import _direct, _krylov, _pardiso  # noqa: F401  (register the strategies)
+from femrom.solvers import _dense, _direct, _krylov, _pardiso  # noqa: F401  (register the strategies)
 from femrom.solvers._direct import SUPERLU_MAX_DOFS
 from femrom.solvers._factory import (
     AUTO_DIRECT_THRESHOLD,

@@ -28,6 +28,8 @@ Strategies
     smoothed-aggregation hierarchy built with ``B = near_nullspace`` (the
     rigid-body modes for elasticity); GMRES when ``spd=False``. The caller
     passes a warm start ``x0`` (e.g. the previous step's solution).
+``"dense"``
+    Cholesky or LU of an ndarray (:mod:`._dense`): a reduced model's small matrices.
 ``"auto"``
     :func:`choose_strategy`, by the matrix alone (diagonal or not, and its
     size): ``"diagonal"`` for a diagonal matrix; ``"superlu"`` below
@@ -104,8 +106,11 @@ def choose_strategy(A, *, spd: bool = True, small: int = AUTO_SMALL,
     never the spatial dimension (module docstring, "Size, not dimension").
     ``small``, ``direct_threshold`` and ``available`` are the rule's inputs
     (defaults :data:`AUTO_SMALL`, :data:`AUTO_DIRECT_THRESHOLD`, the packages
-    installed here), open so that the rule can be checked at any size.
+    installed here), open so that the rule can be checked at any size. A matrix given
+    as an ndarray (a reduced model's) takes ``"dense"``.
     """
+    if not sp.issparse(A):
+        return "dense"
     if is_diagonal(A):
         return "diagonal"
     n = A.shape[0]
