@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from _constant_load import ConstantLoad
 from femrom.fem import ForceSum, JenkinsForce, LocalPotential
 from femrom.inference import (
     TERMS,
+    ConstantLoad,
     LagrangianOpInf,
     ProjectedNonlinearForce,
     SecondOrderOpInf,
@@ -265,7 +265,7 @@ def test_an_effect_written_in_one_class_is_listed_checked_assembled_and_reduced(
     """Gravity from tests/_gravity_effect.py: a scene lists it, its options are checked, the
     system gets the load (tip deflection rho A g L^4 / (8 E I): Hermite cubics are nodally
     exact for a uniform load, so to round-off), and Galerkin reduces it through the
-    constant-load term of tests/_constant_load.py."""
+    built-in constant-load term."""
     import _gravity_effect  # noqa: F401
     from femrom.scene import Scene, SceneError, build, registered_effects
     from femrom.solvers import make_solver

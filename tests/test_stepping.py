@@ -5,7 +5,6 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-import _constant_load  # noqa: F401  (registers the constant-load term a user would write)
 from femrom.fem import JenkinsForce, LocalPotential
 from femrom.inference import ProjectedNonlinearForce, ReducedOperators
 from femrom.integrators import registered_schemes

@@ -36,7 +36,7 @@ from femrom.fem._nonlinear import (
     selection_map,
     sum_of_forces,
 )
-from femrom.fem._transformed_force import TransformedForce, transform_force
+from femrom.fem._transformed_force import TransformedForce, dense_projection, transform_force
 from femrom.fem._potentials import DENSITIES, LocalPotential, QuarticPotential
 from femrom.fem._spaces import LineSpace, SolidSpace, SpaceError
 from femrom.fem._vector_ops import (
@@ -58,7 +58,7 @@ from femrom.fem.interface_laws.jenkins import JenkinsLaw
 __all__ = [
     "DENSITIES", "FORCES", "INTERFACE_LAWS", "ClampedFrictionLaw", "ClampedIwanLaw", "clamped_iwan_state", "clamped_state", "Condensation", "DryFrictionLaw", "ElementMaterial", "ForceSum", "InterfaceLaw",
     "IwanLaw", "JenkinsForce", "JenkinsLaw", "JointForce", "LineSpace", "LocalPotential", "NonlinearForce",
-    "ParallelSliderLaw", "QuarticPotential", "SolidSpace", "SpaceError", "TransformedForce", "transform_force", "force_from_parameters",
+    "ParallelSliderLaw", "QuarticPotential", "SolidSpace", "SpaceError", "TransformedForce", "dense_projection", "transform_force", "force_from_parameters",
     "interface_frames", "interface_law", "interface_law_from_parameters", "radial_return",
     "register_force", "register_interface_law", "relative_displacement_map", "selection_map", "sum_of_forces",
     "average_rows", "axial_stiffness", "bending_stiffness", "dirichlet_dofs", "elasticity_stiffness",

@@ -67,6 +67,8 @@ class TransformedForce(NonlinearForce):
     """
 
     kind = "transformed"
+    #: The original's methods of ``(q, state)`` offered on the new coordinates.
+    delegated = DELEGATED
 
     def __init__(self, force: NonlinearForce, transformation, *, name: str | None = None, reference=None):
         if not isinstance(force, NonlinearForce):
@@ -155,38 +157,33 @@ class TransformedForce(NonlinearForce):
         T[self.touched_dofs] = self.touched_rows
         return TransformedForce(force, T.tocsr(), name=force.name, reference=self.reference)
 
+    def local_force_and_blocks(self, x, state=None):
+        """The original's force and 3 x 3 tangent blocks at ``x`` shifted to the reference (a joint's)."""
+        return self.force_model.local_force_and_blocks(self._shifted(x), state)
+
+    @property
+    def has_blocks(self) -> bool:
+        """Whether the law gives force and 3 x 3 tangent blocks from one evaluation (a joint)."""
+        return hasattr(self.force_model, "local_force_and_blocks") and not self.force_model.velocity_dependent
+
+    def dense_map(self) -> np.ndarray:
+        """(s, k) ndarray ``L T``: the local map as a dense array (cached)."""
+        if self.__dict__.get("_dense_map") is None:
+            self._dense_map = self.local_map.toarray()
+        return self._dense_map
+
     def dense_force_and_tangent(self, q_hat, v_hat=None, state=None):
         r"""``(f^ (k,), df^/dq^ (k, k) or None, df^/dv^ (k, k) or None)`` as dense arrays, one law evaluation.
 
         For the small systems a reduced basis gives (``k <= DENSE_COORDINATES``): the dense
         Newton of :mod:`femrom.integrators` asks for force and tangent together, so a joint's
         law runs once per iteration and the tangent ``(L T)^T D (L T)`` is a dense product over
-        the pairs' 3 x 3 blocks, with no sparse matrix built.
+        the pairs' 3 x 3 blocks, with no sparse matrix built (:func:`dense_projection`).
         """
         if self.n_dofs > DENSE_COORDINATES:
             raise ValueError(f"dense_force_and_tangent is for at most {DENSE_COORDINATES} coordinates, "
                              f"this force has {self.n_dofs}")
-        if self.__dict__.get("_dense_map") is None:
-            self._dense_map = self.local_map.toarray()
-        L = self._dense_map
-        x = self._shifted(L @ q_hat)
-        blocks = getattr(self.force_model, "local_force_and_blocks", None)
-        if blocks is not None and not self.force_model.velocity_dependent:
-            g, D = blocks(x, state)
-            s = D.shape[0]
-            LD = np.matmul(D, L.reshape(s, 3, -1)).reshape(3 * s, -1)
-            return L.T @ g, L.T @ LD, None
-        xdot = None if v_hat is None else L @ v_hat
-        g = self.force_model.local_force(x, xdot, state)
-        parts = []
-        for D in self.force_model.local_tangent(x, xdot, state):
-            if D is None:
-                parts.append(None)
-            elif np.ndim(D) == 1 and not sp.issparse(D):
-                parts.append(L.T @ (D[:, None] * L))
-            else:
-                parts.append(L.T @ np.asarray(D @ L))
-        return (L.T @ g, *parts)
+        return dense_projection(self.dense_map(), self, q_hat, v_hat, state)
 
     # -- the original's own view ---------------------------------------------------------
     def embed(self, q_hat: np.ndarray) -> np.ndarray:
@@ -233,14 +230,56 @@ class TransformedForce(NonlinearForce):
         return cls(force, T.tocsr(), name=str(parameters["name"]), reference=parameters.get("reference"))
 
 
+def dense_projection(W: np.ndarray, force, q_hat, v_hat=None, state=None):
+    r"""``(W^T g, W^T (dg/dx) W, W^T (dg/dxdot) W)`` of a force's local law at ``x = W q^``, as dense arrays.
+
+    ``W`` (s, k) maps ``k`` coordinates to the force's ``s`` local ones (``L T``, ``L V``); ``force``
+    has ``local_force`` and ``local_tangent`` (each tangent ``None``, an (s,) diagonal or an (s, s)
+    matrix), or ``local_force_and_blocks`` and ``has_blocks`` (a joint: force and 3 x 3 tangent
+    blocks per pair from one law evaluation, the product ``W^T D W`` formed block by block).
+    """
+    x = W @ q_hat
+    if getattr(force, "has_blocks", False):
+        g, D = force.local_force_and_blocks(x, state)
+        s = D.shape[0]
+        WD = np.matmul(D, W.reshape(s, 3, -1)).reshape(3 * s, -1)
+        return W.T @ g, W.T @ WD, None
+    xdot = None if v_hat is None else W @ v_hat
+    g = force.local_force(x, xdot, state)
+    parts = []
+    for D in force.local_tangent(x, xdot, state):
+        if D is None:
+            parts.append(None)
+        elif np.ndim(D) == 1 and not sp.issparse(D):
+            parts.append(W.T @ (D[:, None] * W))
+        else:
+            parts.append(W.T @ np.asarray(D @ W))
+    return (W.T @ g, *parts)
+
+
 def transform_force(force: NonlinearForce | None, transformation, *, reference=None) -> NonlinearForce | None:
     """``None``, or ``force`` on the coordinates ``q = q_0 + T q^`` (``reference`` ``q_0``, default 0): a
     :class:`TransformedForce`, or a :class:`~femrom.fem.ForceSum` of them (each summand transformed on
-    its own, with its own state)."""
+    its own, with its own state).
+
+    ``transformation=None`` keeps the coordinates and only shifts them to ``q_0``
+    (``q = q_0 + x``: the force of a model about a reference state). A force already so
+    shifted and then transformed is one :class:`TransformedForce` of the original
+    (``q = q_0 + T q^``), not a chain of two.
+    """
     from femrom.fem._nonlinear import ForceSum, sum_of_forces
 
     if force is None:
         return None
     if isinstance(force, ForceSum):
-        return sum_of_forces([TransformedForce(f, transformation, reference=reference) for f in force.forces])
+        return sum_of_forces([transform_force(f, transformation, reference=reference) for f in force.forces])
+    if transformation is None:
+        transformation = sp.identity(force.n_dofs, format="csr")
+        shifted = TransformedForce(force, transformation, reference=reference)
+        shifted.shift_only = True
+        return shifted
+    if isinstance(force, TransformedForce) and getattr(force, "shift_only", False):
+        if reference is not None:
+            raise ValueError("a shifted force is transformed about its own reference: give no second one")
+        return TransformedForce(force.force_model, transformation, name=force.name, reference=force.reference)
     return TransformedForce(force, transformation, reference=reference)

@@ -5,7 +5,7 @@
   knows its Galerkin projection, its data block, its structure, its value and
   tangent in a reduced step and its HDF5 form (:class:`Mass`,
   :class:`Damping`, :class:`Stiffness`, :class:`Input`, :class:`Output`,
-  :class:`ProjectedNonlinearForce`; :func:`register_term` for more);
+  :class:`ConstantLoad`, :class:`ProjectedNonlinearForce`; :func:`register_term` for more);
   :class:`ReducedOperators` holds a model's terms, :func:`galerkin` projects
   every registered term;
 - data: :func:`finite_difference`, :func:`reduce_snapshots` /
@@ -111,6 +111,7 @@ from femrom.inference.learners.okid import OKID
 from femrom.inference.learners.opinf import SecondOrderOpInf
 from femrom.inference.learners.spml import TORCH_MISSING, SpML, SpMLConfig, spml_module, torch_available
 from femrom.inference._networks import ConvexPowers, NetworkLayer, ScalarNetwork, SymmetricPolynomial, multi_indices
+from femrom.inference.terms.constant_load import ConstantLoad
 from femrom.inference.terms.damping import Damping
 from femrom.inference.terms.input import Input
 from femrom.inference.terms.learned_dissipation import LearnedDissipation
@@ -123,7 +124,7 @@ from femrom.inference.terms.stiffness import Stiffness
 
 __all__ = [
     "CONIC_SOLVERS", "DERIVATIVE_SOURCES", "GRADIENT_DATA", "HAMILTONIAN_DERIVATIVE_SOURCES", "LEARNERS",
-    "SOLVERS", "TERMS", "TORCH_MISSING", "VARIABLES", "ConvexPowers", "LearnedDissipation", "LearnedPotential",
+    "SOLVERS", "TERMS", "TORCH_MISSING", "VARIABLES", "ConstantLoad", "ConvexPowers", "LearnedDissipation", "LearnedPotential",
     "NetworkLayer", "ScalarNetwork", "multi_indices", "SpML", "SpMLConfig", "SymmetricPolynomial", "torch_available", "Block", "CanonicalData", "CanonicalOpInf", "Damping", "ErrorSplit", "FastOptions", "ForcePotential",
     "GalerkinProjection", "canonical_from_second_order",
     "GramProblem", "HamiltonianErrorSplit", "HamiltonianOperators", "HamiltonianOpInf", "Input",

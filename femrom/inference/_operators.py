@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from femrom._errors import FemromValueError
 from femrom.inference._terms import LinearTerm, ReducedTerm, registered_terms
 from femrom.scene import SecondOrderSystem
 
@@ -253,45 +254,86 @@ def _load_term(known):
     raise ValueError("no registered term holds a constant load (variable '1'): register one")
 
 
-def galerkin(system, basis: np.ndarray, *, mass_orthonormal: bool = False,
-             rtol: float = 1e-8) -> ReducedOperators:
-    r"""Intrusive Galerkin ROM of a :class:`~femrom.scene.SecondOrderSystem`.
+def galerkin(system, basis: np.ndarray, *, reference: np.ndarray | None = None, reference_state=None,
+             mass_orthonormal: bool = False, damping_ratios=None, rtol: float = 1e-8) -> ReducedOperators:
+    r"""The intrusive Galerkin model of a :class:`~femrom.scene.SecondOrderSystem` on ``q = q_0 + V q^``.
 
     Every registered term contributes its projection (``V^T M V``, ``V^T C V``,
-    ``V^T K V``, ``V^T B``, ``E V``, ``V^T f(V q)``, ...); every effect of the
-    system must be covered by some term, else this raises.
+    ``V^T K V``, ``V^T B``, ``E V``, ``V^T f(q_0 + V q^)``, ``V^T (f_0 - K q_0)``, ...);
+    every effect of the system must be covered by some term, else this raises. The
+    model steps as :attr:`ReducedOperators.system`, an instance of the same model type
+    as ``system``; at ``q^ = 0`` in the force state at the reference it is in
+    equilibrium when ``q_0`` is one of the full model.
 
     Parameters
     ----------
     system : SecondOrderSystem
     basis : (n, r) ndarray
-        ``V``; with ``mass_orthonormal`` it must satisfy ``V^T M V = I``.
+        ``V``, full column rank; with ``mass_orthonormal`` it must satisfy ``V^T M V = I``.
+    reference : (n,) ndarray, optional
+        ``q_0`` (a preloaded equilibrium; default zero): the model is of
+        :meth:`~femrom.scene.SecondOrderSystem.about`, its outputs measured from ``q_0``.
+    reference_state : optional
+        The nonlinear force's committed state at ``q_0``: its tangent at ``q^ = 0`` enters
+        ``omega_i^2`` for ``damping_ratios``.
     mass_orthonormal : bool
         Check ``||V^T M V - I||_F <= rtol sqrt(r)`` and keep ``M^ = I`` (no mass
         term), else raise.
+    damping_ratios : float or (r,) array_like, optional
+        Modal damping ``C^ = diag(2 zeta_i omega_i)`` in place of ``V^T C V``, with
+        ``omega_i^2`` the diagonal of ``V^T K V`` plus the force's tangent (needs
+        ``V^T M V = I``, checked to 1e-8): for a basis of modes of the linearisation.
 
     Returns
     -------
     ReducedOperators
     """
     V = np.asarray(basis, dtype=float)
-    if V.ndim != 2 or V.shape[0] != system.n_dofs:
-        raise ValueError(f"basis has shape {V.shape}, expected ({system.n_dofs}, r)")
+    if V.ndim != 2 or V.shape[0] != system.n_dofs or V.shape[1] < 1:
+        raise FemromValueError(f"basis has shape {V.shape}, expected ({system.n_dofs}, r)")
+    if not np.all(np.isfinite(V)):
+        raise FemromValueError("basis has non-finite entries")
+    r = V.shape[1]
+    about = system if reference is None else system.about(reference)
     terms, covered = [], set()
     for cls in registered_terms().values():
-        term = cls.galerkin(system, V)
+        term = cls.galerkin(about, V)
         if term is None:
             continue
         covered.add(cls.effect)
         if cls.name == "mass" and mass_orthonormal:
-            r = V.shape[1]
             defect = np.linalg.norm(term.matrix - np.eye(r))
             if defect > rtol * np.sqrt(r):
-                raise ValueError(f"basis is not mass-orthonormal: ||V^T M V - I||_F = {defect:.3e}")
+                raise FemromValueError(f"basis is not mass-orthonormal: ||V^T M V - I||_F = {defect:.3e}")
             continue
         terms.append(term)
-    missing = sorted(set(system.effects) - covered)
+    missing = sorted(set(about.effects) - covered)
     if missing:
-        raise ValueError(f"no registered reduced term projects the system's {', '.join(missing)}: "
-                         "write one (femrom.inference.register_term)")
-    return ReducedOperators(tuple(terms), {"method": "galerkin", "mass_orthonormal": bool(mass_orthonormal)})
+        raise FemromValueError(f"no registered reduced term projects the system's {', '.join(missing)}: "
+                               "write one (femrom.inference.register_term)")
+    metadata = {"method": "galerkin", "mass_orthonormal": bool(mass_orthonormal),
+                "about_reference": reference is not None}
+    ops = ReducedOperators(tuple(terms), metadata)
+    if damping_ratios is not None:
+        ops = _modal_damping(ops, damping_ratios, reference_state)
+    return ops
+
+
+def _modal_damping(ops: ReducedOperators, damping_ratios, reference_state) -> ReducedOperators:
+    """``C^ = diag(2 zeta_i omega_i)``, ``omega_i^2`` the diagonal of ``K^`` plus the force's tangent at rest."""
+    r = ops.r
+    if np.max(np.abs(ops.mass_matrix - np.eye(r))) > 1e-8:
+        raise FemromValueError("damping_ratios needs a mass-normalised basis (V^T M V = I)")
+    zeta = np.broadcast_to(np.asarray(damping_ratios, dtype=float), (r,))
+    if not np.all(np.isfinite(zeta)) or np.any(zeta < 0):
+        raise FemromValueError(f"damping_ratios must be finite and >= 0, got {damping_ratios!r}")
+    stiffness = ops.stiffness.copy()
+    force = ops.nonlinear
+    if force is not None:
+        state = force.initial_state() if reference_state is None else reference_state
+        D = force.tangent(np.zeros(r), np.zeros(r), state)[0]
+        if D is not None:
+            stiffness = stiffness + np.asarray(D)
+    omega = np.sqrt(np.maximum(np.diag(stiffness), 0.0))
+    damping = registered_terms()["damping"](np.diag(2.0 * zeta * omega))
+    return ops.with_terms(damping)

@@ -2,14 +2,14 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Callable
 
 import numpy as np
 import scipy.sparse as sp
 
-from femrom._errors import FemromTypeError, FemromValueError
-from femrom.fem import Condensation, ForceSum, NonlinearForce, sum_of_forces
+from femrom._errors import FemromValueError
+from femrom.fem import Condensation, ForceSum, NonlinearForce, sum_of_forces, transform_force
 
 
 @dataclass(frozen=True, eq=False)
@@ -90,7 +90,7 @@ class SecondOrderSystem:
             object.__setattr__(self, "nonlinear", sum_of_forces(self.nonlinear))
         if self.nonlinear is not None and not isinstance(self.nonlinear, NonlinearForce) and not all(
                 callable(getattr(self.nonlinear, name, None)) for name in ("force", "tangent", "initial_state", "commit")):
-            raise FemromTypeError(f"nonlinear must be a NonlinearForce, a sequence of them, or a reduced force "
+            raise FemromValueError(f"nonlinear must be a NonlinearForce, a sequence of them, or a reduced force "
                                   f"with force, tangent, initial_state and commit; got {type(self.nonlinear).__name__}")
         size = getattr(self.nonlinear, "n_dofs", n)
         if size != n:
@@ -160,6 +160,26 @@ class SecondOrderSystem:
         if self.output_matrix is not None:
             present.append("outputs")
         return tuple(present)
+
+    def about(self, reference: np.ndarray) -> "SecondOrderSystem":
+        r"""The model on the coordinates ``x = q - q_0`` about a reference state ``q_0`` (a preloaded equilibrium).
+
+        ``M x'' + C x' + K x + f(q_0 + x, x'; s) = B u + (f_0 - K q_0)``: the load becomes
+        ``f_0 - K q_0``, the nonlinear force reads ``q_0 + x`` (its state unchanged), the
+        outputs ``E x`` are measured from ``q_0``. Projections of the result are models about
+        the reference (``q = q_0 + V q^``).
+        """
+        q0 = np.asarray(reference, dtype=float).reshape(-1)
+        n = self.n_dofs
+        if q0.shape != (n,) or not np.all(np.isfinite(q0)):
+            raise FemromValueError(f"reference must be a finite ({n},) vector, got shape {q0.shape}")
+        load = (np.zeros(n) if self.load is None else self.load) - np.asarray(self.stiffness @ q0).reshape(-1)
+        force = self.nonlinear
+        if isinstance(force, NonlinearForce):
+            force = transform_force(force, None, reference=q0)
+        elif force is not None:
+            raise FemromValueError("a model about a reference needs full-order nonlinear forces (NonlinearForce)")
+        return replace(self, load=load, nonlinear=force, metadata={**self.metadata, "about_reference": True})
 
     # -- evaluations -----------------------------------------------------
     def external_force(self, t: float) -> np.ndarray | None:

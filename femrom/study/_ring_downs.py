@@ -12,7 +12,7 @@ hyper-reduced joint) at rest in a committed force state. :func:`reference_ring_d
   dissipation ``F^(q')``), both predicted with the discrete-gradient scheme, the variants of
   ``settings.iwan`` (:class:`~femrom.inference.IwanLOpInf`, learned Jenkins sliders along the
   leading coordinate, stepped by Newmark with their return mapping), and ``"galerkin"``,
-  the reference projected on ``V`` with its stateful force (:func:`~femrom.scene.project_system`:
+  the reference projected on ``V`` with its stateful force (:func:`~femrom.inference.galerkin`:
   the force keeps its law and its state on its own coordinates), stepped by Newmark;
 - each test run predicted from rest with the test input, over the test run's duration;
   output ``output`` (an acceleration) compared in time and through its Hilbert backbones.
@@ -29,11 +29,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from femrom.inference import IwanLOpInf, LagrangianOpInf, SecondOrderData, SpML, SpMLConfig, concatenate
+from femrom.inference import IwanLOpInf, LagrangianOpInf, SecondOrderData, SpML, SpMLConfig, concatenate, galerkin
 from femrom.integrators import Newmark, StepResult, Trajectory, integrate
 from femrom.post import Backbone, hilbert_backbone
 from femrom.rom import SecondOrderROM
-from femrom.scene import project_system
 
 #: Columns of one comparison row.
 RING_DOWN_COLUMNS = ("model", "r", "test", "frequency_shift_error", "damping_max_error", "time_domain_error",
@@ -219,7 +218,7 @@ def compare_ring_downs(system, rest_state, training, validation, tests, settings
         for name in settings.models:
             fit_seconds = 0.0
             if name == "galerkin":
-                model = project_system(system, V)
+                model = galerkin(system, V).system
             else:
                 learner = _learner(name, settings)
                 tic = time.perf_counter()

@@ -4,19 +4,23 @@ from __future__ import annotations
 
 import numpy as np
 
-from femrom.fem import force_from_parameters
+from femrom.fem import TransformedForce, dense_projection, force_from_parameters, transform_force
 from femrom.inference._terms import ReducedTerm, register_term
 
 
 @register_term
 class ProjectedNonlinearForce(ReducedTerm):
-    r"""``f^(q^, v^; s) = V^T f(V q^, V v^; s)`` with tangent ``V^T (df/dq) V``.
+    r"""``f^(q^, v^; s) = V^T f(q_0 + V q^, V v^; s)`` with tangent ``V^T (df/dq) V``.
 
-    The projection of a known full-order force (:class:`femrom.fem.NonlinearForce`).
-    A force ``f = L^T g(L q, L v; s)`` is evaluated through ``L V`` (s_loc, r)
-    only: a spring layer or a joint costs ``O(s_loc r)`` per call, not
-    ``O(n r)``. A stateful force carries its state on its own local
-    coordinates (frozen during a reduced Newton step, committed after it).
+    The projection of a known full-order force (:class:`femrom.fem.NonlinearForce`), about a
+    reference ``q_0`` when the force is a model's about one
+    (:meth:`femrom.scene.SecondOrderSystem.about`). It is the force seen through the new
+    coordinates (:func:`femrom.fem.transform_force`: the same law on the local map ``L V``),
+    evaluated with that map as a dense (s_loc, r) array ``W``: a spring layer or a joint costs
+    ``O(s_loc r)`` per call, not ``O(n r)``, and a joint gives force and tangent from one law
+    evaluation (:func:`femrom.fem.dense_projection`). A stateful force carries its state on
+    its own local coordinates (frozen during a reduced Newton step, committed after it); a
+    joint's ``dissipation``, ``stored_energy`` and ``tractions`` are offered on ``q^``.
 
     As a learning target (:meth:`target`) the force is evaluated along each
     training trajectory in time order from its initial state, committing the
@@ -27,6 +31,12 @@ class ProjectedNonlinearForce(ReducedTerm):
     ----------
     force : NonlinearForce
     basis : (n, r) ndarray
+
+    Attributes
+    ----------
+    transformed : NonlinearForce or None
+        The force on the reduced coordinates (``None`` for a force without a local map,
+        evaluated as ``V^T f(V q^)``).
     """
 
     name = "projected_force"
@@ -37,8 +47,11 @@ class ProjectedNonlinearForce(ReducedTerm):
     def __init__(self, force, basis: np.ndarray):
         self.force_model = force
         self.basis = np.asarray(basis, dtype=float)
-        L = getattr(force, "local_map", None)
-        self._local = None if L is None else np.ascontiguousarray(force.localize(self.basis))
+        if getattr(force, "local_map", None) is None:
+            self.transformed, self._local = None, None
+        else:
+            self.transformed = transform_force(force, self.basis)
+            self._local = np.ascontiguousarray(self.transformed.local_map.toarray())
 
     @classmethod
     def galerkin(cls, system, basis):
@@ -66,12 +79,12 @@ class ProjectedNonlinearForce(ReducedTerm):
 
     # -- evaluations -------------------------------------------------------------------
     def force(self, q, v=None, state=None) -> np.ndarray:
-        """(r,) ndarray ``V^T f(V q, V v; state)``."""
+        """(r,) ndarray ``V^T f(q_0 + V q, V v; state)``."""
         W = self._local
         if W is None:
             V = self.basis
             return V.T @ self.force_model.force(V @ q, None if v is None else V @ v, state)
-        return W.T @ self.force_model.local_force(W @ q, None if v is None else W @ v, state)
+        return W.T @ self.transformed.local_force(W @ q, None if v is None else W @ v, state)
 
     def lhs(self, q, v=None, a=None, u=None, state=None):
         return self.force(q, v, state)
@@ -83,16 +96,14 @@ class ProjectedNonlinearForce(ReducedTerm):
             V = self.basis
             dq, dv = self.force_model.tangent(V @ q, None if v is None else V @ v, state)
             return tuple(None if D is None else V.T @ np.asarray(D @ V) for D in (dq, dv))
-        parts = self.force_model.local_tangent(W @ q, None if v is None else W @ v, state)
-        out = []
-        for D in parts:
-            if D is None:
-                out.append(None)
-            elif np.ndim(D) == 1 and not hasattr(D, "toarray"):
-                out.append(W.T @ (D[:, None] * W))
-            else:
-                out.append(W.T @ np.asarray(D @ W))
-        return tuple(out)
+        return dense_projection(W, self.transformed, q, v, state)[1:]
+
+    def dense_force_and_tangent(self, q, v=None, state=None):
+        """``(f^, df^/dq^, df^/dv^)`` from one evaluation of the law (what a reduced Newton step asks)."""
+        W = self._local
+        if W is None:
+            return (self.force(q, v, state), *self.tangent(q, v, state))
+        return dense_projection(W, self.transformed, q, v, state)
 
     def potential(self, q) -> float:
         if not self.conservative:
@@ -100,7 +111,7 @@ class ProjectedNonlinearForce(ReducedTerm):
         W = self._local
         if W is None:
             return self.force_model.potential(self.basis @ q)
-        return float(self.force_model.local_potential(W @ q))
+        return float(self.transformed.local_potential(W @ q))
 
     def commit(self, q, v, state):
         W = self._local
@@ -108,7 +119,19 @@ class ProjectedNonlinearForce(ReducedTerm):
             return self.force_model.commit(self.basis @ q, self.basis @ v, state)
         if not self.stateful:
             return state
-        return self.force_model.local_commit(W @ q, W @ v, state)
+        return self.transformed.local_commit(W @ q, W @ v, state)
+
+    def checkpoint(self, state):
+        return self.force_model.checkpoint(state)
+
+    def restore(self, data):
+        return self.force_model.restore(data)
+
+    def __getattr__(self, attribute):
+        # a joint's energy bookkeeping on the reduced coordinates (only reached when lookup fails)
+        if attribute in TransformedForce.delegated and "transformed" in self.__dict__ and self.transformed is not None:
+            return getattr(self.transformed, attribute)
+        raise AttributeError(f"{type(self).__name__!r} object has no attribute {attribute!r}")
 
     def forces(self, Q: np.ndarray, Vel: np.ndarray | None = None, starts=(0,)) -> np.ndarray:
         """(r, K) ndarray: the force at every column of ``Q``, ``Vel`` (r, K).
