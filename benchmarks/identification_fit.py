@@ -112,7 +112,7 @@ def main():
     times = DT * np.arange(SAMPLES)
 
     def output_error(rom, x0=None):
-        prediction = rom.predict(times, U_test, x0=x0)
+        prediction = rom.predict(times, U_test, initial=None if x0 is None else rom.initial_state(x0=x0, u0=U_test[:, 0]))
         return float(np.linalg.norm(prediction.outputs - Y_test) / np.linalg.norm(Y_test))
 
     rows = []

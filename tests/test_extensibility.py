@@ -84,15 +84,14 @@ def test_a_term_written_in_one_class_is_projected_learned_predicted_and_saved(tm
     assert LagrangianOpInf(["damping"]).fit(data).error_split_.optimization > 1e-2
     # predict with the learned term reproduces the FOM (full basis, same scheme)
     rom = SecondOrderROM(learner=LagrangianOpInf.for_system(system), basis=V, product=M).fit(data)
-    solution = rom.predict(V.T @ (M @ q0), trajectory.t, inputs=inputs)
+    solution = rom.predict(trajectory.t, inputs, initial=V.T @ (M @ q0))
     assert relative(V @ solution.q, trajectory.q) < 1e-8
     # the energy includes the load's potential -f_0^T q; galerkin and learned agree
-    assert relative(solution.energy, SecondOrderROM(intrusive, V).predict(V.T @ (M @ q0), trajectory.t,
-                                                                            inputs=inputs).energy) < 1e-8
+    assert relative(solution.energy, SecondOrderROM(intrusive, V).predict(trajectory.t, inputs, initial=V.T @ (M @ q0)).energy) < 1e-8
     rom.save(tmp_path / "rom.h5")
     loaded = SecondOrderROM.load(tmp_path / "rom.h5", product=M)
     np.testing.assert_array_equal(loaded.operators_.load, rom.operators_.load)
-    np.testing.assert_array_equal(loaded.predict(V.T @ (M @ q0), trajectory.t, inputs=inputs).q, solution.q)
+    np.testing.assert_array_equal(loaded.predict(trajectory.t, inputs, initial=V.T @ (M @ q0)).q, solution.q)
 
 
 def test_galerkin_refuses_an_effect_no_term_projects():
@@ -245,7 +244,7 @@ def test_a_stateful_known_force_is_the_learning_target_along_the_trajectory():
     assert wrong.error_split_.optimization > 1e-3 and relative(wrong.stiffness_, intrusive.stiffness) > 0.1
     # the reduced model with the stateful projected force reproduces the FOM (full basis)
     rom = SecondOrderROM(learner.operators_, V, product=system.mass)
-    solution = rom.predict(rom.reduce(q0), trajectory.t, inputs=U)     # r = n: reduce explicitly
+    solution = rom.predict(trajectory.t, U, initial=rom.reduce(q0))     # r = n: reduce explicitly
     assert relative(V @ solution.q, trajectory.q) < 1e-9           # measured 8e-13
 
 

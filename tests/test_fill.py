@@ -43,7 +43,7 @@ def _run(ops, kind, n=600):
     t = np.arange(n + 1) * DT
     u = _signal(t, kind)
     rom = SecondOrderROM(ops)
-    sol = rom.predict(np.zeros(ops.r), t, inputs=u)
+    sol = rom.predict(t, u, initial=np.zeros(ops.r))
     return t, u, sol.q, sol.outputs
 
 
@@ -58,7 +58,7 @@ def _test_error(ops):
     true = _system()
     _, u, q, _ = _run(true, "test")
     t = np.arange(q.shape[1]) * DT
-    pred = SecondOrderROM(ops).predict(np.zeros(ops.r), t, inputs=u).q
+    pred = SecondOrderROM(ops).predict(t, u, initial=np.zeros(ops.r)).q
     return np.linalg.norm(pred - q) / np.linalg.norm(q)
 
 

@@ -213,7 +213,7 @@ def test_field_errors_from_reduced_coordinates_equal_the_full_fields(pipeline):
         rom = SecondOrderROM.galerkin(model.system, V[:, :r], product=M, mass_orthonormal=True)
         u = SignalVector(fishtail.pressure_signals(scene, "step"))
         times = scene.time.dt * np.arange(Q["step"].shape[1])
-        solution = rom.predict(np.zeros(r), times, inputs=u)
+        solution = rom.predict(times, u, initial=np.zeros(r))
         slow = mass_norm(M, Q["step"] - V[:, :r] @ solution.q) / mass_norm(M, Q["step"])
         assert row["test_field_error"] == pytest.approx(slow, rel=1e-3), r
 

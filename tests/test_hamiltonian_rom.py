@@ -74,7 +74,7 @@ def test_fit_and_predict_reproduce_the_hopinf_model(linear):
     assert relative(rom.operators_.momentum, np.eye(6)) < 1e-8
     assert rom.metadata_["method"] == "hamiltonian_opinf" and galerkin.metadata_["method"] == "galerkin"
 
-    solution = rom.predict(Phi.T @ Q[:, 0], Phi.T @ P[:, 0], t)
+    solution = rom.predict(t, initial=(Phi.T @ Q[:, 0], Phi.T @ P[:, 0]))
     assert isinstance(solution, HamiltonianSolution) and solution.info["scheme"] == "midpoint"
     # predict is the learned operators' step matrix applied k times (the same
     # products in the same order)
@@ -84,7 +84,7 @@ def test_fit_and_predict_reproduce_the_hopinf_model(linear):
         y = S @ y
         np.testing.assert_array_equal(np.concatenate([solution.q[:, k], solution.p[:, k]]), y)
     # full initial conditions are reduced by Phi^T: the same trajectory
-    full = rom.predict(Q[:, 0], P[:, 0], t)
+    full = rom.predict(t, initial=(Q[:, 0], P[:, 0]))
     np.testing.assert_array_equal(full.q, solution.q)
     # against the exact solution: the midpoint rule's second-order phase error,
     # (w_max dt)^2 = 3.5e-4 per radian at most, measured 5.7e-5 over the window
@@ -99,21 +99,21 @@ def test_symplectic_schemes_conserve_the_reduced_hamiltonian(linear):
     rom = HamiltonianROM(basis=Phi).fit_snapshots(Q, P, ddt_q=dQ, ddt_p=dP)
     times = np.arange(10001) * 1e-3                          # 5 training windows
     q0, p0 = Phi.T @ Q[:, 0], Phi.T @ P[:, 0]
-    H = rom.predict(q0, p0, times, scheme="midpoint").hamiltonian
+    H = rom.predict(times, initial=(q0, p0), scheme="midpoint").hamiltonian
     # quadratic invariant, kept exactly by the midpoint rule: 1e4 steps of round-off (~1e-16 each)
     assert np.ptp(H) / H[0] < 1e-11
     # without a potential AVF is the midpoint rule
-    np.testing.assert_array_equal(rom.predict(q0, p0, times, scheme="avf").q,
-                                  rom.predict(q0, p0, times).q)
+    np.testing.assert_array_equal(rom.predict(times, initial=(q0, p0), scheme="avf").q,
+                                  rom.predict(times, initial=(q0, p0)).q)
     for scheme in ("symplectic_euler_a", "symplectic_euler_b", "verlet"):
-        H = rom.predict(q0, p0, times, scheme=scheme).hamiltonian
+        H = rom.predict(times, initial=(q0, p0), scheme=scheme).hamiltonian
         # a modified Hamiltonian is conserved: H oscillates by O(w_max dt) = 1.9e-2
         # (Euler; O((w_max dt)^2) for Verlet), no drift. Measured: ptp 7.0e-3 (Euler A, B),
         # 1.8e-5 (Verlet); change of the mean over 10 windows 2e-6, 4e-9
         assert np.ptp(H) / H[0] < 0.05, scheme
         assert abs(H[-1000:].mean() - H[:1000].mean()) / H[0] < 1e-4, scheme
     with pytest.raises(ValueError, match="unknown Hamiltonian scheme"):
-        rom.predict(q0, p0, times, scheme="rk4")
+        rom.predict(times, initial=(q0, p0), scheme="rk4")
 
 
 def test_nls_rom_with_a_known_potential_conserves_h_and_mass(nls):
@@ -122,7 +122,7 @@ def test_nls_rom_with_a_known_potential_conserves_h_and_mass(nls):
                          learner=HamiltonianOpInf(shared=True)).fit_snapshots(run.q, run.p, dt)
     times = dt * np.arange(301)
     q0, p0 = Phi.T @ run.q[:, 0], Phi.T @ run.p[:, 0]
-    avf = rom.predict(q0, p0, times, scheme="avf")
+    avf = rom.predict(times, initial=(q0, p0), scheme="avf")
     # AVF conserves the quartic H^ exactly up to the Newton residual: each step
     # may leave rtol = 1e-12 of it (about one iteration a step here), so over
     # 300 steps H^ may move by 300 rtol = 3e-10 relative; measured 1.4e-10
@@ -131,10 +131,10 @@ def test_nls_rom_with_a_known_potential_conserves_h_and_mass(nls):
     # ... which is the Newton tolerance, not the scheme: at rtol 1e-14 only round-off
     # of H^ (~|H_quad| eps, |H_quad| / |H^| = 1.5) is left, measured 1.3e-15
     tight = HamiltonianROM(rom.operators_, Phi, potential, Newton(rtol=1e-14))
-    H = tight.predict(q0, p0, times, scheme="avf").hamiltonian
+    H = tight.predict(times, initial=(q0, p0), scheme="avf").hamiltonian
     assert np.ptp(H) / abs(H[0]) < 1e-13
     assert avf.info["newton_iterations"] > 0
-    mid = rom.predict(q0, p0, times)
+    mid = rom.predict(times, initial=(q0, p0))
     mass = np.sum(mid.q**2 + mid.p**2, axis=0)
     # shared D^ and a phase-invariant potential: the reduced mass is a quadratic
     # invariant of the ROM, kept by the midpoint rule to the Newton tolerance
@@ -143,14 +143,14 @@ def test_nls_rom_with_a_known_potential_conserves_h_and_mass(nls):
     # the ROM follows the FOM on its training window (r = 8 of 32; measured 4.6e-3)
     assert relative(Phi @ mid.q, run.q) < 2e-2
     with pytest.raises(ValueError, match="separable"):
-        rom.predict(q0, p0, times, scheme="verlet")
+        rom.predict(times, initial=(q0, p0), scheme="verlet")
 
 
 # -- lazy fields -------------------------------------------------------------------
 def test_fields_are_rebuilt_only_when_asked(linear):
     K, t, Q, P, dQ, dP, Phi = linear
     rom = HamiltonianROM(basis=Phi.copy()).fit_snapshots(Q, P, ddt_q=dQ, ddt_p=dP)
-    solution = rom.predict(Phi.T @ Q[:, 0], Phi.T @ P[:, 0], t)
+    solution = rom.predict(t, initial=(Phi.T @ Q[:, 0], Phi.T @ P[:, 0]))
     n = Phi.shape[0]
     # nothing of full size was computed: every array held has r or fewer rows
     arrays = [v for v in vars(solution).values() if isinstance(v, np.ndarray) and v is not solution.basis]
@@ -172,7 +172,7 @@ def test_fields_are_rebuilt_only_when_asked(linear):
     np.testing.assert_array_equal(solution.field(10), (2.0 * Phi) @ solution.q[:, 10])
     with pytest.raises(ValueError, match="unknown field"):
         solution.field(0, "v")
-    nobasis = HamiltonianROM(rom.operators_).predict(np.ones(6), np.zeros(6), t[:3])
+    nobasis = HamiltonianROM(rom.operators_).predict(t[:3], initial=(np.ones(6), np.zeros(6)))
     with pytest.raises(ValueError, match="no basis"):
         nobasis.field(0)
 
@@ -194,8 +194,8 @@ def test_save_load_predicts_bit_identically(linear, tmp_path):
     assert meta["data"]["derivative_source"] == "finite_difference" and meta["data"]["order"] == 6
     assert set(meta["error_split"]) == {"projection", "derivative", "position_derivative",
                                         "momentum_derivative", "optimization"}
-    a = rom.predict(Q[:, 0], P[:, 0], t)
-    b = loaded.predict(Q[:, 0], P[:, 0], t)
+    a = rom.predict(t, initial=(Q[:, 0], P[:, 0]))
+    b = loaded.predict(t, initial=(Q[:, 0], P[:, 0]))
     for name in ("q", "p", "hamiltonian", "outputs"):
         np.testing.assert_array_equal(getattr(b, name), getattr(a, name))
     assert b.info["scheme"] == "verlet"
@@ -228,8 +228,8 @@ def test_save_load_with_a_known_potential(nls, tmp_path):
         HamiltonianROM.load(path, potential=QuarticPotential(2.0))
     loaded = HamiltonianROM.load(path, potential=QuarticPotential(1.0))
     times = dt * np.arange(101)
-    a = rom.predict(run.q[:, 0], run.p[:, 0], times)
-    b = loaded.predict(run.q[:, 0], run.p[:, 0], times)
+    a = rom.predict(times, initial=(run.q[:, 0], run.p[:, 0]))
+    b = loaded.predict(times, initial=(run.q[:, 0], run.p[:, 0]))
     np.testing.assert_array_equal(b.q, a.q)
     np.testing.assert_array_equal(b.hamiltonian, a.hamiltonian)
     with pytest.raises(ValueError, match="include_basis=True"):
@@ -321,12 +321,12 @@ def test_bad_input_gives_one_line_errors(linear):
     with pytest.raises(ValueError, match="not orthonormal"):
         HamiltonianROM(basis=2.0 * Phi).fit_snapshots(Q, P, ddt_q=dQ, ddt_p=dP)
     with pytest.raises(ValueError, match="not fitted"):
-        HamiltonianROM(basis=Phi).predict(np.zeros(6), np.zeros(6), t)
+        HamiltonianROM(basis=Phi).predict(t, initial=(np.zeros(6), np.zeros(6)))
     rom = HamiltonianROM(HamiltonianOperators(np.eye(6), np.eye(6)), Phi)
     with pytest.raises(ValueError, match="expected r = 6"):
-        rom.predict(np.zeros(5), np.zeros(6), t)
+        rom.predict(t, initial=(np.zeros(5), np.zeros(6)))
     with pytest.raises(ValueError, match="uniformly spaced"):
-        rom.predict(np.zeros(6), np.zeros(6), np.array([0.0, 1.0, 3.0]))
+        rom.predict(np.array([0.0, 1.0, 3.0]), initial=(np.zeros(6), np.zeros(6)))
     with pytest.raises(ValueError, match="need dt"):
         HamiltonianOpInf().fit_snapshots(Phi, Q, P)
     with pytest.raises(ValueError, match="expected"):

@@ -192,9 +192,9 @@ def test_a_nan_initial_state_is_refused_by_name():
 
     rom = SecondOrderROM(ReducedOperators.from_matrices(np.diag([1.0, 4.0])))
     with pytest.raises(ValueError, match=r"q0 is not finite"):
-        rom.predict(np.array([np.nan, 0.0]), np.linspace(0, 1, 11))
+        rom.predict(np.linspace(0, 1, 11), initial=np.array([np.nan, 0.0]))
     with pytest.raises(ValueError, match=r"v0 is not finite"):
-        rom.predict(np.zeros(2), np.linspace(0, 1, 11), v0=np.array([0.0, np.inf]))
+        rom.predict(np.linspace(0, 1, 11), initial=(np.zeros(2), np.array([0.0, np.inf])))
 
 
 # -- results appear whole or not at all -------------------------------------------------------

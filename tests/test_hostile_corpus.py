@@ -294,7 +294,7 @@ def _rom_predict(q0, times, **kwargs):
     from femrom.inference import ReducedOperators
     from femrom.rom import SecondOrderROM
 
-    return SecondOrderROM(ReducedOperators.from_matrices(np.diag([1.0, 4.0]))).predict(q0, times, **kwargs)
+    return SecondOrderROM(ReducedOperators.from_matrices(np.diag([1.0, 4.0]))).predict(times, initial=q0, **kwargs)
 
 
 def _learn(learner, data):
@@ -341,7 +341,7 @@ API_CASES = [
     ("lopinf-zero-data", lambda: _learn("LagrangianOpInf", _data(states=np.zeros((3, 20)),
                                                                  velocities=np.zeros((3, 20)))),
      "LagrangianOpInf: every snapshot of the data is zero: nothing to learn from"),
-    ("rom-q0-size", lambda: _rom_predict(np.zeros(3), np.linspace(0, 1, 11)), "q0 has 3 entries: expected r = 2"),
+    ("rom-q0-size", lambda: _rom_predict(np.zeros(3), np.linspace(0, 1, 11)), "initial q0 has 3 entries: expected r = 2"),
     ("rom-times-decreasing", lambda: _rom_predict(np.zeros(2), np.linspace(1, 0, 11)),
      "times must be uniformly spaced and increasing"),
     ("rom-times-nan", lambda: _rom_predict(np.zeros(2), np.array([0.0, np.nan, 1.0])),

@@ -266,7 +266,7 @@ def test_impulse_responses_of_the_full_order_system_and_its_state_space_agree():
     exact = markov_parameters(state_space, count)
     assert fom.relative_error(exact) < 1e-12
     assert np.linalg.norm(exact.feedthrough) > 1e-6        # Newmark's end-of-step input: D != 0
-    stepped = impulse_response(lambda: state_space.stepper(np.zeros(6)), 2, count, dt=dt)
+    stepped = impulse_response(lambda: state_space.stepper(initial=np.zeros(6)), 2, count, dt=dt)
     assert stepped.relative_error(exact) < 1e-13
     # and ERA of order 2n = 6 realises them: the poles of Newmark's step map
     ops = ERA(6).fit(fom).operators_
@@ -294,12 +294,12 @@ def test_dmdc_with_both_input_samples_recovers_the_newmark_state_space(tmp_path)
     # exact, D = C B_1 included (round-off through 100 steps of poles |z| ~ 0.99: 1e-9)
     assert both.operators_.markov_parameters(100).relative_error(exact) < 1e-9
     rom = StateSpaceROM(both.operators_)
-    prediction = rom.predict(dt * np.arange(U.shape[1]), U, x0=X[:, 0])
+    prediction = rom.predict(dt * np.arange(U.shape[1]), U, initial=rom.initial_state(x0=X[:, 0], u0=U[:, 0]))
     assert np.linalg.norm(prediction.outputs - Y) / np.linalg.norm(Y) < 1e-9
     rom.save(tmp_path / "dmdc.h5")                          # the shifted state survives the file
     loaded = StateSpaceROM.load(tmp_path / "dmdc.h5")
     np.testing.assert_array_equal(loaded.operators_.input_offset, both.operators_.input_offset)
-    np.testing.assert_array_equal(loaded.predict(dt * np.arange(U.shape[1]), U, x0=X[:, 0]).outputs,
+    np.testing.assert_array_equal(loaded.predict(dt * np.arange(U.shape[1]), U, initial=loaded.initial_state(x0=X[:, 0], u0=U[:, 0])).outputs,
                                   prediction.outputs)
     # lower side: Proctor's form (u_k only) cannot represent the u_k+1 term: B is O(1) wrong
     start = DMDc(feedthrough=True).fit(InputOutputData(U, Y, dt, states=X))
@@ -475,11 +475,11 @@ def test_state_space_rom_fits_predicts_steps_and_round_trips(kind, tmp_path):
             rom.estimate_states(U, Y)
     if kind == "dmdc":
         np.testing.assert_array_equal(loaded.operators_.state_basis, rom.operators_.state_basis)
-        from_state = rom.predict(times, U, x0=X[:, 0])
+        from_state = rom.predict(times, U, initial=rom.initial_state(x0=X[:, 0], u0=U[:, 0]))
         np.testing.assert_array_equal(from_state.outputs, prediction.outputs)
     else:
         with pytest.raises(ValueError, match="state is abstract"):
-            rom.predict(times, U, x0=np.zeros(4))
+            rom.predict(times, U, initial=rom.initial_state(x0=np.zeros(4)))
     with pytest.raises(ValueError, match="identified at dt = 0.01"):
         rom.predict(2 * times, U)
     with pytest.raises(ValueError, match="exists at its step dt = 0.01 only"):

@@ -114,7 +114,7 @@ def test_learning_from_the_foreign_displacements_predicts_its_unseen_trajectory(
     errors = {}
     for label, data in (("integrator", raw.integrator_consistent()), ("fd4", raw.with_finite_differences(4))):
         rom = SecondOrderROM(basis=basis, product=M, learner=LagrangianOpInf(["damping"])).fit(data)
-        prediction = rom.predict(np.zeros(M.shape[0]), tt, inputs=Ut)
+        prediction = rom.predict(tt, Ut, initial=np.zeros(M.shape[0]))
         E = Qt - basis @ prediction.q
         errors[label] = (float(np.sqrt(np.sum(E * (M @ E)) / np.sum(Qt * (M @ Qt)))),
                          relative_error(Yt, prediction.outputs))
@@ -132,8 +132,7 @@ def test_learning_from_the_foreign_displacements_predicts_its_unseen_trajectory(
     learner = LagrangianOpInf(["damping"])
     alternating_fill(learner, raw, EVERY, inputs=_sampled(folder / "train_inputs.csv", (t.size - 1) * EVERY + 1, h))
     fine_times = np.arange((tt.size - 1) * EVERY + 1) * (h / EVERY)
-    prediction = SecondOrderROM(learner.operators_, basis, product=M).predict(
-        np.zeros(M.shape[0]), fine_times, inputs=_sampled(folder / "test_inputs.csv", fine_times.size, h))
+    prediction = SecondOrderROM(learner.operators_, basis, product=M).predict(fine_times, _sampled(folder / "test_inputs.csv", fine_times.size, h), initial=np.zeros(M.shape[0]))
     E = Qt - basis @ prediction.q[:, ::EVERY]
     refined = float(np.sqrt(np.sum(E * (M @ E)) / np.sum(Qt * (M @ Qt))))
     assert refined < errors["integrator"][0] / 2, (refined, errors)
@@ -142,7 +141,7 @@ def test_learning_from_the_foreign_displacements_predicts_its_unseen_trajectory(
     from femrom.post import export_prediction
 
     rom = SecondOrderROM(basis=basis, product=M, learner=LagrangianOpInf(["damping"])).fit(raw.integrator_consistent())
-    prediction = rom.predict(np.zeros(M.shape[0]), tt, inputs=Ut)
+    prediction = rom.predict(tt, Ut, initial=np.zeros(M.shape[0]))
     written = export_prediction(folder / "prediction.pvd", ingested.space, ingested.system.condensation, tt, basis,
                                 prediction.q, reference=lambda k: Qt[:, k], outputs=prediction.outputs,
                                 output_names=ingested.system.output_names, every=10)

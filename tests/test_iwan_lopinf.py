@@ -34,7 +34,7 @@ def ring_downs(ops, amplitudes=(5.0, 20.0), steps=3000, dt=1e-3):
     runs = []
     for amplitude in amplitudes:
         u = np.where(t < 0.01, amplitude * np.sin(np.pi * t / 0.01), 0.0)[None]
-        solution = rom.predict(np.zeros(ops.r), t, inputs=u, scheme="newmark")
+        solution = rom.predict(t, u, initial=np.zeros(ops.r), scheme="newmark")
         runs.append(SecondOrderData(solution.q, solution.v, solution.a, inputs=u, times=t))
     return runs
 
@@ -98,7 +98,7 @@ def test_learner_defaults_fit_and_predict_an_untrained_blow():
     errors = []
     for model in (learner, linear):
         rom = SecondOrderROM(model.operators_, np.eye(2))
-        solution = rom.predict(np.zeros(2), test.times, inputs=test.inputs, scheme="newmark")
+        solution = rom.predict(test.times, test.inputs, initial=np.zeros(2), scheme="newmark")
         errors.append(np.linalg.norm(solution.q - test.states) / np.linalg.norm(test.states))
     assert learner.hysteresis_.thresholds.size == 32
     assert errors[0] < 0.05
@@ -114,7 +114,7 @@ def test_free_energy_never_grows():
     K = G @ G.T + 3 * np.eye(3)
     term = LearnedHysteresis(rng.standard_normal(3), np.geomspace(1e-3, 1.0, 10), rng.uniform(0, 2, 10))
     rom = SecondOrderROM(ReducedOperators.from_matrices(K, nonlinear=term), np.eye(3))
-    stepper = rom.stepper(q0=np.array([2.0, -1.0, 0.5]), dt=0.05)
+    stepper = rom.stepper(0.05, initial=np.array([2.0, -1.0, 0.5]))
     energies = []
     for _ in range(2000):
         stepper.step()
@@ -133,8 +133,8 @@ def test_save_load_and_registry(tmp_path):
     back = SecondOrderROM.load(tmp_path / "rom.h5")
     t = np.arange(500) * 1e-3
     u = np.where(t < 0.01, 20.0, 0.0)[None]
-    a = rom.predict(np.zeros(2), t, inputs=u).q
-    b = back.predict(np.zeros(2), t, inputs=u).q
+    a = rom.predict(t, u, initial=np.zeros(2)).q
+    b = back.predict(t, u, initial=np.zeros(2)).q
     np.testing.assert_array_equal(a, b)
     assert learner_class("iwan_lopinf") is IwanLOpInf
 

@@ -175,7 +175,7 @@ def test_reduced_model_conserves_its_hamiltonian_and_mass(setup):
     rom = HamiltonianROM(ops, V, fom.potential)
     times = cfg.dt * np.arange(501)
     q0, p0 = V.T @ run.q[:, 0], V.T @ run.p[:, 0]
-    Q, P, H = rom.predict(q0, p0, times, scheme="avf")
+    Q, P, H = rom.predict(times, initial=(q0, p0), scheme="avf")
     # the reported H^ is the reduced Hamiltonian, written out here from its definition with the
     # full potential on the reconstructed state (no ProjectedPotential, no CanonicalSystem): the
     # same terms summed in another order, so round-off of |H_quad| ~ 10 |H| (1e-12 = 1e3 x that)
@@ -184,7 +184,7 @@ def test_reduced_model_conserves_its_hamiltonian_and_mass(setup):
     np.testing.assert_allclose(H, expected, rtol=1e-12, atol=0)
     # energy-preserving scheme: the reduced H^ to the Newton tolerance (measured 3.7e-13)
     assert np.ptp(H) / abs(H[0]) < 1e-10
-    Q, P, H = rom.predict(q0, p0, times, scheme="midpoint")
+    Q, P, H = rom.predict(times, initial=(q0, p0), scheme="midpoint")
     mass = np.sum(Q**2 + P**2, axis=0)
     # shared D^: H^ is phase-invariant, the reduced mass an exact quadratic
     # invariant, kept by the midpoint rule to the Newton tolerance (measured 2e-15)
@@ -196,15 +196,15 @@ def test_reduced_model_conserves_its_hamiltonian_and_mass(setup):
     fom_spread = np.ptp(run.hamiltonian) / abs(run.hamiltonian[0])
     assert 0.5 < spread / fom_spread < 2.0, (spread, fom_spread)
     # ... and it is that O(h^2) oscillation: at dt / 2 four times smaller (measured 4.0)
-    half = rom.predict(q0, p0, 0.5 * cfg.dt * np.arange(1001), scheme="midpoint").hamiltonian
+    half = rom.predict(0.5 * cfg.dt * np.arange(1001), initial=(q0, p0), scheme="midpoint").hamiltonian
     assert 3.0 < spread / (np.ptp(half) / abs(H[0])) < 5.0
     # no drift: over 5x the window (to t = 10) the oscillation stays within 1.5x of the first
     # window's (measured 1.18x: the later focusing events are a little sharper); a drift of
     # 2.5e-3 of |H0| per 2 s would already add 1e-2 = 0.5 x the first window's spread
-    long = rom.predict(q0, p0, cfg.dt * np.arange(2501), scheme="midpoint").hamiltonian
+    long = rom.predict(cfg.dt * np.arange(2501), initial=(q0, p0), scheme="midpoint").hamiltonian
     assert np.ptp(long) / abs(H[0]) < 1.5 * spread, (np.ptp(long) / abs(H[0]), spread)
     with pytest.raises(ValueError, match="separable"):
-        rom.predict(q0, p0, times, scheme="verlet")
+        rom.predict(times, initial=(q0, p0), scheme="verlet")
 
 
 def test_the_plain_baseline_midpoint_is_the_hamiltonian_roms_midpoint(setup):
@@ -218,15 +218,15 @@ def test_the_plain_baseline_midpoint_is_the_hamiltonian_roms_midpoint(setup):
                          V, fom.potential)
     q0, p0 = V.T @ run.q[:, 0], V.T @ run.p[:, 0]
     times = cfg.dt * np.arange(501)
-    Q, P, _ = rom.predict(q0, p0, times, scheme="midpoint")
-    plain = FirstOrderROM(linear_operator(rom), V, fom.potential, scheme="midpoint").predict(q0, p0, times)
+    Q, P, _ = rom.predict(times, initial=(q0, p0), scheme="midpoint")
+    plain = FirstOrderROM(linear_operator(rom), V, fom.potential, scheme="midpoint").predict(times, initial=(q0, p0))
     # the same equations from the same predictor to the same Newton tolerance: measured identical
     # to the last bit. 1e-9 admits a different but converged Newton path (rtol 1e-12 per step over
     # 500 steps, amplified by the focusing) and fails for another scheme: RK4 differs by 4.5e-4,
     # the midpoint rule at 2 dt by 1.3e-3 (measured)
     assert relative(np.vstack([plain.q, plain.p]), np.vstack([Q, P])) < 1e-9
     assert plain.info["blowup_step"] is None and plain.hamiltonian is None
-    rk4 = FirstOrderROM(linear_operator(rom), V, fom.potential, scheme="rk4").predict(q0, p0, times)
+    rk4 = FirstOrderROM(linear_operator(rom), V, fom.potential, scheme="rk4").predict(times, initial=(q0, p0))
     assert 1e-5 < relative(np.vstack([rk4.q, rk4.p]), np.vstack([Q, P])) < 1e-2
 
 
@@ -237,7 +237,7 @@ def test_a_blown_up_baseline_stops_with_nan_and_says_where(setup):
     V = CotangentLiftPSD(4, method="svd").fit(run.q, run.p).phi_
     A = 50.0 * np.eye(8)
     times = cfg.dt * np.arange(251)
-    sol = FirstOrderROM(A, V).predict(V.T @ run.q[:, 0], V.T @ run.p[:, 0], times, scheme="rk4")
+    sol = FirstOrderROM(A, V).predict(times, initial=(V.T @ run.q[:, 0], V.T @ run.p[:, 0]), scheme="rk4")
     k = sol.info["blowup_step"]
     # |y| e^{50 t} passes 1e3 |y_0| (|y_0| > 1) at t = ln(1e3) / 50 = 0.138: step 35 of dt = 4e-3
     assert k == 35, k

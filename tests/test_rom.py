@@ -64,7 +64,7 @@ def test_full_basis_rom_reproduces_the_fom_integrator(beam, scheme, fom_scheme):
     integrate(system, fom_scheme, q0, np.zeros(n), dt, steps, consumers=[trajectory])
     rom = SecondOrderROM.galerkin(system, Phi, product=M, mass_orthonormal=True)
     # r = n: a vector of size r is read as reduced coordinates, so reduce it here
-    solution = rom.predict(rom.reduce(q0), trajectory.t, inputs=system.inputs, scheme=scheme)
+    solution = rom.predict(trajectory.t, system.inputs, initial=rom.reduce(q0), scheme=scheme)
     # round-off of the modal transform, amplified by condition of Phi (~1e3)
     assert relative(Phi @ solution.q, trajectory.q) < 1e-9
     assert relative(Phi @ solution.v, trajectory.v) < 1e-9
@@ -83,10 +83,10 @@ def test_verlet_matches_central_difference(beam):
     trajectory = Trajectory()
     integrate(system, CentralDifference(), Phil[:, 1], np.zeros(n), dt, 300, consumers=[trajectory])
     rom = SecondOrderROM.galerkin(system, Phil, product=Ml, mass_orthonormal=True)
-    solution = rom.predict(rom.reduce(Phil[:, 1]), trajectory.t, scheme="verlet")
+    solution = rom.predict(trajectory.t, initial=rom.reduce(Phil[:, 1]), scheme="verlet")
     assert relative(Phil @ solution.q, trajectory.q) < 1e-9
     with pytest.raises(ValueError, match="Stoermer-Verlet bound"):
-        rom.predict(Phil[:, 1], np.arange(3) * 3.0 / wl[-1], scheme="verlet")
+        rom.predict(np.arange(3) * 3.0 / wl[-1], initial=Phil[:, 1], scheme="verlet")
 
 
 def test_lean_stepper_reproduces_the_fom_integrators():
@@ -109,7 +109,7 @@ def test_lean_stepper_reproduces_the_fom_integrators():
     integrate(system, Newmark(), q0, np.zeros(r), dt, steps, consumers=[trajectory])
     times = dt * np.arange(steps + 1)
     U = np.column_stack([inputs(t) for t in times])
-    solution = SecondOrderROM(ops).predict(q0, times, inputs=U)
+    solution = SecondOrderROM(ops).predict(times, U, initial=q0)
     # two exact implementations of one linear recurrence: round-off over 2000 steps
     assert relative(solution.q, trajectory.q) < 1e-10
 
@@ -122,11 +122,11 @@ def test_reduced_energy_is_conserved_by_the_variational_schemes(beam):
     times = np.arange(0, 20001) * 2e-3
     q0 = Phi[:, :5] @ np.array([1.0, 0.5, 0.2, 0.1, 0.05])
     for scheme in ("newmark", "midpoint"):
-        e = rom.predict(q0, times, scheme=scheme).energy
+        e = rom.predict(times, initial=q0, scheme=scheme).energy
         # exact conservation for linear undamped systems (quadratic invariant);
         # 20000 steps of round-off at ~1e-16 each
         assert np.ptp(e) / e[0] < 1e-11, scheme
-    e = rom.predict(q0, times, scheme="verlet").energy
+    e = rom.predict(times, initial=q0, scheme="verlet").energy
     # Verlet conserves a modified energy: the exact one oscillates by O((w dt)^2), no drift
     assert np.ptp(e) / e[0] < 0.05
     first, last = e[:2000], e[-2000:]
@@ -163,7 +163,7 @@ def test_lopinf_energy_stays_bounded_where_plain_opinf_blows_up(beam):
     for name, learner in (("lopinf", LagrangianOpInf(["damping"])), ("plain", SecondOrderOpInf(["damping"]))):
         rom = SecondOrderROM(learner=learner, basis=V, product=M).fit(data)
         with np.errstate(over="ignore", invalid="ignore"):
-            solution = rom.predict(data.states[:, 0], long_times)
+            solution = rom.predict(long_times, initial=data.states[:, 0])
         energies[name] = solution.energy
         errors[name] = relative(solution.q[:, :steps + 1], data.states)
     assert errors["lopinf"] < 2e-3 and errors["plain"] < 2e-3
@@ -198,7 +198,7 @@ def test_nonlinear_full_basis_rom_matches_fom(scheme, fom_scheme):
     trajectory = Trajectory()
     integrate(system, fom_scheme, q0, np.zeros(n), dt, steps, consumers=[trajectory])
     rom = SecondOrderROM.galerkin(system, Phi, product=system.mass, mass_orthonormal=True)
-    solution = rom.predict(rom.reduce(q0), trajectory.t, scheme=scheme)
+    solution = rom.predict(trajectory.t, initial=rom.reduce(q0), scheme=scheme)
     # both Newton iterations stop at ~1e-10 relative
     assert relative(Phi @ solution.q, trajectory.q) < 1e-8
     # the cubic potential is conservative and the reduced energy includes it;
@@ -236,13 +236,13 @@ def test_inputs_as_callable_or_array_and_lazy_fields(beam, tmp_path):
     rom = SecondOrderROM.galerkin(system, Phi[:, :4], product=M, mass_orthonormal=True)
     times = np.arange(501) * 2e-3
     U = np.column_stack([system.inputs(t) for t in times])
-    a = rom.predict(Phi[:, 0] * 0.01, times, inputs=system.inputs)
-    b = rom.predict(Phi[:, 0] * 0.01, times, inputs=U)
+    a = rom.predict(times, system.inputs, initial=Phi[:, 0] * 0.01)
+    b = rom.predict(times, U, initial=Phi[:, 0] * 0.01)
     np.testing.assert_allclose(a.q, b.q, rtol=0, atol=1e-14 * np.abs(a.q).max())
     with pytest.raises(ValueError, match="inputs"):
-        rom.predict(np.zeros(4), times)
+        rom.predict(times, initial=np.zeros(4))
     with pytest.raises(ValueError, match="expected r = 4"):
-        rom.predict(np.zeros(7), times, inputs=U)
+        rom.predict(times, U, initial=np.zeros(7))
     blocks = list(a.fields(block=128))
     assert [x.shape[1] for _, x in blocks] == [128, 128, 128, 117]
     np.testing.assert_allclose(np.hstack([x for _, x in blocks]), Phi[:, :4] @ a.q)
@@ -270,8 +270,8 @@ def test_save_load_round_trip(beam, tmp_path):
     meta = loaded.operators_.metadata
     assert meta["method"] == "lagrangian_opinf" and meta["solver"] == "fast"
     assert set(meta["error_split"]) == {"projection", "derivative", "velocity", "optimization"}
-    a = rom.predict(trajectory.q[:, 0], trajectory.t, inputs=U)
-    b = loaded.predict(trajectory.q[:, 0], trajectory.t, inputs=U)
+    a = rom.predict(trajectory.t, U, initial=trajectory.q[:, 0])
+    b = loaded.predict(trajectory.t, U, initial=trajectory.q[:, 0])
     # same operators and basis; BLAS threading may reorder sums: round-off only
     np.testing.assert_allclose(a.q, b.q, rtol=1e-12, atol=1e-14 * np.abs(a.q).max())
     rom.save(tmp_path / "nobasis.h5", include_basis=False)
@@ -282,7 +282,7 @@ def test_save_load_round_trip(beam, tmp_path):
     nonlinear.save(tmp_path / "nl.h5")
     whole = SecondOrderROM.load(tmp_path / "nl.h5")
     t, q0 = np.arange(201) * 2e-3, 0.05 * np.ones(8)
-    np.testing.assert_array_equal(whole.predict(q0, t).q, nonlinear.predict(q0, t).q)
+    np.testing.assert_array_equal(whole.predict(t, initial=q0).q, nonlinear.predict(t, initial=q0).q)
     # a force femrom cannot rebuild (its density is code, not a named one) is passed again, checked
     unnamed = LocalPotential(np.ones(8), lambda q: q**4, lambda q: 4 * q**3, lambda q: 12 * q**2)
     custom = SecondOrderROM.galerkin(SecondOrderSystem(mass=chain.mass, stiffness=chain.stiffness,
@@ -293,7 +293,7 @@ def test_save_load_round_trip(beam, tmp_path):
     with pytest.raises(ValueError, match="does not match the saved"):
         SecondOrderROM.load(tmp_path / "custom.h5", nonlinear=JenkinsForce(1.0, 1.0, 8))
     again = SecondOrderROM.load(tmp_path / "custom.h5", nonlinear=unnamed)
-    np.testing.assert_array_equal(again.predict(q0, t).q, custom.predict(q0, t).q)
+    np.testing.assert_array_equal(again.predict(t, initial=q0).q, custom.predict(t, initial=q0).q)
 
 
 def test_select_regularization_returns_a_stable_model(beam):
@@ -355,8 +355,8 @@ def test_select_regularization_with_lagrangian_opinf_on_noisy_beam_data(beam):
     long_times = h * np.arange(int(extension * 500) + 1)
     for score in scores:
         rom = SecondOrderROM(learner=LagrangianOpInf(["damping"], regularization=score.value)).fit(data)
-        short = rom.predict(data.states[:, 0], trajectory.t, inputs=system.inputs)
-        long = rom.predict(data.states[:, 0], long_times, inputs=system.inputs)
+        short = rom.predict(trajectory.t, system.inputs, initial=data.states[:, 0])
+        long = rom.predict(long_times, system.inputs, initial=data.states[:, 0])
         error = relative(short.q, data.states)
         growth = np.abs(long.energy).max() / np.abs(short.energy).max()
         # the same deterministic fit and recurrence: equal up to BLAS summation order
@@ -398,10 +398,10 @@ def test_hamiltonian_opinf_on_a_linear_wave_conserves_the_reduced_hamiltonian():
     assert learner.residual_ < 1e-10
     rom = HamiltonianROM(ops, Phi)
     times = np.arange(20001) * 1e-3
-    _, _, H = rom.predict(Qh[:, 0], Ph[:, 0], times, scheme="midpoint")
+    _, _, H = rom.predict(times, initial=(Qh[:, 0], Ph[:, 0]), scheme="midpoint")
     assert np.ptp(H) / H[0] < 1e-11                      # quadratic invariant: exact
     for scheme in ("symplectic_euler_a", "symplectic_euler_b", "verlet"):
-        _, _, H = rom.predict(Qh[:, 0], Ph[:, 0], times, scheme=scheme)
+        _, _, H = rom.predict(times, initial=(Qh[:, 0], Ph[:, 0]), scheme=scheme)
         # modified Hamiltonian: bounded O(w dt) oscillation, no drift
         assert np.ptp(H) / H[0] < 0.05, scheme
         assert abs(H[-2000:].mean() - H[:2000].mean()) / H[0] < 1e-3, scheme

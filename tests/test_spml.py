@@ -177,7 +177,7 @@ def _duffing_data(seed, n_trajectories, t_end=15.0, dt=0.02):
     for _ in range(n_trajectories):
         amplitude, frequency = rng.uniform(0.5, 1.5), rng.uniform(0.7, 1.6)
         U = amplitude * np.sin(frequency * t)[None, :]
-        sol = rom.predict(rng.standard_normal(R), t, inputs=U)
+        sol = rom.predict(t, U, initial=rng.standard_normal(R))
         out.append(SecondOrderData(sol.q, sol.v, sol.a, inputs=U, times=t))
     return truth, out
 
@@ -243,14 +243,14 @@ def test_saved_model_predicts_bit_for_bit_and_loads_without_torch(duffing, tmp_p
     rom.save(path)
     loaded = SecondOrderROM.load(path)
     for scheme in ("discrete_gradient", "newmark"):
-        a = rom.predict(q0, t[:200], v0=v0, inputs=U[:, :200], scheme=scheme)
-        b = loaded.predict(q0, t[:200], v0=v0, inputs=U[:, :200], scheme=scheme)
+        a = rom.predict(t[:200], U[:, :200], initial=(q0, v0), scheme=scheme)
+        b = loaded.predict(t[:200], U[:, :200], initial=(q0, v0), scheme=scheme)
         assert np.array_equal(a.q, b.q) and np.array_equal(a.energy, b.energy)
     assert loaded.operators_.metadata["method"] == "spml"
     # one input at a time: the stepper follows predict's trajectory
-    stepper = loaded.stepper(q0, v0, dt=t[1] - t[0], u0=U[:, 0], scheme="discrete_gradient")
+    stepper = loaded.stepper(t[1] - t[0], initial=(q0, v0), u0=U[:, 0], scheme="discrete_gradient")
     steps = np.column_stack([stepper.step(U[:, k]) for k in range(1, 50)])
-    ref = loaded.predict(q0, t[:50], v0=v0, inputs=U[:, :50], scheme="discrete_gradient")
+    ref = loaded.predict(t[:50], U[:, :50], initial=(q0, v0), scheme="discrete_gradient")
     np.testing.assert_allclose(steps, ref.q[:, 1:], rtol=1e-10, atol=1e-12)
     # without torch: the file loads and predicts the same numbers
     code = (HIDE_TORCH + f"import numpy as np\nfrom femrom.rom import SecondOrderROM\n"
@@ -261,7 +261,7 @@ def test_saved_model_predicts_bit_for_bit_and_loads_without_torch(duffing, tmp_p
             f"assert 'torch' not in sys.modules\n")
     subprocess.run([sys.executable, "-c", code], check=True, cwd=ROOT, capture_output=True)
     np.testing.assert_array_equal(np.load(tmp_path / "q.npy"),
-                                  rom.predict(q0, t[:200], v0=v0, inputs=U[:, :200], scheme="newmark").q)
+                                  rom.predict(t[:200], U[:, :200], initial=(q0, v0), scheme="newmark").q)
 
 
 def test_femrom_works_without_torch_and_spml_says_what_to_install():
@@ -314,7 +314,7 @@ def test_discrete_gradient_energy_never_increases_without_input():
         rom = SecondOrderROM(_random_model(rng, r, damped))
         q0, v0 = rng.standard_normal(r), rng.standard_normal(r)
         t = h * np.arange(steps + 1)
-        E = rom.predict(q0, t, v0=v0, scheme=DiscreteGradient(newton=newton)).energy
+        E = rom.predict(t, initial=(q0, v0), scheme=DiscreteGradient(newton=newton)).energy
         # round-off of E (|E| ~ 10, eps ~ 2e-16, a few dozen operations) and the Newton tolerance
         assert np.max(np.diff(E)) <= 1e-12 * abs(E[0]), (damped, np.max(np.diff(E)))
         if damped:
@@ -323,7 +323,7 @@ def test_discrete_gradient_energy_never_increases_without_input():
         else:
             assert np.max(np.abs(E - E[0])) <= 1e-11 * abs(E[0])
             # the plain midpoint rule on the same model drifts: the discrete gradient is what holds E
-            plain = rom.predict(q0, t[:1001], v0=v0, scheme=ImplicitMidpoint(newton=newton)).energy
+            plain = rom.predict(t[:1001], initial=(q0, v0), scheme=ImplicitMidpoint(newton=newton)).energy
             assert np.max(np.abs(plain - plain[0])) > 1e-6 * abs(E[0])
 
 

@@ -38,7 +38,7 @@ def test_state_space_form_equals_predict(scheme):
     times = 0.01 * np.arange(401)
     U = np.vstack([np.sin(3 * times), np.cos(7 * times) ** 2])
     q0, v0 = rng.standard_normal(8), rng.standard_normal(8)
-    solution = rom.predict(q0, times, v0=v0, inputs=U, scheme=scheme)
+    solution = rom.predict(times, U, initial=(q0, v0), scheme=scheme)
     ss = rom.to_state_space(0.01, scheme)
     assert (ss.n_states, ss.n_inputs, ss.n_outputs) == (16, 2, 3)
     z0 = ss.initial_state(np.concatenate([q0, v0]), U[:, 0])
@@ -57,7 +57,7 @@ def test_a_constant_load_is_a_constant_input_channel_of_the_state_space():
     rom, rng = linear_rom()
     times = 0.01 * np.arange(301)
     U = np.vstack([np.sin(3 * times), np.ones_like(times)])
-    solution = rom.predict(np.zeros(8), times, inputs=U)
+    solution = rom.predict(times, U, initial=np.zeros(8))
     ss = rom.to_state_space(0.01)
     assert ss.metadata["constant_input"] and ss.n_inputs == 3
     Ua = np.vstack([U, np.ones_like(times)])
@@ -73,8 +73,8 @@ def test_stepper_follows_predict_one_input_at_a_time(scheme):
     times = 0.01 * np.arange(301)
     U = np.vstack([np.sin(3 * times), np.cos(5 * times)])
     q0 = rng.standard_normal(8)
-    solution = rom.predict(q0, times, inputs=U, scheme=scheme)
-    stepper = rom.stepper(q0, dt=0.01, u0=U[:, 0], scheme=scheme)
+    solution = rom.predict(times, U, initial=q0, scheme=scheme)
+    stepper = rom.stepper(0.01, initial=q0, u0=U[:, 0], scheme=scheme)
     Y = np.column_stack([stepper.outputs] + [stepper.step(U[:, k]) for k in range(1, times.size)])
     assert relative(Y, solution.outputs) < 1e-12
     if scheme == "generalized_alpha":      # its acceleration is a state of its own: no [q; v] state space
@@ -83,7 +83,7 @@ def test_stepper_follows_predict_one_input_at_a_time(scheme):
         return
     ss = rom.to_state_space(0.01, scheme)
     Ua = np.vstack([U, np.ones_like(times)])
-    plant = ss.stepper(ss.initial_state(np.concatenate([q0, np.zeros(8)]), Ua[:, 0]), Ua[:, 0])
+    plant = ss.stepper(initial=ss.initial_state(np.concatenate([q0, np.zeros(8)]), Ua[:, 0]), u0=Ua[:, 0])
     Y2 = np.column_stack([plant.output] + [plant.step(Ua[:, k]) for k in range(1, times.size)])
     assert relative(Y2, solution.outputs) < 1e-12
 
@@ -104,8 +104,8 @@ def test_a_nonlinear_stateful_rom_steps_like_it_predicts_and_has_no_state_space(
     times = 0.05 * np.arange(201)
     U = np.sin(times)[None]
     for scheme in ("newmark", "midpoint"):
-        solution = rom.predict(0.3 * np.ones(6), times, inputs=U, scheme=scheme)
-        stepper = rom.stepper(0.3 * np.ones(6), dt=0.05, u0=U[:, 0], scheme=scheme)
+        solution = rom.predict(times, U, initial=0.3 * np.ones(6), scheme=scheme)
+        stepper = rom.stepper(0.05, initial=0.3 * np.ones(6), u0=U[:, 0], scheme=scheme)
         Y = np.column_stack([stepper.outputs] + [stepper.step(U[:, k]) for k in range(1, times.size)])
         # the same steps in the same order (outputs by matrix-vector instead of matrix-matrix
         # products: a last-bit difference)
@@ -128,7 +128,7 @@ def test_state_space_save_load_and_checks(tmp_path):
     with pytest.raises(ValueError, match="dt must be positive"):
         DiscreteStateSpace(np.eye(2), np.zeros((2, 1)), np.eye(2), np.zeros((2, 1)), dt=0.0)
     with pytest.raises(ValueError, match="input has 3 entries, expected 2"):
-        ss.stepper(np.zeros(16)).step(np.ones(3))
+        ss.stepper(initial=np.zeros(16)).step(np.ones(3))
 
 
 def test_hamiltonian_rom_steps_like_it_predicts():
@@ -142,8 +142,8 @@ def test_hamiltonian_rom_steps_like_it_predicts():
     times = 0.02 * np.arange(101)
     q0, p0 = rng.standard_normal(5), np.zeros(5)
     for scheme in ("midpoint", "verlet", "symplectic_euler_a"):
-        solution = rom.predict(q0, p0, times, scheme=scheme)
-        stepper = rom.stepper(q0, p0, dt=0.02, scheme=scheme)
+        solution = rom.predict(times, initial=(q0, p0), scheme=scheme)
+        stepper = rom.stepper(0.02, initial=(q0, p0), scheme=scheme)
         Y = np.column_stack([stepper.outputs] + [stepper.step() for _ in range(100)])
         assert relative(Y, solution.outputs) < 1e-12
         ss = rom.to_state_space(0.02, scheme)

@@ -65,8 +65,8 @@ class StateSpacePlant:
             raise ValueError(f"model must be a DiscreteStateSpace, got a {type(model).__name__}")
         self.model = model
         self.n_inputs, self.n_outputs = model.n_inputs, model.n_outputs
-        self._stepper = model.stepper(vector(initial_state, model.n_states, "initial_state"),
-                                      vector(u0, model.n_inputs, "u0"))
+        self._stepper = model.stepper(initial=vector(initial_state, model.n_states, "initial_state"),
+                                      u0=vector(u0, model.n_inputs, "u0"))
 
     @property
     def state(self) -> np.ndarray:
@@ -97,9 +97,14 @@ class ReducedPlant:
 
     def __init__(self, model, dt: float, *, q0=None, v0=None, u0=None, scheme: str = "newmark"):
         if not callable(getattr(model, "stepper", None)):
-            raise ValueError(f"model must have a stepper(q0, v0, dt=, u0=, scheme=) method; "
+            raise ValueError(f"model must have a stepper(dt, initial=, u0=, scheme=) method; "
                              f"got a {type(model).__name__}")
-        self.stepper = model.stepper(q0, v0, dt=float(dt), u0=u0, scheme=scheme)
+        initial = None if q0 is None and v0 is None else (q0, v0)
+        if initial is not None and q0 is None:
+            initial = (np.zeros_like(np.asarray(v0, dtype=float)), v0)
+        elif initial is not None and v0 is None:
+            initial = q0
+        self.stepper = model.stepper(float(dt), initial=initial, u0=u0, scheme=scheme)
         B = self.stepper.input_matrix
         self.n_inputs = 0 if B is None else B.shape[1]
         self.n_outputs = self.output.size

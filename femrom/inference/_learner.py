@@ -1,6 +1,6 @@
 """The learner protocol, the registry of learners and relative regularisation weights.
 
-A learner is an estimator: ``learner.fit(data) -> learner`` leaves the fitted
+A learner is an estimator: ``learner.fit(data, *, validation=None) -> learner`` leaves the fitted
 operators in ``learner.operators_`` (a :class:`ReducedOperators` for
 second-order models, a :class:`HamiltonianOperators` for canonical ones, a
 :class:`StateSpaceOperators` for identified first-order models: DMDc, ERA,
@@ -19,14 +19,21 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any, ClassVar
 
+from femrom._errors import FemromValueError
 from femrom._registry import Registry
 
 #: The learners by short name (sorted).
 LEARNERS = Registry("learner", "femrom.inference.learners", order=lambda name, cls: name, valid="registered")
 
 
+def refuse_validation(learner, validation) -> None:
+    """One clear error when a learner that has nothing to judge on validation data is given some."""
+    if validation is not None:
+        raise FemromValueError(f"{type(learner).__name__} does not use validation data: give validation=None")
+
+
 class Learner:
-    """Base of femrom's learners: ``fit(data) -> self``, ``operators_``, ``describe()``.
+    """Base of femrom's learners: ``fit(data, *, validation=None) -> self``, ``operators_``, ``describe()``.
 
     Class attributes
     ----------------
@@ -40,7 +47,10 @@ class Learner:
     model: ClassVar[str] = "second_order"
     operators_: Any
 
-    def fit(self, data) -> "Learner":  # pragma: no cover - interface
+    def fit(self, data, *, validation=None) -> "Learner":  # pragma: no cover - interface
+        """Fit on ``data``; ``validation`` (data of the same kind) is what the learner judges itself on:
+        a learner that chooses (when to stop, which fit) chooses on it, a regression reports its
+        residual there (``validation_residual_``), and a learner with nothing to judge refuses it."""
         raise NotImplementedError
 
     def describe(self) -> dict:

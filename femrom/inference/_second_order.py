@@ -32,6 +32,7 @@ from typing import ClassVar
 
 import numpy as np
 
+from femrom._errors import FemromValueError
 from femrom.inference._data import SecondOrderData, concatenate
 from femrom.inference._fast import FastOptions, solve_fast
 from femrom.inference._learner import Learner, Regularization
@@ -278,7 +279,7 @@ class SecondOrderLearner(Learner):
         return solve_conic(problem, self.solver.upper(), **self.solver_options)
 
     # -- fit -----------------------------------------------------------------------------
-    def fit(self, data) -> "SecondOrderLearner":
+    def fit(self, data, *, validation=None) -> "SecondOrderLearner":
         r"""Learn the operators from ``data``.
 
         Parameters
@@ -286,6 +287,9 @@ class SecondOrderLearner(Learner):
         data : SecondOrderData or list of SecondOrderData
             Several trajectories are fitted together (their Gram matrices add;
             a stateful known force restarts at each trajectory's first column).
+        validation : SecondOrderData or list of them, optional
+            Held-out data: the relative residual ``||Y + X D||_F / ||Y||_F`` the fitted
+            operators leave on them is ``validation_residual_`` (``None`` without).
 
         Returns
         -------
@@ -319,6 +323,13 @@ class SecondOrderLearner(Learner):
             derivative=0.0 if stored else diag.get("acceleration_error"),
             velocity=0.0 if stored else diag.get("velocity_error"),
             optimization=self._residual(Y, blocks_data, X))
+        self.validation_residual_ = None
+        if validation is not None:
+            held = concatenate(validation) if isinstance(validation, (list, tuple)) else validation
+            if [c.name for c in self._learned(held)] != [c.name for c in learned]:
+                raise FemromValueError("validation data must carry what the training data carry "
+                                       "(inputs, outputs) so that the same terms apply")
+            self.validation_residual_ = self._residual(self._target(held), self._datablocks(held), X)
         self.operators_ = ReducedOperators(tuple(terms), self.describe())
         return self
 

@@ -53,7 +53,7 @@ from femrom.integrators._hamiltonian import (
     integrate_canonical,
 )
 from femrom.integrators._implicit import ImplicitSolve
-from femrom.integrators._march import Stepper, march, run_linear, sampled_forcing, uniform_step
+from femrom.integrators._march import Stepper, input_sample, march, run_linear, sampled_forcing, uniform_step
 from femrom.integrators._newton import NEWTON_METHODS, ConvergenceError, Newton, newton_loop, solve_newton
 from femrom.integrators._scheme import (
     SCHEMES,
@@ -95,7 +95,7 @@ __all__ = [
     "Trajectory", "bound_max_frequency", "estimate_max_frequency", "integrate", "integrate_canonical",
     "iterate", "newmark_frequencies", "register_scheme", "scheme_for", "simulate", "solve_newton",
     "LinearParts", "Scheme", "Stepper", "march", "newton_loop", "registered_schemes", "run_linear",
-    "sampled_forcing", "time_scheme", "uniform_step", "verlet_bound",
+    "input_sample", "sampled_forcing", "time_scheme", "uniform_step", "verlet_bound",
     "FrequencyResponse", "Peak", "SteadyStateCriterion", "SteadyStateMonitor", "SteadyStateWarning",
     "SteppedSine", "SteppedSineResult", "StepperPlant", "SystemPlant", "first_harmonic", "parabolic_peak",
     "prewarped_frequency",

@@ -33,12 +33,13 @@ from typing import Any, Callable, Iterable, Iterator
 
 import numpy as np
 
+from femrom._errors import FemromRuntimeError, FemromValueError
 from femrom._progress import Progress
 from femrom.integrators._newton import ConvergenceError
 from femrom.solvers import LinearSolver, LinearSolverError, make_solver
 
 
-class IntegrationError(RuntimeError):
+class IntegrationError(FemromRuntimeError):
     """A run stopped: non-finite state, Newton or linear-solver failure.
 
     Attributes
@@ -85,6 +86,20 @@ class StepResult:
     v: np.ndarray
     a: np.ndarray | None
     state: Any = None
+
+    @classmethod
+    def at_rest(cls, n_dofs: int, *, state: Any = None, t: float = 0.0, q=None) -> "StepResult":
+        """Step 0 at rest: ``v = a = 0`` on ``n_dofs`` dofs, the displacement ``q`` (default zero), the
+        nonlinear force's committed ``state`` (e.g. a joint's sliders at a preloaded equilibrium).
+
+        At rest means no acceleration: ``q`` must be an equilibrium under the state and the
+        forcing at ``t`` (for a model about a reference state, ``q = 0`` is).
+        """
+        n = int(n_dofs)
+        if n < 1:
+            raise FemromValueError(f"n_dofs must be a positive integer, got {n_dofs!r}")
+        q = np.zeros(n) if q is None else _vector(q, n, "q")
+        return cls(step=0, t=float(t), q=q, v=np.zeros(n), a=np.zeros(n), state=state)
 
 
 @dataclass(frozen=True)
@@ -202,9 +217,9 @@ class _SolverLog:
 def _vector(x, n: int, name: str) -> np.ndarray:
     x = np.array(x, dtype=float, copy=True)
     if x.shape != (n,):
-        raise ValueError(f"{name} has shape {x.shape}, expected ({n},)")
+        raise FemromValueError(f"{name} has shape {x.shape}, expected ({n},)")
     if not np.all(np.isfinite(x)):
-        raise ValueError(f"{name} has non-finite entries")
+        raise FemromValueError(f"{name} has non-finite entries")
     x.setflags(write=False)
     return x
 
@@ -232,9 +247,9 @@ class Integration(Iterator[StepResult]):
                  start: StepResult | None = None):
         dt, n_steps = float(dt), int(n_steps)
         if not (dt > 0.0 and math.isfinite(dt)):
-            raise ValueError(f"dt must be positive and finite, got {dt}")
+            raise FemromValueError(f"dt must be positive and finite, got {dt}")
         if n_steps < 0:
-            raise ValueError(f"n_steps must be >= 0, got {n_steps}")
+            raise FemromValueError(f"n_steps must be >= 0, got {n_steps}")
         self.system, self.scheme, self.dt, self.n_steps = system, scheme, dt, n_steps
         self._log = _SolverLog(solver)
         n = system.n_dofs
@@ -247,7 +262,7 @@ class Integration(Iterator[StepResult]):
             self._first = StepResult(step=0, t=float(t0), q=q0, v=v0, a=a0, state=state0)
         else:
             if q0 is not None or v0 is not None:
-                raise ValueError("pass q0 = v0 = None when restarting from start=StepResult")
+                raise FemromValueError("pass q0 = v0 = None when restarting from start=StepResult")
             self._first = start
         first = self._first
         if not getattr(scheme, "uses_mass_solver", False):

@@ -170,16 +170,18 @@ class Scheme:
         r"""``Omega``: the frequency [rad/s] at which the scheme steps an undamped mode
         ``q'' + omega^2 q = 0`` at step ``dt`` (float or ndarray, like ``omega``).
 
-        By default the argument of the principal eigenvalue of the step map on the
-        mode; schemes with a closed form override it.
+        By default the argument of the principal eigenvalue of the step map on the mode
+        (of the complex pair the largest in modulus; a scheme's spurious roots are real);
+        schemes with a closed form override it.
         """
         omega = np.asarray(omega, dtype=float)
         out = np.empty(omega.shape)
         for index, w in np.ndenumerate(omega):
             parts = LinearParts(np.eye(1), None, np.array([[w * w]]))
             A, _ = self.step_map(parts, dt, None)
-            angles = np.abs(np.angle(np.linalg.eigvals(A)))
-            out[index] = float(np.max(angles)) / dt
+            roots = np.linalg.eigvals(A)
+            pair = roots[roots.imag > 1e-14 * np.abs(roots)]
+            out[index] = 0.0 if pair.size == 0 else float(np.angle(pair[np.argmax(np.abs(pair))])) / dt
         return out if out.ndim else float(out)
 
     def continuous_frequency(self, Omega, dt: float):

@@ -149,7 +149,7 @@ class StepperPlant:
 
     Parameters
     ----------
-    model : object with ``stepper(q0, v0, *, dt, t0, u0, scheme)``
+    model : object with ``stepper(dt, *, initial, t0, u0, scheme)``
     input_index : int
         The input ``j`` that is the shaker force.
     scheme : str
@@ -162,11 +162,11 @@ class StepperPlant:
     def __init__(self, model, input_index: int = 0, *, scheme: str = "newmark",
                  quantity: str = "acceleration", output_names=None):
         if not callable(getattr(model, "stepper", None)):
-            raise ValueError(f"model must have a stepper(q0, v0, dt=, t0=, u0=) method; "
+            raise ValueError(f"model must have a stepper(dt, initial=, t0=, u0=, scheme=) method; "
                              f"got a {type(model).__name__}")
         self.model, self.scheme = model, str(scheme)
         self.quantity = _quantity(quantity)
-        probe = model.stepper(dt=1.0, scheme=self.scheme)
+        probe = model.stepper(1.0, scheme=self.scheme)
         m = 0 if probe.input_matrix is None else probe.input_matrix.shape[1]
         if not (isinstance(input_index, (int, np.integer)) and 0 <= input_index < m):
             raise ValueError(f"input_index must be an integer in [0, {m}), got {input_index!r}")
@@ -194,9 +194,8 @@ class StepperPlant:
         N = int(steps_per_period)
         dt = 1.0 / (float(frequency_hz) * N)
         u_zero = np.zeros(self.n_inputs)
-        stepper = self.model.stepper(self._q, self._v, dt=dt, t0=self._t, u0=u_zero, scheme=self.scheme)
-        if stepper.nonlinear is not None and self._a is not None:
-            stepper.state, stepper.a = self._state, self._a
+        start = StepResult(step=0, t=self._t, q=self._q, v=self._v, a=self._a, state=self._state)
+        stepper = self.model.stepper(dt, initial=start, t0=self._t, u0=u_zero, scheme=self.scheme)
         sines = float(amplitude) * np.sin(2.0 * np.pi * np.arange(1, N + 1) / N)
         u = u_zero.copy()
         E = stepper.output_matrix

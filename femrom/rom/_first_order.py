@@ -71,11 +71,11 @@ class FirstOrderROM(ReducedModel):
         self.potential_ = None if potential is None else ProjectedPotential(potential, self.basis)
         self.learner, self.scheme, self.newton = learner, scheme, newton
 
-    def fit(self, data) -> "FirstOrderROM":
+    def fit(self, data, *, validation=None) -> "FirstOrderROM":
         """Fit ``A^`` with the learner (:class:`~femrom.inference.CanonicalOpInf` on CanonicalData)."""
         if self.learner is None:
             raise ValueError("this ROM has no learner; pass learner=CanonicalOpInf(...)")
-        self.operators_ = self.learner.fit(data).operators_
+        self.operators_ = self.learner.fit(data, validation=validation).operators_
         return self
 
     @property
@@ -103,8 +103,8 @@ class FirstOrderROM(ReducedModel):
         hqq, hqp, hpp = self.potential_.hessian(y[:r], y[r:])
         return A + np.block([[hqp.T, hpp], [-hqq, -hqp]])
 
-    def predict(self, q0, p0, times, scheme: str | None = None) -> HamiltonianSolution:
-        """Integrate from reduced (r,) or full (n,) ``q0``, ``p0`` on a uniform grid.
+    def predict(self, times, inputs=None, *, initial=None, scheme: str | None = None) -> HamiltonianSolution:
+        """Integrate from ``initial = (q0, p0)`` (each reduced (r,) or full (n,)) on a uniform grid (no inputs).
 
         Returns a :class:`~femrom.rom.HamiltonianSolution` with ``hamiltonian = None``
         (the model has none); ``info`` holds ``stepping_seconds``, ``scheme`` and
@@ -114,7 +114,7 @@ class FirstOrderROM(ReducedModel):
         if scheme not in FIRST_ORDER_SCHEMES:
             raise ValueError(f"unknown scheme {scheme!r}; valid: {FIRST_ORDER_SCHEMES}")
         times, h = uniform_step(times)
-        q0, p0 = self._initial(q0, "q0", default_zero=False), self._initial(p0, "p0", default_zero=False)
+        q0, p0 = self.canonical_initial(initial, inputs)
         y0 = np.concatenate([q0, p0])
         n_steps = times.size - 1
         Y = np.full((y0.size, n_steps + 1), np.nan)

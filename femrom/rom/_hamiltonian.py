@@ -238,7 +238,7 @@ class HamiltonianROM(ReducedModel):
         rom.metadata_ = {"method": "galerkin"}
         return rom
 
-    def fit(self, data: CanonicalData) -> "HamiltonianROM":
+    def fit(self, data: CanonicalData, *, validation=None) -> "HamiltonianROM":
         r"""Learn ``D^_q``, ``D^_p`` (and ``E^`` when the data carry outputs) with the learner.
 
         Parameters
@@ -247,6 +247,8 @@ class HamiltonianROM(ReducedModel):
             Reduced data, e.g. :func:`femrom.inference.reduce_canonical_snapshots`
             of full snapshots on this model's basis and potential (what
             :meth:`fit_snapshots` does).
+        validation : CanonicalData, optional
+            Held-out data the learner judges itself on.
 
         Returns
         -------
@@ -254,7 +256,7 @@ class HamiltonianROM(ReducedModel):
         """
         if self.learner is None:
             self.learner = HamiltonianOpInf()
-        learner = self.learner.fit(data)
+        learner = self.learner.fit(data, validation=validation)
         self.operators_ = learner.operators_
         if learner.output_matrix_ is not None:
             self.output_matrix_ = learner.output_matrix_
@@ -311,17 +313,18 @@ class HamiltonianROM(ReducedModel):
             raise ValueError("this model has no basis: full fields cannot be reconstructed")
         return self.basis @ q, self.basis @ p
 
-    def predict(self, q0: np.ndarray, p0: np.ndarray, times: np.ndarray,
-                scheme: str | None = None) -> HamiltonianSolution:
+    def predict(self, times, inputs=None, *, initial=None, scheme: str | None = None) -> HamiltonianSolution:
         r"""Integrate the ROM on a uniform time grid.
 
         Parameters
         ----------
-        q0, p0 : (r,) or (n,) ndarray
-            Initial position and momentum, reduced or full (then ``Phi^T x``);
-            with ``r = n`` a vector is read as reduced.
         times : (k,) ndarray
             Uniform grid ``t_0, t_0 + h, ...``.
+        inputs : None
+            A canonical model has no inputs.
+        initial : (q0, p0), optional
+            Initial position and momentum, each reduced (r,) or full (n,) (then ``Phi^T x``);
+            with ``r = n`` a vector is read as reduced. Default rest.
         scheme : str, optional
             Default: the model's ``scheme``. Without a potential one precomputed
             (2r, 2r) step matrix (:func:`hamiltonian_step_matrix`); with one,
@@ -335,7 +338,7 @@ class HamiltonianROM(ReducedModel):
         scheme = self.scheme if scheme is None else scheme
         ops = self._ops()
         times, h = uniform_step(times)
-        q0, p0 = self._initial(q0, "q0", default_zero=False), self._initial(p0, "p0", default_zero=False)
+        q0, p0 = self.canonical_initial(initial, inputs)
         r, n_steps = ops.r, times.size - 1
         info = {"scheme": scheme, "dt": h, "n_steps": n_steps}
         tic = time.perf_counter()
@@ -361,9 +364,9 @@ class HamiltonianROM(ReducedModel):
         return HamiltonianSolution(t=times, q=Q, p=P, hamiltonian=H, outputs=self.outputs(Q, P),
                                    basis=self.basis, info=info)
 
-    def stepper(self, q0, p0, *, dt: float, scheme: str | None = None) -> "HamiltonianStepper":
-        """A :class:`HamiltonianStepper` at ``(q0, p0)`` (reduced or full): ``y = stepper.step()``."""
-        q0, p0 = self._initial(q0, "q0", default_zero=False), self._initial(p0, "p0", default_zero=False)
+    def stepper(self, dt: float, *, initial=None, scheme: str | None = None) -> "HamiltonianStepper":
+        """A :class:`HamiltonianStepper` at ``initial = (q0, p0)`` (reduced or full): ``y = stepper.step()``."""
+        q0, p0 = self.canonical_initial(initial)
         return HamiltonianStepper(self, q0, p0, float(dt), self.scheme if scheme is None else scheme)
 
     def to_state_space(self, dt: float, scheme: str | None = None) -> DiscreteStateSpace:

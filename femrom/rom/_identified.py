@@ -30,30 +30,7 @@ import numpy as np
 from femrom._json import dumps
 from femrom.inference import StateSpaceOperators
 from femrom.rom._base import uniform_step
-from femrom.rom._statespace import DiscreteStateSpace, StateSpaceStepper, input_sample
-
-
-@dataclass(frozen=True, eq=False)
-class StateSpaceSolution:
-    """A trajectory of an identified model.
-
-    Attributes
-    ----------
-    t : (K,) ndarray
-    states : (n_z, K) ndarray
-    outputs : (p, K) ndarray
-    info : dict
-        ``dt``, ``n_steps``, ``stepping_seconds``, ``seconds_per_step``.
-    """
-
-    t: np.ndarray
-    states: np.ndarray
-    outputs: np.ndarray
-    info: dict = field(default_factory=dict)
-
-    @property
-    def times(self) -> np.ndarray:
-        return self.t
+from femrom.rom._statespace import DiscreteStateSpace, StateSpaceSolution, StateSpaceStepper, input_sample
 
 
 class StateSpaceROM:
@@ -81,11 +58,11 @@ class StateSpaceROM:
         self.learner = learner
         self._state_space = None
 
-    def fit(self, data) -> "StateSpaceROM":
+    def fit(self, data, *, validation=None) -> "StateSpaceROM":
         """Fit the learner on ``data`` (InputOutputData, or MarkovParameters for ERA) and keep its operators."""
         if self.learner is None:
             raise ValueError("this ROM has no learner; pass learner=DMDc(...), ERA(...) or OKID(...)")
-        self.operators_ = self.learner.fit(data).operators_
+        self.operators_ = self.learner.fit(data, validation=validation).operators_
         self._state_space = None
         return self
 
@@ -155,7 +132,7 @@ class StateSpaceROM:
             raise ValueError("inputs are not finite")
         return U
 
-    def predict(self, times, inputs, *, z0=None, x0=None) -> StateSpaceSolution:
+    def predict(self, times, inputs=None, *, initial=None) -> StateSpaceSolution:
         r"""Outputs and states on a uniform grid with the model's step.
 
         Parameters
@@ -163,17 +140,17 @@ class StateSpaceROM:
         times : (K,) ndarray
             ``t_0, t_0 + dt, ...`` with the training ``dt``.
         inputs : (m, K) ndarray or callable
-            The samples ``u(t_k)``, or ``u(t) -> (m,)``.
-        z0, x0 : ndarray, optional
-            The model's initial state, or the data's (DMDc); default ``z_0 = 0``,
-            rest (for a shifted state, ``x_0 = E u_0``: give ``x0`` for ``x_0 = 0``).
+            The samples ``u(t_k)``, or ``u(t) -> (m,)`` (required when the model has inputs).
+        initial : (n_z,) ndarray, optional
+            The model's state ``z_0`` (default rest, zeros); from the data's state ``x_0``:
+            ``initial=rom.initial_state(x0=x_0, u0=u_0)``.
         """
         ops = self._ops()
         times, h = uniform_step(times)
         if not np.isclose(h, ops.dt, rtol=1e-9, atol=0.0):
             raise ValueError(f"times have step {h:g}, the model was identified at dt = {ops.dt:g}")
         U = self._samples(inputs, times)
-        z = self.initial_state(z0, x0, U[:, 0])
+        z = self.initial_state(initial, None, U[:, 0])
         tic = time.perf_counter()
         outputs, states = self.state_space.simulate(U, z)
         seconds = time.perf_counter() - tic
@@ -182,9 +159,10 @@ class StateSpaceROM:
             "dt": h, "n_steps": n_steps, "stepping_seconds": seconds,
             "seconds_per_step": seconds / max(n_steps, 1)})
 
-    def stepper(self, z0=None, *, x0=None, u0=None) -> StateSpaceStepper:
-        """A :class:`~femrom.rom.StateSpaceStepper`: ``y_{k+1} = stepper.step(u_{k+1})``."""
-        return self.state_space.stepper(self.initial_state(z0, x0, u0), u0)
+    def stepper(self, *, initial=None, u0=None) -> StateSpaceStepper:
+        """A :class:`~femrom.rom.StateSpaceStepper` at ``initial = z_0`` (default rest):
+        ``y_{k+1} = stepper.step(u_{k+1})``."""
+        return self.state_space.stepper(initial=self.initial_state(initial, None, u0), u0=u0)
 
     def estimate_states(self, inputs, outputs, z0=None) -> np.ndarray:
         r"""(n_z, K + 1) state estimates ``z^_0 ... z^_K`` from measured samples, by the identified observer.

@@ -98,14 +98,12 @@ class SecondOrderROM(ReducedModel):
         ops = galerkin(system, basis, mass_orthonormal=mass_orthonormal)
         return cls(ops, basis, product=product)
 
-    def fit(self, data=None, **options) -> "SecondOrderROM":
-        """Fit the learner on ``data`` (SecondOrderData or a list) and keep its operators.
-
-        ``options`` go to the learner's ``fit`` (e.g. ``validation=`` for :class:`~femrom.inference.SpML`).
-        """
+    def fit(self, data=None, *, validation=None) -> "SecondOrderROM":
+        """Fit the learner on ``data`` (SecondOrderData or a list) and keep its operators;
+        ``validation``: held-out data the learner judges itself on (its ``fit``)."""
         if self.learner is None:
-            raise ValueError("this ROM has no learner; pass learner=LagrangianOpInf(...)")
-        self.operators_ = self.learner.fit(data, **options).operators_
+            raise FemromValueError("this ROM has no learner; pass learner=LagrangianOpInf(...)")
+        self.operators_ = self.learner.fit(data, validation=validation).operators_
         return self
 
     # -- evaluation --------------------------------------------------------------
@@ -129,20 +127,21 @@ class SecondOrderROM(ReducedModel):
         E = self._ops().output_matrix
         return None if E is None else E @ q
 
-    def predict(self, q0, times, *, v0=None, inputs=None, scheme="newmark") -> ReducedSolution:
+    def predict(self, times, inputs=None, *, initial=None, scheme="newmark") -> ReducedSolution:
         r"""Integrate the reduced model on a uniform time grid.
 
         Parameters
         ----------
-        q0 : (r,) or (n,) ndarray
-            Initial displacement, reduced or full (then ``V^T W q0``); with
-            ``r = n`` a vector is read as reduced (use :meth:`reduce`).
         times : (k,) ndarray
             Uniform grid ``t_0, t_0 + h, ...``.
-        v0 : (r,) or (n,) ndarray, optional
-            Initial velocity (default zero).
         inputs : callable or (m, k) ndarray, optional
-            ``u(t) -> (m,)`` or the sampled inputs on ``times``.
+            ``u(t) -> (m,)`` or the sampled inputs on ``times`` (required when the
+            model has inputs).
+        initial : optional
+            ``q0``, a ``(q0, v0)`` pair (each (r,) reduced or (n,) full, then ``V^T W x``;
+            with ``r = n`` a vector is read as reduced) or a
+            :class:`~femrom.integrators.StepResult` that also gives the nonlinear terms'
+            committed state (``StepResult.at_rest(r, state=...)``); default rest.
         scheme : str or Scheme
             A registered time scheme (``"newmark"``, ``"implicit_midpoint"``,
             ``"central_difference"``, ``"discrete_gradient"``, ...; the aliases
@@ -155,9 +154,9 @@ class SecondOrderROM(ReducedModel):
         ops = self._ops()
         step = time_scheme(scheme)
         times, h = uniform_step(times)
-        q0, v0 = self._initial(q0, "q0"), self._initial(v0, "v0")
+        q0, v0, state0 = self.initial_state(initial)
         tic = time.perf_counter()
-        run = march(ops.system, step, times, q0, v0, inputs=inputs)
+        run = march(ops.system, step, times, q0, v0, inputs=inputs, state0=state0)
         info = {"scheme": step.name, "dt": h, "n_steps": times.size - 1}
         if ops.nonlinear is not None:
             info["newton_iterations"] = run["newton_iterations"]
@@ -168,13 +167,22 @@ class SecondOrderROM(ReducedModel):
         return ReducedSolution(t=times, q=Q, v=Vel, a=run["a"], energy=self.energy(Q, Vel),
                                outputs=self.outputs(Q), basis=self.basis, info=info)
 
-    def stepper(self, q0=None, v0=None, *, dt: float, t0: float = 0.0, u0=None, scheme="newmark") -> Stepper:
-        """A :class:`~femrom.integrators.Stepper` at ``(q0, v0)``: ``y = stepper.step(u)`` advances by ``dt``.
+    def stepper(self, dt: float, *, initial=None, t0: float = 0.0, u0=None, scheme="newmark") -> Stepper:
+        """A :class:`~femrom.integrators.Stepper`: ``y = stepper.step(u)`` advances by ``dt``.
 
-        ``q0``, ``v0`` reduced or full (default zero); ``u0`` the input sample at ``t0``.
+        ``initial`` as in :meth:`predict` (default rest; a :class:`~femrom.integrators.StepResult`
+        also carries its acceleration over); ``u0`` the input sample at ``t0``.
         """
-        return Stepper(self._ops().system, scheme, dt, self._initial(q0, "q0"), self._initial(v0, "v0"),
-                       t0=t0, u0=u0)
+        q0, v0, state = self.initial_state(initial)
+        a = getattr(initial, "a", None)
+        a0 = None if a is None else self._initial(a, "initial.a")
+        return Stepper(self._ops().system, scheme, dt, q0, v0, t0=t0, u0=u0, state=state, a0=a0)
+
+    @property
+    def model(self):
+        """The reduced model as a :class:`~femrom.scene.SecondOrderSystem` (dense (r, r) operators):
+        the one model type every time scheme, stepper, stepped sine and plant takes."""
+        return self._ops().system
 
     def to_state_space(self, dt: float, scheme="newmark") -> DiscreteStateSpace:
         r"""The discrete state space ``z+ = A z + B u``, ``y = C z + D u`` of a linear model.

@@ -77,8 +77,8 @@ def select_regularization(make_learner: Callable[[float], object], data, times, 
         rom = SecondOrderROM(learner.operators_)
         try:
             with np.errstate(over="ignore", invalid="ignore"):
-                short = rom.predict(q0, times, v0=v0, inputs=sampled, scheme=scheme)
-                long = rom.predict(q0, long_times, v0=v0, inputs=sampled, scheme=scheme)
+                short = rom.predict(times, sampled, initial=(q0, v0), scheme=scheme)
+                long = rom.predict(long_times, sampled, initial=(q0, v0), scheme=scheme)
             error = float(np.linalg.norm(short.q - data.states) / reference)
             e_short = np.max(np.abs(short.energy))
             growth = float(np.max(np.abs(long.energy)) / max(e_short, np.finfo(float).tiny))

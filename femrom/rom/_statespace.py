@@ -19,21 +19,34 @@ recovered as ``z + E u``, and the output has a feedthrough ``D = C_x E``.
 from __future__ import annotations
 
 import json
+import time
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from femrom._errors import FemromValueError
 from femrom._json import dumps
+from femrom.integrators import input_sample
+from femrom.rom._base import Solution
 
 
-def input_sample(u, m: int) -> np.ndarray:
-    """(m,) ndarray of one input sample (zeros for ``None``); one clear error for a wrong size."""
-    if u is None:
-        return np.zeros(m)
-    u = np.atleast_1d(np.asarray(u, dtype=float)).ravel()
-    if u.size != m:
-        raise ValueError(f"input has {u.size} entries, expected {m}")
-    return u
+@dataclass(frozen=True, eq=False)
+class StateSpaceSolution(Solution):
+    """A trajectory of a discrete state space (an identified model, a linear ROM's export).
+
+    Attributes
+    ----------
+    t : (K,) ndarray
+    states : (n_z, K) ndarray
+    outputs : (p, K) ndarray
+    info : dict
+        ``dt``, ``n_steps``, ``stepping_seconds``, ``seconds_per_step``.
+    """
+
+    t: np.ndarray
+    states: np.ndarray
+    outputs: np.ndarray
+    info: dict = field(default_factory=dict)
 
 
 @dataclass(frozen=True, eq=False)
@@ -130,13 +143,32 @@ class DiscreteStateSpace:
             Z[:, k + 1] = self.A @ Z[:, k] + BU[:, k]
         return self.C @ Z + self.D @ U, Z
 
-    def predict(self, z0: np.ndarray, inputs: np.ndarray | None = None, n_steps: int | None = None):
-        """(p, K) outputs for input samples (m, K) from ``z_0`` (the protocol's ``predict``)."""
-        return self.simulate(inputs, z0, n_steps)[0]
+    def predict(self, times, inputs=None, *, initial=None) -> StateSpaceSolution:
+        """Outputs and states on the uniform grid ``times`` (step ``dt``) from ``initial = z_0`` (default zeros)
+        for input samples (m, K) on it (required when the model has inputs)."""
+        times = np.asarray(times, dtype=float)
+        if times.ndim != 1 or times.size < 1:
+            raise FemromValueError("times must be a 1-d grid")
+        if times.size > 1 and not np.allclose(np.diff(times), self.dt, rtol=1e-9, atol=0.0):
+            raise FemromValueError(f"times must be spaced by the model's dt = {self.dt:g}")
+        if self.n_inputs and inputs is None:
+            raise FemromValueError(f"this model has {self.n_inputs} inputs: pass their samples (m, K)")
+        if inputs is not None and np.shape(inputs)[-1] != times.size:
+            raise FemromValueError(f"inputs have {np.shape(inputs)[-1]} samples for {times.size} times")
+        z0 = np.zeros(self.n_states) if initial is None else np.asarray(initial, dtype=float).ravel()
+        if z0.size != self.n_states or not np.all(np.isfinite(z0)):
+            raise FemromValueError(f"initial must be a finite state of {self.n_states} entries, got {z0.size}")
+        tic = time.perf_counter()
+        Y, Z = self.simulate(inputs, z0, None if inputs is not None else times.size - 1)
+        seconds = time.perf_counter() - tic
+        n_steps = times.size - 1
+        return StateSpaceSolution(t=times, states=Z, outputs=Y, info={
+            "dt": self.dt, "n_steps": n_steps, "stepping_seconds": seconds,
+            "seconds_per_step": seconds / max(n_steps, 1)})
 
-    def stepper(self, z0: np.ndarray, u0: np.ndarray | None = None) -> "StateSpaceStepper":
-        """A :class:`StateSpaceStepper` at ``z_0`` with the input sample ``u_0``."""
-        return StateSpaceStepper(self, z0, u0)
+    def stepper(self, *, initial=None, u0=None) -> "StateSpaceStepper":
+        """A :class:`StateSpaceStepper` at ``initial = z_0`` (default zeros) with the input sample ``u_0``."""
+        return StateSpaceStepper(self, np.zeros(self.n_states) if initial is None else initial, u0)
 
     def to_control(self):
         """The python-control ``StateSpace(A, B, C, D, dt)`` (needs the ``control`` package)."""

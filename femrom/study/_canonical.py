@@ -93,13 +93,14 @@ class SceneHamiltonianROM:
     def operators_(self) -> HamiltonianOperators:
         return self.rom.operators_
 
-    def predict(self, q0, times, *, v0=None, inputs=None):
-        """Integrate from the full ``(q0, v0)``; ``inputs`` must be absent or zero."""
+    def predict(self, times, inputs=None, *, initial=None):
+        """Integrate from the full ``initial = (q0, v0)`` (or ``q0``); ``inputs`` must be absent or zero."""
         if inputs is not None and np.any(np.asarray(inputs) != 0):
             raise ValueError("a canonical Hamiltonian ROM has no inputs")
+        q0, v0 = initial if isinstance(initial, (tuple, list)) else (initial, None)
         q0 = self.rom.reduce(q0)                 # V^T M q0: the ROM's basis is orthonormal in M
         p0 = np.zeros_like(q0) if v0 is None else self.rom.reduce(v0)
-        return self.rom.predict(q0, p0, times)
+        return self.rom.predict(times, initial=(q0, p0))
 
 
 def fit_canonical_rom(system, basis: np.ndarray, product, r: int, spec, data) -> SceneHamiltonianROM:

@@ -172,7 +172,7 @@ class _Models:
 def _predict(model, y0, times):
     r = model.r
     with np.errstate(all="ignore"):
-        return model.predict(y0[:r], y0[r:], times)
+        return model.predict(times, initial=(y0[:r], y0[r:]))
 
 
 def canonical_rows(system, run: CanonicalRun, specs, *, ranks, train_window: float, order: int = 4,

@@ -223,7 +223,7 @@ def compare_ring_downs(system, rest_state, training, validation, tests, settings
                 learner = _learner(name, settings)
                 tic = time.perf_counter()
                 rom = SecondOrderROM(basis=V, learner=learner)
-                rom = rom.fit(data, validation=valid) if name not in ("lopinf",) else rom.fit(data)
+                rom = rom.fit(data, validation=valid)
                 fit_seconds = time.perf_counter() - tic
             fitted[(name, r)] = model if name == "galerkin" else rom
             for run, reference in tests:
@@ -234,7 +234,7 @@ def compare_ring_downs(system, rest_state, training, validation, tests, settings
                 else:
                     tic = time.perf_counter()
                     # a stateful (hysteretic) model steps by Newmark with its sliders' return mapping
-                    solution = rom.predict(np.zeros(r), run.times, inputs=reference.inputs,
+                    solution = rom.predict(run.times, reference.inputs,
                                            scheme="newmark" if rom.operators_.stateful else settings.learned_scheme)
                     seconds = time.perf_counter() - tic
                     signal = E @ (V @ np.asarray(solution.a))

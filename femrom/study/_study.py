@@ -250,7 +250,7 @@ def evaluate(rom, run: FOMRun, projection: Projection, *, extension: float,
     long_times = times[0] + run.dt * np.arange(int(round(extension * (times.size - 1))) + 1)
     with np.errstate(all="ignore"):
         # one integration over the extended window; the run's window is its first steps
-        long = rom.predict(run.q0, long_times, v0=run.v0, inputs=run.inputs.sampled(long_times))
+        long = rom.predict(long_times, run.inputs.sampled(long_times), initial=(run.q0, run.v0))
         solution = _first_steps(long, times.size)
         output_error = float("nan") if run.outputs is None else relative_error(
             run.outputs[:, columns], solution.outputs[:, columns])
@@ -281,7 +281,7 @@ def rom_costs(roms: dict, run: FOMRun, *, repeats: int = 5, min_block_seconds: f
         def block(n: int) -> float:
             times = run.times[0] + run.dt * np.arange(n + 1)
             with np.errstate(all="ignore"):
-                solution = rom.predict(run.q0, times, v0=run.v0, inputs=run.inputs.sampled(times))
+                solution = rom.predict(times, run.inputs.sampled(times), initial=(run.q0, run.v0))
             return solution.info["stepping_seconds"]
         return block
 

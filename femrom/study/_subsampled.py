@@ -119,10 +119,10 @@ def subsampled_rows(state, every=(1, 2, 5, 10), *, r: int | None = None, learner
             grid = slice(None, None, k // step)                  # its solution at the kept steps
             try:
                 with np.errstate(all="ignore"):
-                    fit = rom.predict(train.q0, train.times[::step], v0=train.v0, inputs=None if train.U is None
-                                      else train.U[:, ::step])
-                    prediction = rom.predict(test.q0, test.times[::step], v0=test.v0,
-                                             inputs=test.inputs.sampled(test.times[::step]))
+                    fit = rom.predict(train.times[::step], None if train.U is None else train.U[:, ::step],
+                                      initial=(train.q0, train.v0))
+                    prediction = rom.predict(test.times[::step], test.inputs.sampled(test.times[::step]),
+                                             initial=(test.q0, test.v0))
                     fit, prediction = _at(fit, grid), _at(prediction, grid)
             except (RuntimeError, np.linalg.LinAlgError) as exc:
                 rows.append(row | {"failed": str(exc), "train_output_error": float("inf"),

@@ -45,14 +45,19 @@ class CanonicalOpInf(Learner):
             raise ValueError(f"regularization must be >= 0, got {regularization}")
         self.regularization = float(regularization)
 
-    def fit(self, data: CanonicalData) -> "CanonicalOpInf":
-        """Fit ``A^`` from ``Q^, P^, Q^', P^'`` and the known ``F^_q, F^_p``."""
+    @staticmethod
+    def _regression(data):
         if not isinstance(data, CanonicalData):
             raise TypeError(f"CanonicalOpInf.fit takes CanonicalData, got {type(data).__name__}")
         Y = np.vstack([data.states_q, data.states_p])
         Fq = 0.0 if data.forces_q is None else data.forces_q
         Fp = 0.0 if data.forces_p is None else data.forces_p
-        R = np.vstack([data.ddt_q - Fq, data.ddt_p + Fp])
+        return Y, np.vstack([data.ddt_q - Fq, data.ddt_p + Fp])
+
+    def fit(self, data: CanonicalData, *, validation=None) -> "CanonicalOpInf":
+        """Fit ``A^`` from ``Q^, P^, Q^', P^'`` and the known ``F^_q, F^_p``; ``validation`` (CanonicalData):
+        the relative residual ``||R - A^ Y|| / ||R||`` there is ``validation_residual_``."""
+        Y, R = self._regression(data)
         if self.regularization == 0.0:
             A = np.linalg.lstsq(Y.T, R.T, rcond=None)[0].T
         else:
@@ -61,6 +66,11 @@ class CanonicalOpInf(Learner):
         self.operators_ = A
         den = np.linalg.norm(R)
         self.residual_ = float(np.linalg.norm(R - A @ Y) / den) if den > 0 else 0.0
+        self.validation_residual_ = None
+        if validation is not None:
+            Yv, Rv = self._regression(validation)
+            norm = np.linalg.norm(Rv)
+            self.validation_residual_ = float(np.linalg.norm(Rv - A @ Yv) / norm) if norm > 0 else 0.0
         return self
 
     def describe(self) -> dict:

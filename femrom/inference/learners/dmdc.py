@@ -6,6 +6,8 @@ import time
 
 import numpy as np
 
+from femrom._errors import FemromValueError
+
 from femrom.inference._io_data import InputOutputData
 from femrom.inference._learner import Learner, register_learner
 from femrom.inference._realization import KEPT_SINGULAR_VALUES
@@ -99,8 +101,17 @@ class DMDc(Learner):
         self.input_samples = input_samples
         self.operators_ = None
 
-    def fit(self, data: InputOutputData) -> "DMDc":
-        """Fit ``A, B, C, D`` from the states, inputs and outputs of ``data``."""
+    def _step_residual(self, data, Ur, A, Bs) -> float:
+        """``||X_1 - U_r (A U_r^T X_0 + B^ U_0)|| / ||X_1||`` over the step pairs of ``data``."""
+        X, U = data.states, data.inputs
+        k0 = data.step_pairs()
+        U0 = U[:, k0] if self.input_samples == "start" else np.vstack([U[:, k0], U[:, k0 + 1]])
+        X1 = X[:, k0 + 1]
+        return float(np.linalg.norm(X1 - Ur @ (A @ (Ur.T @ X[:, k0]) + Bs @ U0)) / np.linalg.norm(X1))
+
+    def fit(self, data: InputOutputData, *, validation=None) -> "DMDc":
+        """Fit ``A, B, C, D`` from the states, inputs and outputs of ``data``; ``validation``
+        (InputOutputData with states): the one-step residual there is ``validation_residual_``."""
         if not isinstance(data, InputOutputData):
             raise TypeError(f"DMDc.fit takes InputOutputData, got {type(data).__name__}")
         if data.states is None:
@@ -149,6 +160,11 @@ class DMDc(Learner):
             B0, offset = Bs[:, :m], Bs[:, m:]
             B, D = A @ offset + B0, D + C @ offset
         seconds = time.perf_counter() - tic
+        self.validation_residual_ = None
+        if validation is not None:
+            if not isinstance(validation, InputOutputData) or validation.states is None:
+                raise FemromValueError("DMDc validation data must be InputOutputData with states")
+            self.validation_residual_ = self._step_residual(validation, Ur, A, Bs)
         self.omega_singular_values_ = st
         metadata = {"method": self.method, "rank": p, "output_rank": r, "feedthrough": self.feedthrough,
                     "input_samples": self.input_samples, "step_pairs": int(N),

@@ -3,7 +3,7 @@ r"""The eigensystem realisation algorithm (ERA): a balanced first-order model fr
 from __future__ import annotations
 
 from femrom.inference._io_data import InputOutputData, MarkovParameters
-from femrom.inference._learner import Learner, register_learner
+from femrom.inference._learner import Learner, refuse_validation, register_learner
 from femrom.inference._realization import era_realization
 
 
@@ -57,8 +57,9 @@ class ERA(Learner):
         self.output_directions, self.input_directions = output_directions, input_directions
         self.operators_ = None
 
-    def fit(self, data: MarkovParameters) -> "ERA":
-        """Realise the Markov parameters ``data`` (:class:`~femrom.inference.MarkovParameters`)."""
+    def fit(self, data: MarkovParameters, *, validation=None) -> "ERA":
+        """Realise the Markov parameters ``data`` (:class:`~femrom.inference.MarkovParameters`; no validation data)."""
+        refuse_validation(self, validation)
         if isinstance(data, InputOutputData):
             raise TypeError("ERA realises Markov parameters; for input-output data use OKID, "
                             "or ERA on okid_markov_parameters(data, observer_order, count)")

@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from femrom.inference._learner import Learner, register_learner
+from femrom.inference._learner import Learner, refuse_validation, register_learner
 from femrom.inference._operators import galerkin
 
 
@@ -30,7 +30,8 @@ class GalerkinProjection(Learner):
         self.basis = np.asarray(basis, dtype=float)
         self.mass_orthonormal = bool(mass_orthonormal)
 
-    def fit(self, data=None) -> "GalerkinProjection":
+    def fit(self, data=None, *, validation=None) -> "GalerkinProjection":
+        refuse_validation(self, validation)
         self.operators_ = galerkin(self.system, self.basis, mass_orthonormal=self.mass_orthonormal)
         return self
 

@@ -61,8 +61,17 @@ class HamiltonianOpInf(Learner):
         self.shared = bool(shared)
         self.outputs_of = outputs_of
 
-    def fit(self, data: CanonicalData) -> "HamiltonianOpInf":
-        """Fit from reduced data ``Q^, P^, Q^', P^'`` and the known ``F^_q, F^_p``."""
+    @staticmethod
+    def _relative_residual(data, Dq, Dp) -> float:
+        Rp = data.ddt_q - (0.0 if data.forces_q is None else data.forces_q)
+        Rq = -data.ddt_p - (0.0 if data.forces_p is None else data.forces_p)
+        num = np.linalg.norm(Rp - Dp @ data.states_p) ** 2 + np.linalg.norm(Rq - Dq @ data.states_q) ** 2
+        den = np.linalg.norm(Rp) ** 2 + np.linalg.norm(Rq) ** 2
+        return float(np.sqrt(num / den)) if den > 0 else 0.0
+
+    def fit(self, data: CanonicalData, *, validation=None) -> "HamiltonianOpInf":
+        """Fit from reduced data ``Q^, P^, Q^', P^'`` and the known ``F^_q, F^_p``; ``validation``
+        (CanonicalData): the fitted operators' relative residual there is ``validation_residual_``."""
         if not isinstance(data, CanonicalData):
             raise TypeError(f"HamiltonianOpInf.fit takes CanonicalData, got {type(data).__name__}")
         states_q, states_p = np.asarray(data.states_q, float), np.asarray(data.states_p, float)
@@ -86,6 +95,11 @@ class HamiltonianOpInf(Learner):
             projection=diag.get("projection_error"), derivative=diag.get("derivative_error"),
             position_derivative=diag.get("position_derivative_error"),
             momentum_derivative=diag.get("momentum_derivative_error"), optimization=self.residual_)
+        self.validation_residual_ = None
+        if validation is not None:
+            if not isinstance(validation, CanonicalData):
+                raise TypeError(f"validation must be CanonicalData, got {type(validation).__name__}")
+            self.validation_residual_ = self._relative_residual(validation, Dq, Dp)
         self.output_matrix_ = None
         if data.outputs is not None:
             X = states_q if self.outputs_of == "position" else np.vstack([states_q, states_p])

@@ -273,7 +273,7 @@ class IwanLOpInf(Learner):
         return filt(Y), {n: filt(D) for n, D in blocks.items()}
 
     # -- fit -----------------------------------------------------------------------------
-    def fit(self, data, validation=None) -> "IwanLOpInf":
+    def fit(self, data, *, validation=None) -> "IwanLOpInf":
         """Learn ``K^, C^, B^`` and the sliders' stiffnesses from ``data`` (one or a list of trajectories).
 
         ``validation`` (optional data) only reports :attr:`validation_residual_`."""

@@ -6,7 +6,7 @@ import math
 import time
 
 from femrom.inference._io_data import InputOutputData
-from femrom.inference._learner import Learner, register_learner
+from femrom.inference._learner import Learner, refuse_validation, register_learner
 from dataclasses import replace
 
 import numpy as np
@@ -95,8 +95,9 @@ class OKID(Learner):
         columns = default if self.columns is None else int(self.columns)
         return hankel_blocks(rows + columns + 1, rows, columns)
 
-    def fit(self, data: InputOutputData) -> "OKID":
-        """Identify ``A, B, C, D`` from the inputs and outputs of ``data``."""
+    def fit(self, data: InputOutputData, *, validation=None) -> "OKID":
+        """Identify ``A, B, C, D`` from the inputs and outputs of ``data`` (no validation data)."""
+        refuse_validation(self, validation)
         if not isinstance(data, InputOutputData):
             raise TypeError(f"OKID.fit takes InputOutputData, got {type(data).__name__}")
         if data.outputs is None:

@@ -283,7 +283,7 @@ class SpML(Learner):
         return np.eye(r) if self.linear.mass is None else self.linear.mass
 
     # -- fit ---------------------------------------------------------------------------------
-    def fit(self, data, validation=None) -> "SpML":
+    def fit(self, data, *, validation=None) -> "SpML":
         r"""Step 1 (L-OpInf) on ``data``, then step 2 (module docstring).
 
         Parameters

@@ -1,0 +1,228 @@
+"""One scheme registry for the full and the reduced models: each scheme steps a sparse full model
+and a dense reduced one alike, declares its frequency map, and a model about a reference state
+is the model itself seen from there."""
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+from femrom import FemromError
+from femrom.fem import JenkinsForce, LocalPotential
+from femrom.inference import ERA, LagrangianOpInf, galerkin, reduce_snapshots
+from femrom.integrators import (
+    Newmark,
+    StepResult,
+    Stepper,
+    Trajectory,
+    integrate,
+    march,
+    registered_schemes,
+    time_scheme,
+)
+from femrom.scene import SecondOrderSystem
+
+SCHEMES = sorted(registered_schemes())
+
+
+def relative(A, B):
+    return float(np.linalg.norm(A - B) / np.linalg.norm(B))
+
+
+def chain(n=12, seed=3, *, nonlinear=None, damping=0.02):
+    """Fixed-fixed chain with lumped masses (central difference needs them), mass-proportional damping
+    (diagonal: central difference treats it implicitly on both the sparse and the dense path), one input."""
+    rng = np.random.default_rng(seed)
+    m = 1.0 + 0.5 * rng.random(n)
+    k = 1.0 + rng.random(n + 1)
+    K = sp.diags([k[:-1] + k[1:], -k[1:-1], -k[1:-1]], [0, 1, -1], format="csr")
+    M = sp.diags(m, format="csr")
+    B = np.zeros((n, 1))
+    B[n // 2, 0] = 1.0
+    return SecondOrderSystem(mass=M, stiffness=K, damping=None if damping is None else damping * M,
+                             input_matrix=B, nonlinear=nonlinear,
+                             output_matrix=sp.csr_matrix(np.eye(n)[[0, n - 1]]))
+
+
+def duffing_layer(n):
+    return LocalPotential.of_density("duffing", np.full(3, 0.5), dofs=[2, 5, 9], n_dofs=n, linear=0.2,
+                                     cubic=3.0, name="layer")
+
+
+@pytest.mark.parametrize("scheme", SCHEMES)
+def test_a_scheme_steps_the_full_model_and_its_exact_projection_alike(scheme):
+    """The sparse chain with a cubic spring layer, and its Galerkin model on the identity basis
+    (dense operators, the projected force): the same scheme gives the same trajectory. Both solve
+    the same equations; the two paths differ in sparse/dense summation order and in Newton's
+    stopping point (its tolerance 1e-10 relative), so 1e-8 over 400 steps of a forced, damped run."""
+    n = 12
+    system = chain(n, nonlinear=duffing_layer(n))
+    reduced = galerkin(system, np.eye(n)).system
+    assert reduced.is_dense and not system.is_dense
+    times = 0.05 * np.arange(401)
+    U = np.sin(1.1 * times)[None, :]
+    q0 = 0.3 * np.sin(np.linspace(0, np.pi, n))
+    full = march(system, scheme, times, q0, np.zeros(n), inputs=U)
+    small = march(reduced, scheme, times, q0, np.zeros(n), inputs=U)
+    assert full["path"] == small["path"] == "steps"
+    assert relative(small["q"], full["q"]) < 1e-8, relative(small["q"], full["q"])
+    assert full["newton_iterations"] > 0 or scheme == "central_difference"
+
+
+@pytest.mark.parametrize("scheme", SCHEMES)
+def test_frequency_map_is_the_phase_the_scheme_steps_an_undamped_mode_at(scheme):
+    """An undamped mode q'' + w^2 q = 0 stepped at w dt = 0.6 for 2000 steps: the discrete solution
+    is cos(Omega t_k) with Omega = scheme.frequency(w, dt) (to round-off; a wrong map, even by the
+    scheme's own O(dt^2) phase error of 1.5 %, misses by far more), and continuous_frequency inverts it."""
+    w, dt = 2.0, 0.3
+    system = SecondOrderSystem(mass=np.eye(1), stiffness=np.array([[w * w]]))
+    times = dt * np.arange(2001)
+    run = march(system, scheme, times, np.ones(1), np.zeros(1))
+    step = time_scheme(scheme)
+    Omega = step.frequency(w, dt)
+    assert abs(Omega - w) > 1e-3 * w                          # the map is not the identity here
+    if scheme == "generalized_alpha":
+        # its third (spurious) root is excited by the start: the response is cos(Omega t) plus a
+        # small non-oscillating part; the period is checked on a long run in the next test
+        assert np.max(np.abs(run["q"][0] - np.cos(Omega * times))) < 0.05
+    else:
+        np.testing.assert_allclose(run["q"][0], np.cos(Omega * times), atol=1e-9)
+    assert abs(step.continuous_frequency(Omega, dt) - w) < 1e-12 * w
+
+
+def test_generalized_alpha_frequency_matches_a_measured_period():
+    """Generalized-alpha's map (from its step map's eigenvalues) against the zero crossings of a run."""
+    w, dt = 2.0, 0.05
+    system = SecondOrderSystem(mass=np.eye(1), stiffness=np.array([[w * w]]))
+    times = dt * np.arange(40001)
+    step = time_scheme("generalized_alpha", spectral_radius=1.0)
+    q = march(system, step, times, np.ones(1), np.zeros(1))["q"][0]
+    crossings = np.flatnonzero(np.diff(np.sign(q)) != 0)
+    # linear interpolation of the crossing times
+    tc = times[crossings] - q[crossings] * dt / (q[crossings + 1] - q[crossings])
+    measured = np.pi * (tc.size - 1) / (tc[-1] - tc[0])
+    assert abs(measured - step.frequency(w, dt)) < 1e-7 * w
+
+
+def test_central_difference_refuses_a_consistent_mass_and_too_large_a_step():
+    n = 6
+    K = sp.diags([2.0 * np.ones(n), -np.ones(n - 1), -np.ones(n - 1)], [0, 1, -1], format="csr")
+    M = sp.diags([4.0 * np.ones(n), np.ones(n - 1), np.ones(n - 1)], [0, 1, -1], format="csr") / 6.0
+    consistent = SecondOrderSystem(mass=M, stiffness=K)
+    reason = time_scheme("central_difference").supports(consistent)
+    assert reason is not None and "diagonal (lumped) mass" in reason
+    with pytest.raises(FemromError, match="cannot step this model: the full model needs a diagonal"):
+        march(consistent, "central_difference", np.linspace(0, 1, 11), np.zeros(n), np.zeros(n))
+    # a dense model with the same (consistent) mass is stepped: its (M + h C / 2) is factorised
+    dense = SecondOrderSystem(mass=M.toarray(), stiffness=K.toarray())
+    assert time_scheme("central_difference").supports(dense) is None
+    with pytest.raises(FemromError, match="exceeds the Stoermer-Verlet bound"):
+        march(dense, "verlet", np.linspace(0, 10, 6), np.zeros(n), np.zeros(n))
+
+
+def test_aliases_and_unknown_names():
+    assert type(time_scheme("midpoint")) is type(time_scheme("implicit_midpoint"))
+    assert type(time_scheme("verlet")) is type(time_scheme("central_difference"))
+    with pytest.raises(FemromError, match="unknown time scheme 'rk4'; valid: central_difference, "
+                                          "discrete_gradient, generalized_alpha, implicit_midpoint, newmark"):
+        time_scheme("rk4")
+
+
+def test_discrete_gradient_conserves_the_energy_of_a_sparse_full_model():
+    """The full (sparse) chain with a quartic spring layer and no damping or input: the discrete
+    gradient keeps v^T M v / 2 + q^T K q / 2 + U(q) to Newton's tolerance (1e-10 of the step's
+    velocity) over 2000 large steps, where the midpoint rule, symplectic but not energy-exact for a
+    quartic potential, drifts by more than 1e-6."""
+    n = 12
+    layer = LocalPotential.of_density("duffing", np.full(3, 0.5), dofs=[2, 5, 9], n_dofs=n, linear=0.0,
+                                      cubic=40.0, name="layer")
+    system = SecondOrderSystem(mass=chain(n).mass, stiffness=chain(n).stiffness, nonlinear=layer)
+    times = 0.4 * np.arange(2001)
+    q0 = 0.8 * np.sin(np.linspace(0, np.pi, n))
+    energy = {}
+    for scheme in ("discrete_gradient", "implicit_midpoint"):
+        run = march(system, scheme, times, q0, np.zeros(n))
+        energy[scheme] = np.array([system.energy(run["q"][:, k], run["v"][:, k]) for k in range(times.size)])
+    E0 = energy["discrete_gradient"][0]
+    assert np.max(np.abs(energy["discrete_gradient"] - E0)) < 1e-8 * E0
+    assert np.max(np.abs(energy["implicit_midpoint"] - E0)) > 1e-6 * E0
+
+
+def test_a_model_about_a_reference_is_the_model_seen_from_there():
+    """A chain with a constant load and grounded Jenkins sliders, moved to a reference q_0 with the
+    sliders' state there: the model about q_0 started at x = 0 follows the original started at q_0,
+    x(t) = q(t) - q_0, to the solvers' round-off (same scheme, same equations in shifted variables),
+    and so does its Galerkin model on the identity basis, which keeps the load f_0 - K q_0."""
+    n = 10
+    joint = JenkinsForce(np.array([2.0, 3.0]), np.array([0.05, 0.08]), n, dofs=[3, 7], name="joint")
+    rng = np.random.default_rng(0)
+    base = chain(n, nonlinear=joint)
+    system = SecondOrderSystem(mass=base.mass, stiffness=base.stiffness, damping=base.damping,
+                               input_matrix=base.input_matrix, nonlinear=joint, load=0.1 * rng.standard_normal(n),
+                               output_matrix=base.output_matrix)
+    q0 = 0.2 * rng.standard_normal(n)
+    state0 = joint.commit(q0, np.zeros(n), joint.initial_state())
+    times = 0.05 * np.arange(301)
+    U = np.sin(2.0 * times)[None, :]
+    original = march(system, Newmark(), times, q0, np.zeros(n), inputs=U, state0=state0)
+    about = system.about(q0)
+    assert np.allclose(about.load, system.load - system.stiffness @ q0)
+    shifted = march(about, Newmark(), times, np.zeros(n), np.zeros(n), inputs=U, state0=state0)
+    np.testing.assert_allclose(shifted["q"] + q0[:, None], original["q"], atol=1e-12)
+    projected = galerkin(system, np.eye(n), reference=q0).system
+    reduced = march(projected, Newmark(), times, np.zeros(n), np.zeros(n), inputs=U, state0=state0)
+    np.testing.assert_allclose(reduced["q"] + q0[:, None], original["q"], atol=1e-10)
+
+
+def test_stepper_and_integrate_agree_on_a_full_model():
+    """The one-step-at-a-time Stepper on the sparse chain with sliders equals the streaming driver
+    under the same input (samples of the same sine: Newmark samples it at the step's end)."""
+    n = 10
+    joint = JenkinsForce(np.array([2.0, 3.0]), np.array([0.05, 0.08]), n, dofs=[3, 7], name="joint")
+    system = chain(n, nonlinear=joint)
+    dt, steps = 0.05, 200
+    driven = SecondOrderSystem(mass=system.mass, stiffness=system.stiffness, damping=system.damping,
+                               input_matrix=system.input_matrix, nonlinear=joint,
+                               inputs=lambda t: np.array([np.sin(2.0 * t)]))
+    q0 = 0.3 * np.ones(n)
+    trajectory = Trajectory()
+    integrate(driven, Newmark(), q0, np.zeros(n), dt, steps, consumers=[trajectory])
+    stepper = Stepper(system, "newmark", dt, q0, np.zeros(n), u0=np.zeros(1))
+    Q = np.column_stack([q0] + [(stepper.step([np.sin(2.0 * dt * k)]), stepper.q)[1]
+                                for k in range(1, steps + 1)])
+    # the driver's clock accumulates t + dt, the stepper's samples are at k dt: 1e-15 apart
+    assert relative(Q, trajectory.q) < 1e-10
+
+
+def test_step_result_at_rest():
+    rest = StepResult.at_rest(3, state=np.array([0.5]))
+    assert rest.step == 0 and rest.t == 0.0 and not rest.q.any() and not rest.v.any() and not rest.a.any()
+    assert rest.state[0] == 0.5
+    with pytest.raises(FemromError, match="q has shape"):
+        StepResult.at_rest(3, q=np.ones(4))
+
+
+def test_validation_data_are_judged_or_refused():
+    """L-OpInf reports its residual on held-out data: round-off on another run of the same linear
+    system (exact derivatives), percents on a run of a 10 % stiffer one. ERA has nothing to judge."""
+    n = 8
+    system = chain(n, damping=0.02)
+    m = system.mass.diagonal()
+    V = np.linalg.qr(np.random.default_rng(1).standard_normal((n, n)))[0] / np.sqrt(m)[:, None]   # V^T M V = I
+
+    def data(stiffness_scale, seed):
+        model = SecondOrderSystem(mass=system.mass, stiffness=stiffness_scale * system.stiffness,
+                                  damping=system.damping, input_matrix=system.input_matrix)
+        times = 0.02 * np.arange(1501)
+        U = np.sin((1.3 + seed) * times)[None, :] + 0.5 * np.cos(3.1 * times)[None, :]
+        q0 = np.random.default_rng(seed).standard_normal(n)
+        run = march(model, Newmark(), times, q0, np.zeros(n), inputs=U)
+        return reduce_snapshots(V, run["q"], 0.02, product=system.mass, velocities=run["v"],
+                                accelerations=run["a"], derivatives="stored", inputs=U)
+
+    learner = LagrangianOpInf(["damping"]).fit(data(1.0, 0), validation=data(1.0, 1))
+    assert learner.validation_residual_ < 1e-8
+    learner = LagrangianOpInf(["damping"]).fit(data(1.0, 0), validation=data(1.1, 1))
+    assert learner.validation_residual_ > 1e-2
+    assert LagrangianOpInf(["damping"]).fit(data(1.0, 0)).validation_residual_ is None
+    with pytest.raises(FemromError, match="ERA does not use validation data"):
+        ERA(order=2).fit(None, validation=object())
