@@ -70,6 +70,7 @@ from femrom.integrators.schemes.generalized_alpha import GeneralizedAlpha
 from femrom.integrators.schemes.implicit_midpoint import ImplicitMidpoint
 from femrom.integrators.schemes.newmark import Newmark, NewmarkAverageAcceleration, newmark_frequencies
 from femrom.integrators._simulate import SimulationResult, simulate
+from femrom.integrators._shaker import Shaker
 from femrom.integrators._sine_plants import StepperPlant, SystemPlant
 from femrom.integrators._stability import MaxFrequency, bound_max_frequency, estimate_max_frequency
 from femrom.integrators._steady_state import SteadyStateCriterion, SteadyStateMonitor, first_harmonic
@@ -95,7 +96,7 @@ __all__ = [
     "Trajectory", "bound_max_frequency", "estimate_max_frequency", "integrate", "integrate_canonical",
     "iterate", "newmark_frequencies", "register_scheme", "scheme_for", "simulate", "solve_newton",
     "LinearParts", "Scheme", "Stepper", "march", "newton_loop", "registered_schemes", "run_linear",
-    "input_sample", "sampled_forcing", "time_scheme", "uniform_step", "verlet_bound",
+    "Shaker", "input_sample", "sampled_forcing", "time_scheme", "uniform_step", "verlet_bound",
     "FrequencyResponse", "Peak", "SteadyStateCriterion", "SteadyStateMonitor", "SteadyStateWarning",
     "SteppedSine", "SteppedSineResult", "StepperPlant", "SystemPlant", "first_harmonic", "parabolic_peak",
     "prewarped_frequency",

@@ -104,7 +104,7 @@ def input_sample(u, m: int) -> np.ndarray:
     """(m,) ndarray of one input sample (zeros for ``None``); one clear error for a wrong size."""
     if u is None:
         return np.zeros(m)
-    u = np.atleast_1d(np.asarray(u, dtype=float)).ravel()
+    u = np.array(u, dtype=float, ndmin=1).ravel()     # a copy: a caller may reuse its array in place
     if u.size != m:
         raise FemromValueError(f"input has {u.size} entries, expected {m}")
     return u
@@ -320,6 +320,12 @@ class Stepper:
     @property
     def n_inputs(self) -> int:
         return 0 if self.input_matrix is None else self.input_matrix.shape[1]
+
+    @property
+    def acceleration(self) -> np.ndarray:
+        """(n,) ``a`` at the current state: the carried one, else from the equation of motion
+        under the last input sample (a scheme whose linear step map carries ``[q; v]``)."""
+        return self.a if self.a is not None else self._acceleration(self.force(self.u))
 
     def force(self, u) -> np.ndarray:
         """(n,) ``F = B u + f_0``."""

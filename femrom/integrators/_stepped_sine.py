@@ -53,14 +53,22 @@ class SteadyStateWarning(RuntimeWarning):
     """A frequency reached ``max_periods`` before its response was steady."""
 
 
-def prewarped_frequency(frequency_hz, steps_per_period: int):
-    r"""The frequency to drive average acceleration at so that it responds as at ``frequency_hz``.
+def prewarped_frequency(frequency_hz, steps_per_period: int, scheme=None):
+    r"""The frequency to drive a scheme at so that it responds as at ``frequency_hz``.
 
-    ``f_s = f (pi / N) / tan(pi / N)`` with ``N`` steps per period of ``f_s``: then
-    ``(2 / h) tan(omega_s h / 2) = omega`` (``h = 1 / (N f_s)``). Float or ndarray alike.
+    A scheme steps a mode of frequency ``omega`` at ``Omega(omega h) / h`` (its
+    :meth:`~femrom.integrators.Scheme.frequency`); driven at ``f_s`` with ``N`` steps a
+    period (``Omega h = 2 pi / N``) a linear model responds as the continuous one at
+    ``omega = continuous_frequency(2 pi / N, 1) N f_s``. Hence ``f_s = 2 pi f / (N
+    continuous_frequency(2 pi / N, 1))``; for average acceleration (``scheme=None``, the
+    trapezoidal rule) ``f_s = f (pi / N) / tan(pi / N)``. Float or ndarray alike.
     """
-    x = math.pi / int(steps_per_period)
-    return np.asarray(frequency_hz, dtype=float) * (x / math.tan(x))
+    N = int(steps_per_period)
+    if scheme is None:
+        x = math.pi / N
+        return np.asarray(frequency_hz, dtype=float) * (x / math.tan(x))
+    g = float(scheme.continuous_frequency(2.0 * math.pi / N, 1.0))
+    return np.asarray(frequency_hz, dtype=float) * (2.0 * math.pi / (N * g))
 
 
 def parabolic_peak(x, y) -> tuple[float, float, int, bool]:
@@ -293,12 +301,16 @@ class SteppedSine:
             (its ``converged`` entry is False; the last period is still reported).
         """
         amplitudes = _force_amplitudes(force_amplitudes)
-        if self.prewarp and not getattr(plant, "tustin", False):
-            raise ValueError("prewarp=True needs a plant stepped by Newmark average acceleration "
-                             "(plant.tustin is False); pass prewarp=False")
+        scheme = getattr(plant, "scheme", None)
+        tustin = getattr(plant, "tustin", False)
+        if self.prewarp and not (hasattr(scheme, "continuous_frequency") or tustin):
+            raise ValueError("prewarp=True needs a plant whose scheme has a frequency map (plant.scheme) "
+                             "or that is stepped by Newmark average acceleration (plant.tustin); "
+                             "pass prewarp=False")
         N, criterion = int(self.steps_per_period), self.steady_state
-        driven = (prewarped_frequency(self.frequencies_hz, N) if self.prewarp
-                  else np.asarray(self.frequencies_hz))
+        driven = (prewarped_frequency(self.frequencies_hz, N,
+                                      scheme if hasattr(scheme, "continuous_frequency") else None)
+                  if self.prewarp else np.asarray(self.frequencies_hz))
         levels = []
         for F in amplitudes:
             plant.reset()
