@@ -26,6 +26,7 @@ from dataclasses import dataclass
 import cvxpy as cp
 import numpy as np
 
+from femrom._errors import FemromRuntimeError, FemromValueError
 from femrom._registry import Registry
 
 #: The QP formulations by name (sorted).
@@ -70,10 +71,10 @@ class CvxpyFormulation(QPFormulation):
     def compiled(self) -> None:
         """Check that the problem is DPP (compiled once) and that the solver is there."""
         if not self.problem.is_dcp(dpp=True):
-            raise RuntimeError(f"formulation {self.name!r} is not DPP: cvxpy would recompile the QP every solve")
+            raise FemromRuntimeError(f"formulation {self.name!r} is not DPP: cvxpy would recompile the QP every solve")
         if self.config.solver not in cp.installed_solvers():
-            raise ValueError(f"solver {self.config.solver!r} is not installed for cvxpy; "
-                             f"installed: {', '.join(cp.installed_solvers())}")
+            raise FemromValueError(f"solver {self.config.solver!r} is not installed for cvxpy; "
+                                   f"installed: {', '.join(cp.installed_solvers())}")
         self._options = solve_options(self.config)
 
     def plan(self) -> np.ndarray | None:
@@ -111,7 +112,7 @@ def solve_options(config) -> dict:
 def register_formulation(cls: type[QPFormulation]) -> type[QPFormulation]:
     """Class decorator: ``LinearMPC(..., formulation=cls.name)`` builds its QP with ``cls``."""
     if not cls.name:
-        raise ValueError(f"formulation class {cls.__name__} has no name")
+        raise FemromValueError(f"formulation class {cls.__name__} has no name")
     QP_FORMULATIONS.add(cls.name, cls)
     return cls
 

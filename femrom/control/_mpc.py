@@ -17,12 +17,13 @@ import warnings
 
 import numpy as np
 
+from femrom._errors import FemromRuntimeError, FemromValueError
 from femrom.control._formulation import QP_FORMULATIONS
 from femrom.control._problem import MPCConfig, MPCProblem, vector
 from femrom.rom import DiscreteStateSpace
 
 
-class MPCError(RuntimeError):
+class MPCError(FemromRuntimeError):
     """A QP solve failed and the controller's policy is ``on_failure="raise"``."""
 
 
@@ -136,9 +137,9 @@ class LinearMPC:
         if R.ndim == 1 and R.shape == (p,):
             R = np.repeat(R[:, None], N, axis=1)
         if R.shape != (p, N):
-            raise ValueError(f"reference has shape {R.shape}, expected ({p}, {N}) (outputs, horizon) or ({p},)")
+            raise FemromValueError(f"reference has shape {R.shape}, expected ({p}, {N}) (outputs, horizon) or ({p},)")
         if not np.all(np.isfinite(R)):
-            raise ValueError("reference has non-finite entries")
+            raise FemromValueError("reference has non-finite entries")
         u_prev = vector(u_previous, m, "u_previous")
         w_z = vector(state_offset, n, "state_offset")
         w_y = vector(output_offset, p, "output_offset")

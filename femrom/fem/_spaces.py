@@ -13,11 +13,12 @@ import numpy as np
 import scipy.sparse as sp
 from skfem import Basis, LinearForm
 
+from femrom._errors import FemromValueError
 from femrom.fem import _elasticity, _line, _vector_ops
 from femrom.mesh import boundary_facets, subdomain_elements
 
 
-class SpaceError(ValueError):
+class SpaceError(FemromValueError):
     """A request a space cannot serve (unknown component, unsupported load)."""
 
 

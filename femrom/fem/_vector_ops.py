@@ -23,6 +23,7 @@ import scipy.sparse as sp
 import skfem
 from skfem.helpers import dot
 
+from femrom._errors import FemromValueError
 from femrom.fem._elasticity import _scalar_element
 from femrom.mesh import MeshError, boundary_facets, subdomain_elements
 
@@ -51,7 +52,7 @@ def _named_elements(mesh, name: str) -> np.ndarray:
 
 def _check_component(component: int) -> int:
     if component not in (0, 1, 2):
-        raise ValueError(f"component must be 0, 1 or 2 (x, y, z), got {component!r}")
+        raise FemromValueError(f"component must be 0, 1 or 2 (x, y, z), got {component!r}")
     return int(component)
 
 
@@ -85,7 +86,7 @@ def surface_traction(basis, boundary: str, traction) -> np.ndarray:
     _scalar_element(basis)
     t = np.asarray(traction, dtype=float)
     if t.shape != (3,):
-        raise ValueError(f"traction must have shape (3,), got {t.shape}")
+        raise FemromValueError(f"traction must have shape (3,), got {t.shape}")
     fb = _facet_basis(basis, _named_facets(basis.mesh, boundary))
 
     @skfem.LinearForm
@@ -124,8 +125,8 @@ def surface_pressure(basis, boundary: str, pressure: float = 1.0) -> np.ndarray:
     facets = _named_facets(basis.mesh, boundary)
     interior = basis.mesh.f2t[1, facets] >= 0
     if np.any(interior):
-        raise ValueError(f"boundary {boundary!r} has {int(interior.sum())} interior facets; "
-                         "pressure needs outer-boundary facets (outward normal)")
+        raise FemromValueError(f"boundary {boundary!r} has {int(interior.sum())} interior facets; "
+                               "pressure needs outer-boundary facets (outward normal)")
     fb = _facet_basis(basis, facets)
     p = float(pressure)
 
@@ -164,7 +165,7 @@ def point_load(basis, point, force, *, snap_to_vertex: bool = True) -> np.ndarra
     x0 = np.asarray(point, dtype=float)
     F = np.asarray(force, dtype=float)
     if x0.shape != (3,) or F.shape != (3,):
-        raise ValueError(f"point and force must have shape (3,), got {x0.shape} and {F.shape}")
+        raise FemromValueError(f"point and force must have shape (3,), got {x0.shape} and {F.shape}")
     if snap_to_vertex:
         vertex = int(np.argmin(np.sum((basis.mesh.p - x0[:, None]) ** 2, axis=0)))
         f = np.zeros(basis.N)
@@ -201,13 +202,13 @@ def probe_rows(basis, points, component: int) -> sp.csr_matrix:
     c = _check_component(component)
     x = np.atleast_2d(np.asarray(points, dtype=float))
     if x.ndim != 2 or x.shape[1] != 3:
-        raise ValueError(f"points must have shape (p, 3), got {np.shape(points)}")
+        raise FemromValueError(f"points must have shape (p, 3), got {np.shape(points)}")
     try:
         P = basis.probes(x.T).tocsr()
     except ValueError as err:
         lo, hi = basis.mesh.p.min(axis=1), basis.mesh.p.max(axis=1)
-        raise ValueError(f"a probe point lies outside the mesh (bounding box {lo} to {hi})"
-                         ) from err
+        raise FemromValueError(f"a probe point lies outside the mesh (bounding box {lo} to {hi})"
+                               ) from err
     # skfem stacks the rows component-major: row c * p + k is u_c(x_k).
     n = x.shape[0]
     return P[c * n:(c + 1) * n]
@@ -248,17 +249,17 @@ def nearest_node_rows(basis, points, component: int, nodes: int, *, tree=None) -
     c = _check_component(component)
     x = np.atleast_2d(np.asarray(points, dtype=float))
     if x.ndim != 2 or x.shape[1] != 3 or not np.all(np.isfinite(x)):
-        raise ValueError(f"points must be finite, of shape (p, 3), got {np.shape(points)}")
+        raise FemromValueError(f"points must be finite, of shape (p, 3), got {np.shape(points)}")
     tree = node_tree(basis) if tree is None else tree
     locations = tree.data
     if isinstance(nodes, bool) or not isinstance(nodes, (int, np.integer)) or not 1 <= nodes <= len(locations):
-        raise ValueError(f"nodes must be a whole number in [1, {len(locations)}], got {nodes!r}")
+        raise FemromValueError(f"nodes must be a whole number in [1, {len(locations)}], got {nodes!r}")
     lo, hi = locations.min(axis=0), locations.max(axis=0)
     pad = 1e-9 * float(np.max(hi - lo))
     outside = np.flatnonzero(np.any((x < lo - pad) | (x > hi + pad), axis=1))
     if outside.size:
-        raise ValueError(f"point {x[outside[0]].tolist()} lies outside the mesh (bounding box "
-                         f"{lo.tolist()} to {hi.tolist()})")
+        raise FemromValueError(f"point {x[outside[0]].tolist()} lies outside the mesh (bounding box "
+                               f"{lo.tolist()} to {hi.tolist()})")
     _, nearest = tree.query(x, k=int(nodes))
     nearest = np.asarray(nearest).reshape(x.shape[0], int(nodes))
     rows = np.repeat(np.arange(x.shape[0]), int(nodes))
@@ -302,7 +303,7 @@ def average_rows(basis, region: str, component: int) -> sp.csr_matrix:
     in_boundaries = region in (mesh.boundaries or {})
     in_subdomains = region in (mesh.subdomains or {})
     if in_boundaries and in_subdomains:
-        raise ValueError(f"{region!r} names both a boundary and a subdomain; rename one")
+        raise FemromValueError(f"{region!r} names both a boundary and a subdomain; rename one")
     if in_boundaries:
         region_basis = _facet_basis(basis, _named_facets(mesh, region))
     elif in_subdomains:
@@ -385,7 +386,7 @@ def dirichlet_dofs(basis, boundaries: str | Iterable[str],
     names = [boundaries] if isinstance(boundaries, str) else list(boundaries)
     comps = sorted({_check_component(c) for c in components})
     if not names or not comps:
-        raise ValueError("need at least one boundary name and one component")
+        raise FemromValueError("need at least one boundary name and one component")
     facets = np.unique(np.concatenate([_named_facets(basis.mesh, name) for name in names]))
     dofs = np.asarray(basis.get_dofs(facets).flatten(), dtype=np.int64)
     return np.unique(dofs[np.isin(dofs % 3, comps)])

@@ -82,6 +82,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from femrom._errors import FemromValueError
 from femrom.inference._ipm import blas_threads, gap_bound, relative_gap, smallest_eigenvalue, solve_ipm
 from femrom.inference._problem import GramProblem
 
@@ -162,7 +163,7 @@ class FastOptions:
 
     def __post_init__(self):
         if self.method not in METHODS:
-            raise ValueError(f"unknown method {self.method!r}; valid: {METHODS}")
+            raise FemromValueError(f"unknown method {self.method!r}; valid: {METHODS}")
 
 
 def solve_fast(problem: GramProblem, options: FastOptions = FastOptions()):

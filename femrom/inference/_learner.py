@@ -19,6 +19,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any, ClassVar
 
+from femrom._errors import FemromValueError
 from femrom._registry import Registry
 
 #: The learners by short name (sorted).
@@ -87,7 +88,7 @@ class Regularization(Mapping):
         values = {"default": default, **weights}
         for name, value in values.items():
             if not float(value) >= 0:
-                raise ValueError(f"regularization {name} must be >= 0, got {value}")
+                raise FemromValueError(f"regularization {name} must be >= 0, got {value}")
         self.default = float(default)
         self._weights = {k: float(v) for k, v in weights.items()}
 

@@ -21,6 +21,7 @@ import time
 
 import numpy as np
 
+from femrom._errors import FemromRuntimeError, FemromValueError
 from femrom.inference._problem import GramProblem
 
 #: cvxpy solvers this reference accepts.
@@ -51,7 +52,7 @@ def solve_conic(problem: GramProblem, solver: str = "CLARABEL", **options):
 
     solver = solver.upper()
     if solver not in CONIC_SOLVERS:
-        raise ValueError(f"unknown conic solver {solver!r}; valid: {CONIC_SOLVERS}")
+        raise FemromValueError(f"unknown conic solver {solver!r}; valid: {CONIC_SOLVERS}")
     tic = time.perf_counter()
     scaled, unscale, _ = problem.scaled()
     L, Z, _ = scaled.factor()
@@ -72,7 +73,7 @@ def solve_conic(problem: GramProblem, solver: str = "CLARABEL", **options):
         options.setdefault("max_iters", 100_000)
     program.solve(solver=solver, **options)
     if X.value is None:
-        raise RuntimeError(f"{solver} returned no solution (status {program.status!r})")
+        raise FemromRuntimeError(f"{solver} returned no solution (status {program.status!r})")
     Xs = np.asarray(X.value, dtype=float)
     # interior-point iterates meet the cone only to the solver's tolerance:
     # clip onto it so every returned model satisfies its constraints exactly

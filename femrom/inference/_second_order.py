@@ -32,6 +32,7 @@ from typing import ClassVar
 
 import numpy as np
 
+from femrom._errors import FemromTypeError, FemromValueError
 from femrom.inference._data import SecondOrderData, concatenate
 from femrom.inference._fast import FastOptions, solve_fast
 from femrom.inference._learner import Learner, Regularization
@@ -86,8 +87,8 @@ def system_terms(system, basis: np.ndarray | None = None, *, known_forces: bool 
                 terms.append(term)
             elif term.structure == "known" and known_forces:
                 if basis is None:
-                    raise ValueError(f"the system has a {effect!r} effect: for_system needs the "
-                                     "basis to project its known force")
+                    raise FemromValueError(f"the system has a {effect!r} effect: for_system needs the "
+                                           "basis to project its known force")
                 terms.append(term.galerkin(system, basis))
     return terms
 
@@ -137,7 +138,7 @@ class SecondOrderLearner(Learner):
         if isinstance(terms, (str, type, ReducedTerm)):
             terms = (terms,)
         if solver.lower() not in SOLVERS:
-            raise ValueError(f"unknown solver {solver!r}; valid: {SOLVERS}")
+            raise FemromValueError(f"unknown solver {solver!r}; valid: {SOLVERS}")
         self.learned_terms: list[type[ReducedTerm]] = []
         self.known_terms: list[ReducedTerm] = []
         for item in terms:
@@ -146,15 +147,15 @@ class SecondOrderLearner(Learner):
                 continue
             cls = term_class(item) if isinstance(item, str) else item
             if not (isinstance(cls, type) and issubclass(cls, ReducedTerm)):
-                raise TypeError(f"terms holds {item!r}: give term names, term classes or known term instances")
+                raise FemromTypeError(f"terms holds {item!r}: give term names, term classes or known term instances")
             if not cls.learnable:
-                raise ValueError(f"term {cls.name!r} is not learned from data; pass a known instance of it")
+                raise FemromValueError(f"term {cls.name!r} is not learned from data; pass a known instance of it")
             if cls.name in ("stiffness", "output"):
                 continue                            # always there (the output map: with output data)
             self.learned_terms.append(cls)
         names = [c.name for c in self.learned_terms] + [t.name for t in self.known_terms]
         if len(set(names)) != len(names):
-            raise ValueError(f"each term may be named once, got {names}")
+            raise FemromValueError(f"each term may be named once, got {names}")
         self.regularization = Regularization.of(regularization)
         self.solver = solver.lower()
         self.mass = None if mass is None else np.asarray(mass, dtype=float)
@@ -182,8 +183,8 @@ class SecondOrderLearner(Learner):
         """
         system = getattr(system, "system", system)
         if "terms" in options or "damping" in options:
-            raise TypeError(f"for_system sets the terms from the system's effects; "
-                            f"use {cls.__name__}(terms=...) to choose them by hand")
+            raise FemromTypeError(f"for_system sets the terms from the system's effects; "
+                                  f"use {cls.__name__}(terms=...) to choose them by hand")
         return cls(system_terms(system, basis), **options)
 
     # -- views -------------------------------------------------------------------------
@@ -216,8 +217,8 @@ class SecondOrderLearner(Learner):
         linear = [t for t in self.known_terms if hasattr(t, "matrix")]
         if data.nonlinear_forces is not None:
             if not forces:
-                raise ValueError("the data carry nonlinear_forces but the learner has no known force term "
-                                 "to pair them with (name one in terms=, or use for_system)")
+                raise FemromValueError("the data carry nonlinear_forces but the learner has no known force term "
+                                       "to pair them with (name one in terms=, or use for_system)")
             Y = Y + data.nonlinear_forces
         else:
             for term in forces:
@@ -242,7 +243,7 @@ class SecondOrderLearner(Learner):
                 "structure argument breaks; pass mass=V^T M V or use a mass-orthonormal basis",
                 UserWarning, stacklevel=3)
         if not any(np.any(D) for D in blocks_data):
-            raise ValueError(f"{type(self).__name__}: every snapshot of the data is zero: nothing to learn from")
+            raise FemromValueError(f"{type(self).__name__}: every snapshot of the data is zero: nothing to learn from")
         unknowns, columns = sum(D.shape[0] for D in blocks_data), Y.shape[1]
         if columns < unknowns and not any(self.regularization[t.name] > 0 for t in self._learned(data)):
             warnings.warn(
@@ -253,8 +254,8 @@ class SecondOrderLearner(Learner):
         for term, D in zip(self._learned(data), blocks_data):
             structure = _BLOCKS.get(term.structure) if self.structured else "free"
             if structure is None:
-                raise ValueError(f"term {term.name!r} of structure {term.structure!r} cannot be learned "
-                                 f"by {type(self).__name__}")
+                raise FemromValueError(f"term {term.name!r} of structure {term.structure!r} cannot be learned "
+                                       f"by {type(self).__name__}")
             shift = 0.0
             if structure == "psd" and term.structure == "spd":
                 shift = self.stiffness_margin * np.linalg.norm(Y) / max(np.linalg.norm(D), np.finfo(float).tiny)

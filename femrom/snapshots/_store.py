@@ -20,6 +20,7 @@ import h5py
 import numpy as np
 
 import femrom
+from femrom._errors import FemromTypeError, FemromValueError
 from femrom.fem import Condensation
 from femrom.integrators import StepResult, scheme_for
 from femrom.snapshots import _format, _journal
@@ -33,8 +34,8 @@ def split_model(model_or_system):
         return model_or_system, model_or_system.system
     if hasattr(model_or_system, "mass") and hasattr(model_or_system, "n_dofs"):
         return None, model_or_system
-    raise TypeError(f"expected a FullOrderModel or a SecondOrderSystem, got "
-                    f"{type(model_or_system).__name__}")
+    raise FemromTypeError(f"expected a FullOrderModel or a SecondOrderSystem, got "
+                          f"{type(model_or_system).__name__}")
 
 
 def trajectory_name(trajectory) -> str:
@@ -51,10 +52,10 @@ def _state_fields(model, system, fields) -> tuple[str, ...]:
     fields = tuple(dict.fromkeys(fields))
     unknown = [f for f in fields if f not in _format.STATE_FIELDS]
     if unknown:
-        raise ValueError(f"unknown snapshot field {unknown[0]!r}; valid: "
-                         f"{', '.join(_format.STATE_FIELDS)}")
+        raise FemromValueError(f"unknown snapshot field {unknown[0]!r}; valid: "
+                               f"{', '.join(_format.STATE_FIELDS)}")
     if "q" not in fields:
-        raise ValueError("a snapshot store always keeps 'q'")
+        raise FemromValueError("a snapshot store always keeps 'q'")
     return tuple(f for f in _format.STATE_FIELDS if f in fields)
 
 
@@ -504,7 +505,7 @@ class SnapshotStore:
         """``(dataset key, block_steps, trajectory names)``, checked."""
         block_steps = int(block_steps)
         if block_steps < 1:
-            raise ValueError(f"block_steps must be >= 1, got {block_steps}")
+            raise FemromValueError(f"block_steps must be >= 1, got {block_steps}")
         names = self.trajectories if trajectories is None else \
             tuple(trajectory_name(t) for t in trajectories)
         return self.field_key(field), block_steps, names

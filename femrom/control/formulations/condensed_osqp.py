@@ -19,6 +19,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
+from femrom._errors import FemromValueError
 from femrom.control._formulation import QPFormulation, QPSolution, register_formulation
 from femrom.control._problem import CondensedQP
 
@@ -37,7 +38,7 @@ class CondensedOSQPFormulation(QPFormulation):
     def __init__(self, problem, config):
         super().__init__(problem, config)
         if config.solver != "OSQP":
-            raise ValueError(f"formulation 'condensed_osqp' solves with OSQP only, got solver={config.solver!r}")
+            raise FemromValueError(f"formulation 'condensed_osqp' solves with OSQP only, got solver={config.solver!r}")
         import osqp
 
         self.qp = CondensedQP.from_problem(problem)

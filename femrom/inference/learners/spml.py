@@ -9,6 +9,7 @@ from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 
+from femrom._errors import FemromTypeError, FemromValueError
 from femrom._progress import Progress
 from femrom.inference._data import SecondOrderData, concatenate
 from femrom.inference._learner import Learner, register_learner
@@ -128,19 +129,19 @@ class SpMLConfig:
         object.__setattr__(self, "dissipation_widths", tuple(int(w) for w in self.dissipation_widths))
         bad = [d for d in self.potential_degrees if d not in (3, 4)]
         if bad or len(set(self.potential_degrees)) != len(self.potential_degrees):
-            raise ValueError(f"SpMLConfig.potential_degrees must be distinct values of (3, 4), got "
-                             f"{self.potential_degrees}")
+            raise FemromValueError(f"SpMLConfig.potential_degrees must be distinct values of (3, 4), got "
+                                   f"{self.potential_degrees}")
         for name in ("potential_widths", "dissipation_widths"):
             if any(w < 1 for w in getattr(self, name)):
-                raise ValueError(f"SpMLConfig.{name} must be positive widths, got {getattr(self, name)}")
+                raise FemromValueError(f"SpMLConfig.{name} must be positive widths, got {getattr(self, name)}")
         if self.dissipation_directions is not None and int(self.dissipation_directions) < 0:
-            raise ValueError(f"SpMLConfig.dissipation_directions must be >= 0, got {self.dissipation_directions}")
+            raise FemromValueError(f"SpMLConfig.dissipation_directions must be >= 0, got {self.dissipation_directions}")
         for name in ("max_iterations", "check_every", "patience", "history_size", "threads"):
             if int(getattr(self, name)) < 1:
-                raise ValueError(f"SpMLConfig.{name} must be >= 1, got {getattr(self, name)}")
+                raise FemromValueError(f"SpMLConfig.{name} must be >= 1, got {getattr(self, name)}")
         if not (self.tolerance >= 0 and self.weight_decay >= 0 and self.polynomial_ridge >= 0):
-            raise ValueError(f"SpMLConfig.tolerance, weight_decay and polynomial_ridge must be >= 0, got "
-                             f"{self.tolerance}, {self.weight_decay}, {self.polynomial_ridge}")
+            raise FemromValueError(f"SpMLConfig.tolerance, weight_decay and polynomial_ridge must be >= 0, got "
+                                   f"{self.tolerance}, {self.weight_decay}, {self.polynomial_ridge}")
 
 
 @register_learner("spml")
@@ -221,7 +222,7 @@ class SpML(Learner):
         if not torch_available():
             raise ImportError(TORCH_MISSING)
         if not isinstance(config, SpMLConfig):
-            raise TypeError(f"config must be an SpMLConfig, got {type(config).__name__}")
+            raise FemromTypeError(f"config must be an SpMLConfig, got {type(config).__name__}")
         self.config, self.progress = config, progress
         self.linear = LagrangianOpInf(terms, regularization=regularization, solver=solver, mass=mass,
                                       mass_orthonormal=mass_orthonormal, stiffness_margin=stiffness_margin,
@@ -307,7 +308,7 @@ class SpML(Learner):
         if validation is not None:
             validation = self._own(concatenate(validation) if isinstance(validation, (list, tuple)) else validation)
             if validation.r != data.r:
-                raise ValueError(f"validation data have r = {validation.r}, the training data r = {data.r}")
+                raise FemromValueError(f"validation data have r = {validation.r}, the training data r = {data.r}")
         self.linear_ = self.linear.fit(data)
         linear_ops = self.linear.operators_
         r, cfg = data.r, self.config
