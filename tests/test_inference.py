@@ -585,10 +585,10 @@ def test_gap_bound_bounds_the_true_gap(string_snapshots):
     """``gap_bound`` is rigorous: at feasible points near and far from the optimum
     of an ill-conditioned problem it never falls below the true gap against the
     certified optimum (up to that optimum's own 1e-8 certificate)."""
-    from femrom.inference._fast import _eliminate_free
-    from femrom.inference._ipm import gap_bound
+    from femrom.inference._structured_lstsq import eliminate_free
+    from femrom.inference._duality_gap import gap_bound
     problem = string_problem(string_snapshots, 12, 1e-8)
-    reduced, _ = _eliminate_free(problem.scaled()[0])
+    reduced, _ = eliminate_free(problem.scaled()[0])
     X_opt, info = solve_fast(reduced)
     assert info["gap_estimate"] < 1e-8
     f_opt = reduced.objective(X_opt)
@@ -621,7 +621,7 @@ def test_newton_operators_in_svec_coordinates():
     """The pieces of the Newton matrix against their definitions: the sparse
     Hessian reproduces the quadratic form 2 <X G, X> and the symmetrised
     Kronecker product maps svec(E) to svec(A E A) (round-off: 1e-12 relative)."""
-    from femrom.inference._ipm import hessian, smat, svec, svec_index, sym_kron
+    from femrom.inference._svec import hessian, smat, svec, svec_index, sym_kron
     rng = np.random.default_rng(13)
     r = 5
     D, Y = rng.standard_normal((2 * r, 40)), rng.standard_normal((r, 40))

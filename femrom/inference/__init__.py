@@ -54,8 +54,8 @@ from femrom.inference._data import (
 from femrom.inference._derivatives import finite_difference, stencil_weights
 from femrom.inference._impulse import impulse_response, system_impulse_response
 from femrom.inference._io_data import STATE_LAYOUTS, InputOutputData, MarkovParameters
-from femrom.inference._fill import FillSweep, alternating_fill, fill_between_snapshots, newmark_residual_matrix
-from femrom.inference._fast import FastOptions, solve_fast
+from femrom.inference._every_kth_snapshot import FillSweep, alternating_fill, fill_between_snapshots, newmark_residual_matrix
+from femrom.inference._structured_lstsq import FastOptions, solve_fast
 from femrom.inference._hamiltonian import (
     GRADIENT_DATA,
     HAMILTONIAN_DERIVATIVE_SOURCES,

@@ -34,7 +34,7 @@ import numpy as np
 
 from femrom._errors import FemromTypeError, FemromValueError
 from femrom.inference._data import SecondOrderData, concatenate
-from femrom.inference._fast import FastOptions, solve_fast
+from femrom.inference._structured_lstsq import FastOptions, solve_fast
 from femrom.inference._learner import Learner, Regularization
 from femrom.inference._operators import ReducedForces, ReducedOperators
 from femrom.inference._problem import Block, GramProblem
