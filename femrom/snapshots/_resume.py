@@ -10,7 +10,8 @@ from femrom._errors import FemromValueError
 from femrom.solvers import make_solver
 from femrom.integrators import IntegrationSummary, integrate, scheme_for
 from femrom.snapshots._errors import SnapshotStoreError
-from femrom.snapshots._store import SnapshotStore, split_model, trajectory_name
+from femrom.snapshots._format import trajectory_name
+from femrom.snapshots._store import SnapshotStore, split_model
 from femrom.snapshots._writer import SnapshotWriter
 
 

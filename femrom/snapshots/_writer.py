@@ -40,7 +40,7 @@ from h5py import h5s
 from femrom._errors import FemromValueError
 from femrom.snapshots import _format
 from femrom.snapshots._errors import SnapshotStoreError
-from femrom.snapshots._store import trajectory_name
+from femrom.snapshots._format import trajectory_name
 
 #: A chunk of about this many bytes per field by default (large enough for fast
 #: sequential reads, small enough to buffer).
