@@ -63,7 +63,6 @@ took the end windows' ``zeta`` error from 3e-3 to 6e-5.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 import scipy.fft as scipy_fft
@@ -464,43 +463,3 @@ def spectral_peaks(signal, sample_rate: float, *, min_frequency: float = 0.0, ma
     curvature = lm - 2 * l0 + lp
     shift = np.where(curvature < 0, 0.5 * (lm - lp) / np.where(curvature < 0, curvature, -1.0), 0.0)
     return np.sort(frequencies[found] + shift * (frequencies[1] - frequencies[0]))
-
-
-# ----------------------------------------------------------------------------- plot
-
-
-def plot_backbones(path, backbones: dict, *, title: str = "", amplitude_label: str = "amplitude") -> Path:
-    """Frequency (top) and damping ratio in % (bottom) against amplitude (log axis), one
-    labelled curve per backbone, on shared axes; returns the path written (PNG, Agg).
-
-    Parameters
-    ----------
-    path : str or Path
-    backbones : dict of label -> Backbone
-    title, amplitude_label : str
-    """
-    from femrom.post._report import pyplot, save_figure
-
-    if not backbones:
-        raise FemromValueError("backbones must name at least one Backbone")
-    for label, backbone in backbones.items():
-        if not isinstance(backbone, Backbone):
-            raise FemromValueError(f"backbones[{label!r}] must be a Backbone, got {type(backbone).__name__}")
-    plt = pyplot()
-    fig, (ax_f, ax_z) = plt.subplots(2, 1, figsize=(6.4, 6.0), sharex=True)
-    markers = ("o", "s", "^", "v", "D", "x")
-    for n, (label, backbone) in enumerate(backbones.items()):
-        positive = backbone.amplitude > 0
-        style = dict(marker=markers[n % len(markers)], ms=3.5, lw=1.0, label=str(label))
-        ax_f.plot(backbone.amplitude[positive], backbone.frequency_hz[positive], **style)
-        ax_z.plot(backbone.amplitude[positive], 100 * backbone.damping_ratio[positive], **style)
-    ax_f.set_xscale("log")
-    ax_f.set_ylabel("frequency [Hz]")
-    ax_z.set_ylabel("damping ratio [%]")
-    ax_z.set_xlabel(amplitude_label)
-    for ax in (ax_f, ax_z):
-        ax.grid(alpha=0.3, which="both")
-    ax_f.legend(fontsize=8)
-    if title:
-        ax_f.set_title(title, fontsize=10)
-    return save_figure(fig, path, dpi=110)
