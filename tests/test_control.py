@@ -1,9 +1,6 @@
 """femrom.control: MPC against LQR, observers against python-control, bounds, tracking, offset-free
 tracking under model mismatch, and a full-order plant against its exact state space."""
 
-import ast
-import pathlib
-
 import numpy as np
 import pytest
 import scipy.linalg as sla
@@ -488,30 +485,3 @@ def test_a_formulation_written_outside_the_package_registers_and_is_checked_for_
             LinearMPC(exact_model(chain()), input_weight=1.0, formulation="product_of_parameters")
     finally:
         QP_FORMULATIONS.remove("product_of_parameters")
-
-
-# -- layers ----------------------------------------------------------------------------------
-
-LOWER = {"solvers", "mesh", "fem", "scene", "integrators", "snapshots", "linalg", "basis", "inference", "rom"}
-
-
-def _femrom_imports(path):
-    for node in ast.walk(ast.parse(path.read_text())):
-        if isinstance(node, ast.ImportFrom) and node.module and node.module.startswith("femrom"):
-            yield node.module
-        elif isinstance(node, ast.Import):
-            yield from (alias.name for alias in node.names if alias.name.startswith("femrom"))
-
-
-def test_control_sits_between_rom_and_post():
-    package = pathlib.Path(__import__("femrom").__file__).parent
-    for path in (package / "control").rglob("*.py"):
-        for module in _femrom_imports(path):
-            parts = module.split(".")
-            if len(parts) == 1 or parts[1] in ("_errors", "_progress", "_json", "_registry") or parts[1] == "control":
-                continue
-            # downward only, and only public names of the lower layers
-            assert parts[1] in LOWER and len(parts) == 2, f"{path.name} imports {module}"
-    for layer in LOWER:
-        for path in (package / layer).rglob("*.py"):
-            assert not any(m.startswith("femrom.control") for m in _femrom_imports(path)), path
