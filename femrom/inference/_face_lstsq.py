@@ -14,8 +14,8 @@ inverse (diagonal in the eigenbasis of each ``U_j^T G_jj U_j``), or, with at mos
 ``dense_unknowns`` unknowns, as one dense symmetric system in the orthonormal
 basis of :func:`~femrom.inference._svec.sym_basis` (exact whatever the conditioning).
 The first-order path (:mod:`._first_order`) and the duality-gap estimate
-(:mod:`._duality_gap`) call :func:`solve_faces`; ``options`` is the solver's
-:class:`~femrom.inference.FastOptions` (``cg_tol``, ``cg_max_iterations``,
+(:mod:`._duality_gap`) call :func:`solve_faces`; ``options`` is the
+:class:`~femrom.inference.FastSolver` (``cg_tol``, ``cg_max_iterations``,
 ``dense_unknowns``) and ``info`` its counters (``cg_iterations``, ``dense_solves``).
 """
 

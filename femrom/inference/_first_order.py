@@ -33,7 +33,7 @@ under ``method="auto"`` unless ``G`` is ill-conditioned or the problem small.
 
 A point is accepted when its relative duality gap (:mod:`._duality_gap`) is below
 ``tol``; the best feasible point by objective is returned in any case. ``options``
-is the solver's :class:`~femrom.inference.FastOptions`.
+is the :class:`~femrom.inference.FastSolver` whose settings apply.
 """
 
 from __future__ import annotations
@@ -48,7 +48,7 @@ from femrom.inference._problem import GramProblem
 def solve_first_order(problem: GramProblem, options, info):
     """The first-order path (module docstring); returns ``(X, status)``.
 
-    ``options`` is the solver's :class:`~femrom.inference.FastOptions`; ``info``
+    ``options`` is the :class:`~femrom.inference.FastSolver` (its settings); ``info``
     receives ``iterations``, ``cg_iterations``, ``gap_estimate`` and ``active``.
     """
     r = problem.r

@@ -18,6 +18,7 @@ thing for every data set.
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -26,6 +27,40 @@ from femrom.inference._problem import GramProblem
 
 #: cvxpy solvers this reference accepts.
 CONIC_SOLVERS = ("CLARABEL", "SCS")
+
+
+@dataclass(frozen=True)
+class ConicSolver:
+    """A cvxpy conic solver and its settings: for a learner's ``solver=``, the regression as a
+    conic program (the reference of :func:`solve_conic`, ``"clarabel"`` or ``"scs"``); for
+    :class:`~femrom.inference.IwanLOpInf`, its second-order cone program (any cvxpy solver
+    that takes one).
+
+    Attributes
+    ----------
+    name : str
+        The cvxpy solver, any case (``"clarabel"``, ``"scs"``, ...); kept lower-case.
+    options : dict
+        Keyword arguments of ``cvxpy.Problem.solve`` (e.g. ``{"eps": 1e-10}`` for SCS).
+    """
+
+    name: str = "clarabel"
+    options: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        if not isinstance(self.name, str) or not self.name:
+            raise FemromValueError(f"a conic solver needs a cvxpy solver name, got {self.name!r}")
+        object.__setattr__(self, "name", self.name.lower())
+        object.__setattr__(self, "options", dict(self.options))
+
+    @property
+    def keywords(self) -> dict:
+        """The keyword arguments of ``cvxpy.Problem.solve``: ``solver`` and :attr:`options`."""
+        return {"solver": self.name.upper(), **self.options}
+
+    def solve(self, problem: GramProblem):
+        """:func:`solve_conic` with this solver and options: ``(X, info)``."""
+        return solve_conic(problem, self.name, **self.options)
 
 
 def solve_conic(problem: GramProblem, solver: str = "CLARABEL", **options):

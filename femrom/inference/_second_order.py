@@ -34,15 +34,12 @@ import numpy as np
 
 from femrom._errors import FemromTypeError, FemromValueError
 from femrom.inference._data import SecondOrderData, concatenate
-from femrom.inference._structured_lstsq import FastOptions, solve_fast
 from femrom.inference._learner import Learner, Regularization
 from femrom.inference._operators import ReducedForces, ReducedOperators
 from femrom.inference._problem import Block, GramProblem
-from femrom.inference._sdp import solve_conic
+from femrom.inference._sdp import CONIC_SOLVERS, ConicSolver
+from femrom.inference._structured_lstsq import FastSolver
 from femrom.inference._terms import ReducedTerm, registered_terms, term_class
-
-#: Solvers a learner accepts.
-SOLVERS = ("fast", "clarabel", "scs")
 
 #: Block structure a Lagrangian learner gives each term structure.
 _BLOCKS = {"spd": "psd", "psd": "psd", "symmetric": "symmetric", "free": "free"}
@@ -105,7 +102,11 @@ class SecondOrderLearner(Learner):
         known (e.g. a :class:`ProjectedNonlinearForce`) and move to the target.
     regularization : float, mapping or Regularization
         Relative Tikhonov weights (a float applies to every term).
-    solver : {"fast", "clarabel", "scs"}
+    solver : FastSolver or ConicSolver
+        What solves the regression: :class:`FastSolver` (default; its fields are the
+        settings), ``ConicSolver("clarabel")`` or ``ConicSolver("scs")`` (the cvxpy
+        reference), or any object with ``name`` and ``solve(problem) -> (X, info)``
+        (``problem`` a :class:`GramProblem`, ``X`` (r, p)).
     mass : (r, r) ndarray, optional
         Known reduced mass (e.g. ``V^T M V`` of a Euclidean basis); default identity.
     mass_orthonormal : bool
@@ -113,8 +114,6 @@ class SecondOrderLearner(Learner):
         warns that ``M^ = I`` is then an assumption that breaks symmetry.
     stiffness_margin : float
         ``eps = margin * ||Y||_F / ||D_j||_F`` in ``X_j >= eps I`` for ``"spd"`` terms.
-    solver_options : dict
-        :class:`FastOptions` fields, or keyword arguments of cvxpy's ``solve``.
 
     Attributes
     ----------
@@ -132,13 +131,17 @@ class SecondOrderLearner(Learner):
 
     structured: ClassVar[bool] = False
 
-    def __init__(self, terms=(), *, regularization=0.0, solver: str = "fast",
+    def __init__(self, terms=(), *, regularization=0.0, solver=FastSolver(),
                  mass: np.ndarray | None = None, mass_orthonormal: bool = True,
-                 stiffness_margin: float = 1e-10, solver_options: dict | None = None):
+                 stiffness_margin: float = 1e-10):
         if isinstance(terms, (str, type, ReducedTerm)):
             terms = (terms,)
-        if solver.lower() not in SOLVERS:
-            raise FemromValueError(f"unknown solver {solver!r}; valid: {SOLVERS}")
+        if not callable(getattr(solver, "solve", None)) or not isinstance(getattr(solver, "name", None), str):
+            raise FemromTypeError(f"solver must be a solver object (FastSolver(), ConicSolver('clarabel'), ...), "
+                                  f"got {solver!r}")
+        if isinstance(solver, ConicSolver) and solver.name.upper() not in CONIC_SOLVERS:
+            raise FemromValueError(f"conic solver {solver.name!r} cannot solve the regression's semidefinite "
+                                   f"program; valid: {', '.join(n.lower() for n in CONIC_SOLVERS)}")
         self.learned_terms: list[type[ReducedTerm]] = []
         self.known_terms: list[ReducedTerm] = []
         for item in terms:
@@ -157,11 +160,10 @@ class SecondOrderLearner(Learner):
         if len(set(names)) != len(names):
             raise FemromValueError(f"each term may be named once, got {names}")
         self.regularization = Regularization.of(regularization)
-        self.solver = solver.lower()
+        self.solver = solver
         self.mass = None if mass is None else np.asarray(mass, dtype=float)
         self.mass_orthonormal = bool(mass_orthonormal)
         self.stiffness_margin = float(stiffness_margin)
-        self.solver_options = dict(solver_options or {})
 
     @classmethod
     def for_system(cls, system, basis: np.ndarray | None = None, **options):
@@ -273,10 +275,7 @@ class SecondOrderLearner(Learner):
         return float(np.linalg.norm(R) / max(np.linalg.norm(Y), np.finfo(float).tiny))
 
     def _solve(self, problem: GramProblem):
-        if self.solver == "fast":
-            options = FastOptions(**self.solver_options) if self.solver_options else FastOptions()
-            return solve_fast(problem, options)
-        return solve_conic(problem, self.solver.upper(), **self.solver_options)
+        return self.solver.solve(problem)
 
     # -- fit -----------------------------------------------------------------------------
     def fit(self, data) -> "SecondOrderLearner":
@@ -331,7 +330,7 @@ class SecondOrderLearner(Learner):
 
     def describe(self) -> dict:
         """What was fitted how (stored with a saved ROM)."""
-        out = {"method": self.method, "solver": self.solver,
+        out = {"method": self.method, "solver": self.solver.name,
                "terms": ["stiffness"] + [c.name for c in self.learned_terms],
                "known_terms": [t.name for t in self.known_terms],
                "damping": self.damping,

@@ -8,7 +8,7 @@ block. After scaling (:meth:`GramProblem.scaled`):
 1. **Free blocks eliminated** (:func:`eliminate_free`). The input operator ``B`` is
    unconstrained, so it is minimised out in closed form (a Schur complement of
    ``G``) and recovered at the end: ``X_F = -(X_S G_SF + H_F^T) G_FF^{-1}``.
-2. **Method chosen** (``FastOptions.method = "auto"``) from the condition
+2. **Method chosen** (``FastSolver.method = "auto"``) from the condition
    number of the reduced Gram matrix and the number of unknowns
    ``m = b r (r + 1) / 2``:
 
@@ -52,6 +52,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, replace
+from typing import ClassVar
 
 import numpy as np
 
@@ -66,8 +67,13 @@ METHODS = ("auto", "first_order", "interior_point")
 
 
 @dataclass(frozen=True)
-class FastOptions:
-    """Tolerances of :func:`solve_fast`.
+class FastSolver:
+    """The regression's own solver (module docstring) with its settings: a learner's default
+    ``solver=``.
+
+    ``FastSolver().solve(problem)`` is :func:`solve_fast`: it returns ``(X, info)``, the
+    (r, p) operators and what the solve did. ``name`` (``"fast"``) is how a fitted model
+    records it.
 
     Attributes
     ----------
@@ -135,13 +141,19 @@ class FastOptions:
     ipm_max_unknowns: int = 12_000
     ipm_max_iterations: int = 60
 
+    name: ClassVar[str] = "fast"
+
     def __post_init__(self):
         if self.method not in METHODS:
             raise FemromValueError(f"unknown method {self.method!r}; valid: {METHODS}")
 
+    def solve(self, problem: GramProblem):
+        """:func:`solve_fast` with these settings: ``(X, info)``."""
+        return solve_fast(problem, self)
 
-def solve_fast(problem: GramProblem, options: FastOptions = FastOptions()):
-    """Solve ``problem`` (see module docstring); returns ``(X, info)``.
+
+def solve_fast(problem: GramProblem, solver: FastSolver = FastSolver()):
+    """Solve ``problem`` (see module docstring) with ``solver``'s settings; returns ``(X, info)``.
 
     Returns
     -------
@@ -167,7 +179,7 @@ def solve_fast(problem: GramProblem, options: FastOptions = FastOptions()):
             Xs = recover(np.zeros((scaled.r, 0)))
             info["status"] = "optimal (least squares)"
         else:
-            Xr, status = _solve_square(reduced, options, info)
+            Xr, status = _solve_square(reduced, solver, info)
             Xs = recover(Xr)
             info["status"] = status
         # exact symmetry (eigen-reconstructions are symmetric to round-off), and
@@ -221,8 +233,8 @@ def eliminate_free(problem: GramProblem):
 
 
 # -- step 2: the method -----------------------------------------------------
-def _solve_square(problem: GramProblem, options: FastOptions, info):
-    """Choose the method (``FastOptions.method``), fall back to the other one if
+def _solve_square(problem: GramProblem, options: FastSolver, info):
+    """Choose the method (``FastSolver.method``), fall back to the other one if
     the first does not certify its point, and return the better point."""
     g = np.linalg.eigvalsh(problem.gram)
     info["condition"] = float(g[-1] / g[0]) if g[0] > 0 else np.inf

@@ -7,10 +7,11 @@ import warnings
 
 import numpy as np
 
-from femrom._errors import FemromRuntimeError, FemromValueError
+from femrom._errors import FemromRuntimeError, FemromTypeError, FemromValueError
 from femrom.inference._data import SecondOrderData, concatenate, sampling_step
 from femrom.inference._learner import Learner, register_learner
 from femrom.inference._operators import ReducedOperators
+from femrom.inference._sdp import ConicSolver
 from femrom.inference._terms import term_class
 from femrom.inference.terms.learned_hysteresis import LearnedHysteresis, slider_stretches
 
@@ -69,8 +70,9 @@ class IwanLOpInf(Learner):
         norm, the target to norm 1).
     stiffness_margin : float
         ``eps = margin ||Q''|| / ||Q^||``.
-    solver : str
-        A cvxpy solver name.
+    solver : ConicSolver
+        The cvxpy solver of the second-order cone program, with its options (default
+        ``ConicSolver("clarabel")``).
 
     Attributes
     ----------
@@ -89,7 +91,7 @@ class IwanLOpInf(Learner):
 
     def __init__(self, terms=("damping",), *, thresholds=32, threshold_span=(1e-3, 1.0), direction=None,
                  monotone: bool = True, band=None, regularization: float = 1e-9, stiffness_margin: float = 1e-10,
-                 solver: str = "CLARABEL"):
+                 solver: ConicSolver = ConicSolver()):
         terms = (terms,) if isinstance(terms, str) else tuple(terms)
         unknown = [t for t in terms if t not in LINEAR_TERMS]
         if unknown:
@@ -117,7 +119,9 @@ class IwanLOpInf(Learner):
         if self.band is not None and not (len(self.band) == 2 and 0 < self.band[0] < self.band[1]):
             raise FemromValueError(f"band must be (low, high) in Hz with 0 < low < high, got {band!r}")
         self.stiffness_margin = float(stiffness_margin)
-        self.solver = str(solver)
+        if not isinstance(solver, ConicSolver):
+            raise FemromTypeError(f"iwan_lopinf: solver must be a ConicSolver, got {solver!r}")
+        self.solver = solver
 
     # -- the regression ----------------------------------------------------------------
     def _direction(self, r: int) -> np.ndarray:
@@ -233,9 +237,9 @@ class IwanLOpInf(Learner):
         problem = cp.Problem(cp.Minimize(objective), constraints)
         with warnings.catch_warnings():         # the status is kept; the chosen fit's is reported by fit
             warnings.filterwarnings("ignore", message="Solution may be inaccurate")
-            problem.solve(solver=self.solver)
+            problem.solve(**self.solver.keywords)
         if x.value is None:
-            raise FemromRuntimeError(f"iwan_lopinf: the {self.solver} solve failed ({problem.status})")
+            raise FemromRuntimeError(f"iwan_lopinf: the {self.solver.name} solve failed ({problem.status})")
         values = np.asarray(x.value, dtype=float) * y_scale / scale
         out = {}
         for n, _ in layout:
@@ -303,7 +307,7 @@ class IwanLOpInf(Learner):
             fit = self._solve(Y, blocks, a, prepared)
             self.top_threshold_ = None
         if fit["status"] != "optimal":
-            warnings.warn(f"iwan_lopinf: {self.solver} ended {fit['status']!r} (relative residual "
+            warnings.warn(f"iwan_lopinf: {self.solver.name} ended {fit['status']!r} (relative residual "
                           f"{fit['residual']:.3g}); another solver= may settle it", UserWarning, stacklevel=2)
         self.hysteresis_ = LearnedHysteresis(a, phi, fit["hysteresis"])
         terms = [term_class("stiffness")(fit["stiffness"])]
@@ -332,7 +336,7 @@ class IwanLOpInf(Learner):
         out = {"method": self.method, "terms": ["stiffness", *self.terms, "learned_hysteresis"],
                "threshold_span": list(self.threshold_span), "monotone": self.monotone,
                "band": None if self.band is None else list(self.band), "regularization": self.regularization,
-               "solver": self.solver}
+               "solver": self.solver.name}
         if getattr(self, "hysteresis_", None) is not None:
             out.update(hysteresis=self.hysteresis_.describe(), residual=self.residual_,
                        linear_residual=self.linear_residual_, validation_residual=self.validation_residual_)

@@ -16,6 +16,7 @@ from femrom.inference._learner import Learner, register_learner
 from femrom.inference._networks import derivative_map, monomials, multi_indices
 from femrom.inference._operators import ReducedOperators
 from femrom.inference._second_order import system_terms
+from femrom.inference._structured_lstsq import FastSolver
 from femrom.inference._terms import term_class
 from femrom.inference.learners.lopinf import LagrangianOpInf
 from femrom.inference.terms.learned_dissipation import LearnedDissipation
@@ -188,7 +189,7 @@ class SpML(Learner):
 
     Parameters
     ----------
-    terms, regularization, solver, mass, mass_orthonormal, stiffness_margin, solver_options
+    terms, regularization, solver, mass, mass_orthonormal, stiffness_margin
         Step 1's (:class:`~femrom.inference.SecondOrderLearner`): e.g. ``terms=["damping"]``.
     config : SpMLConfig
     progress : bool or None
@@ -216,20 +217,18 @@ class SpML(Learner):
 
     method = "spml"
 
-    def __init__(self, terms=(), *, config: SpMLConfig = SpMLConfig(), regularization=0.0, solver: str = "fast",
+    def __init__(self, terms=(), *, config: SpMLConfig = SpMLConfig(), regularization=0.0, solver=FastSolver(),
                  mass: np.ndarray | None = None, mass_orthonormal: bool = True, stiffness_margin: float = 1e-10,
-                 solver_options: dict | None = None, progress: bool | None = None):
+                 progress: bool | None = None):
         if not torch_available():
             raise ImportError(TORCH_MISSING)
         if not isinstance(config, SpMLConfig):
             raise FemromTypeError(f"config must be an SpMLConfig, got {type(config).__name__}")
         self.config, self.progress = config, progress
         self.linear = LagrangianOpInf(terms, regularization=regularization, solver=solver, mass=mass,
-                                      mass_orthonormal=mass_orthonormal, stiffness_margin=stiffness_margin,
-                                      solver_options=solver_options)
+                                      mass_orthonormal=mass_orthonormal, stiffness_margin=stiffness_margin)
         self.linear_options = {"regularization": regularization, "solver": solver, "mass": mass,
-                               "mass_orthonormal": mass_orthonormal, "stiffness_margin": stiffness_margin,
-                               "solver_options": solver_options}
+                               "mass_orthonormal": mass_orthonormal, "stiffness_margin": stiffness_margin}
 
     @property
     def learned_terms(self):
