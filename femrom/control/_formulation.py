@@ -1,7 +1,7 @@
 r"""How the MPC's tracking problem becomes a QP and is solved: registered formulations.
 
 A formulation builds its QP once from an :class:`~femrom.control.MPCProblem` and
-the :class:`~femrom.control.MPCConfig` (solver and its settings), and on every step
+the :class:`~femrom.control.MPCConfig` (its :class:`~femrom.control.QPSolver`), and on every step
 writes the new state, reference window, previous input and offsets into it and
 solves. Each is one class in one module of ``femrom/control/formulations``,
 registered by name (:func:`register_formulation`), with
@@ -72,10 +72,10 @@ class CvxpyFormulation(QPFormulation):
         """Check that the problem is DPP (compiled once) and that the solver is there."""
         if not self.problem.is_dcp(dpp=True):
             raise FemromRuntimeError(f"formulation {self.name!r} is not DPP: cvxpy would recompile the QP every solve")
-        if self.config.solver not in cp.installed_solvers():
-            raise FemromValueError(f"solver {self.config.solver!r} is not installed for cvxpy; "
+        if self.config.solver.name.upper() not in cp.installed_solvers():
+            raise FemromValueError(f"solver {self.config.solver.name!r} is not installed for cvxpy; "
                                    f"installed: {', '.join(cp.installed_solvers())}")
-        self._options = solve_options(self.config)
+        self._options = self.config.solver.cvxpy_keywords()
 
     def plan(self) -> np.ndarray | None:
         raise NotImplementedError
@@ -94,19 +94,6 @@ class CvxpyFormulation(QPFormulation):
         seconds = float(stats.solve_time) if stats.solve_time is not None else float("nan")
         iterations = int(stats.num_iters) if stats.num_iters is not None else -1
         return QPSolution(status, self.plan() if status in ACCEPTED_STATUSES else None, seconds, iterations)
-
-
-def solve_options(config) -> dict:
-    """Keyword arguments of ``cvxpy.Problem.solve`` for the config's solver, tolerance and iterations."""
-    tol, iters = float(config.tolerance), int(config.max_iterations)
-    if config.solver == "OSQP":
-        options = dict(eps_abs=tol, eps_rel=tol, max_iter=iters, polish=False)
-    elif config.solver == "CLARABEL":
-        options = dict(tol_gap_abs=tol, tol_gap_rel=tol, tol_feas=tol, max_iter=iters)
-    else:
-        options = {}
-    options.update(config.solver_options)
-    return dict(solver=config.solver, warm_start=True, **options)
 
 
 def register_formulation(cls: type[QPFormulation]) -> type[QPFormulation]:

@@ -22,12 +22,13 @@ formulation (``femrom/control/formulations``) is built from.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 import scipy.linalg as sla
 
-from femrom._errors import FemromValueError
+from femrom._errors import FemromTypeError, FemromValueError
+from femrom.control._qp_solver import QPSolver
 from femrom.rom import DiscreteStateSpace
 
 #: What an MPC does when a solve fails (infeasible, solver error, no solution).
@@ -63,17 +64,9 @@ class MPCConfig:
         (the condensed QP in OSQP without cvxpy's per-solve work). ``None``: the
         fastest measured for the solver (``benchmarks/mpc_solve.py``),
         ``"condensed_osqp"`` with OSQP and ``"condensed"`` with any other.
-    solver : str
-        A cvxpy QP solver: ``"OSQP"`` (warm-started ADMM) or ``"CLARABEL"`` (interior point).
-    tolerance : float
-        OSQP ``eps_abs = eps_rel``; Clarabel ``tol_gap_abs = tol_gap_rel = tol_feas``.
-        OSQP stops when the bound residual is at most
-        ``tolerance * (1 + max|u|)``: the largest bound violation an accepted
-        solve can have (a polished solve has none).
-    max_iterations : int
-        Solver iteration limit.
-    solver_options : dict
-        Further keyword arguments for ``problem.solve`` (e.g. ``{"polish": True}``).
+    solver : QPSolver
+        The QP solver and its settings (tolerance, iteration limit, options):
+        ``QPSolver("osqp")`` (the default) or ``QPSolver("clarabel", tolerance=1e-9)``.
     on_failure : {"shift", "hold", "raise"}
         After a failed solve (infeasible, solver error, non-finite solution):
         ``"shift"`` applies the next input of the last successful plan (the
@@ -89,10 +82,7 @@ class MPCConfig:
     input_bound: object = 0.1
     terminal_weight: object = None
     formulation: str | None = None
-    solver: str = "OSQP"
-    tolerance: float = 1e-6
-    max_iterations: int = 10_000
-    solver_options: dict = field(default_factory=dict)
+    solver: QPSolver = QPSolver()
     on_failure: str = "shift"
 
     def __post_init__(self):
@@ -100,17 +90,16 @@ class MPCConfig:
             raise FemromValueError(f"horizon must be a positive integer, got {self.horizon!r}")
         if self.on_failure not in FAILURE_POLICIES:
             raise FemromValueError(f"on_failure must be one of {', '.join(FAILURE_POLICIES)}, got {self.on_failure!r}")
-        if not (self.tolerance > 0):
-            raise FemromValueError(f"tolerance must be positive, got {self.tolerance!r}")
-        if not (isinstance(self.max_iterations, (int, np.integer)) and self.max_iterations >= 1):
-            raise FemromValueError(f"max_iterations must be a positive integer, got {self.max_iterations!r}")
+        if not isinstance(self.solver, QPSolver):
+            raise FemromTypeError(f"solver must be a QPSolver (QPSolver('osqp'), QPSolver('clarabel')), "
+                                  f"got {self.solver!r}")
 
     @property
     def formulation_name(self) -> str:
         """The formulation used: ``formulation``, or the default for the solver."""
         if self.formulation is not None:
             return self.formulation
-        return "condensed_osqp" if self.solver == "OSQP" else "condensed"
+        return "condensed_osqp" if self.solver.name == "osqp" else "condensed"
 
     def describe(self) -> dict:
         """The settings as plain JSON values (weights as given, arrays as lists)."""
@@ -118,7 +107,12 @@ class MPCConfig:
             if isinstance(value, np.ndarray):
                 return value.tolist()
             return value
-        settings = {name: plain(getattr(self, name)) for name in self.__dataclass_fields__}
+        settings = {}
+        for name in self.__dataclass_fields__:
+            if name == "solver":        # flat, under the keys the settings have always had
+                settings.update(self.solver.describe())
+            else:
+                settings[name] = plain(getattr(self, name))
         settings["formulation"] = self.formulation_name
         return settings
 
