@@ -26,6 +26,8 @@ import sys
 import time
 from typing import TextIO
 
+from femrom._errors import FemromValueError
+
 
 LOG_SECONDS = 30.0
 
@@ -44,9 +46,9 @@ def _log_seconds() -> float:
     try:
         seconds = float(text) if text else LOG_SECONDS
     except ValueError:
-        raise ValueError(f"FEMROM_PROGRESS_SECONDS must be a number of seconds, got {text!r}") from None
+        raise FemromValueError(f"FEMROM_PROGRESS_SECONDS must be a number of seconds, got {text!r}") from None
     if not seconds >= 0.0:
-        raise ValueError(f"FEMROM_PROGRESS_SECONDS must be >= 0, got {text!r}")
+        raise FemromValueError(f"FEMROM_PROGRESS_SECONDS must be >= 0, got {text!r}")
     return seconds
 
 

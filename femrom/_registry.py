@@ -12,6 +12,8 @@ import importlib
 import pkgutil
 from typing import Callable
 
+from femrom._errors import FemromValueError
+
 
 class Registry:
     """Name -> class, discovered from ``package`` on first read.
@@ -37,7 +39,7 @@ class Registry:
     def add(self, name: str, entry) -> None:
         """Register ``entry`` as ``name`` (a later entry of the same name replaces it)."""
         if not name:
-            raise ValueError(f"a {self.kind} needs a name")
+            raise FemromValueError(f"a {self.kind} needs a name")
         self._entries[name] = entry
 
     def remove(self, name: str):
@@ -66,10 +68,10 @@ class Registry:
         return entries
 
     def get(self, name: str):
-        """The entry ``name``, or one ValueError naming it and listing the registered ones."""
+        """The entry ``name``, or one FemromValueError naming it and listing the registered ones."""
         entries = self.items()
         if name not in entries:
-            raise ValueError(f"unknown {self.kind} {name!r}; {self.valid}: {', '.join(entries)}")
+            raise FemromValueError(f"unknown {self.kind} {name!r}; {self.valid}: {', '.join(entries)}")
         return entries[name]
 
     def __contains__(self, name: str) -> bool:

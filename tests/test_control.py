@@ -1,9 +1,6 @@
 """femrom.control: MPC against LQR, observers against python-control, bounds, tracking, offset-free
 tracking under model mismatch, and a full-order plant against its exact state space."""
 
-import ast
-import pathlib
-
 import numpy as np
 import pytest
 import scipy.linalg as sla
@@ -15,9 +12,11 @@ from femrom.control import (
     FullOrderPlant,
     KalmanObserver,
     LinearMPC,
+    MPCConfig,
     MPCError,
     MPCWarning,
     PolePlacementObserver,
+    QPSolver,
     ReducedPlant,
     StateSpacePlant,
     closed_loop,
@@ -77,7 +76,7 @@ def test_unconstrained_mpc_with_the_dare_terminal_cost_is_the_lqr(formulation, s
     Q, R = np.diag([1.0, 2.0, 0.5, 0.1]), np.diag([0.3, 0.1])
     K, _, _ = control.dlqr(model.A, model.B, Q, R)
     mpc = LinearMPC(model, horizon=15, output_weight=Q, input_weight=R, input_bound=None,
-                    terminal_weight="dare", formulation=formulation, solver=solver, tolerance=1e-10)
+                    terminal_weight="dare", formulation=formulation, solver=QPSolver(solver, tolerance=1e-10))
     rng = np.random.default_rng(0)
     for _ in range(3):
         x = rng.standard_normal(4)
@@ -90,7 +89,7 @@ def test_unconstrained_mpc_with_the_dare_terminal_cost_is_the_lqr(formulation, s
     # without the terminal cost a short horizon gives another feedback (measured 80-100 % off):
     # the terminal cost is doing the work
     short = LinearMPC(model, horizon=3, output_weight=Q, input_weight=R, input_bound=None,
-                      formulation=formulation, solver=solver, tolerance=1e-10)
+                      formulation=formulation, solver=QPSolver(solver, tolerance=1e-10))
     assert np.linalg.norm(short.control(x, np.zeros(4)) + K @ x) > 0.1 * np.linalg.norm(K @ x)
 
 
@@ -102,7 +101,7 @@ def test_formulations_solve_the_same_qp():
     plans = {}
     for formulation, solver in (("condensed", "CLARABEL"), ("sparse", "CLARABEL"), ("condensed_osqp", "OSQP")):
         mpc = LinearMPC(model, horizon=20, output_weight=1e8, input_weight=1.0, input_rate_weight=10.0,
-                        input_bound=0.1, formulation=formulation, solver=solver, tolerance=1e-9)
+                        input_bound=0.1, formulation=formulation, solver=QPSolver(solver, tolerance=1e-9))
         mpc.control(z, window, u_prev)
         plans[formulation] = mpc.plan_
     assert set(registered_formulations()) >= {"condensed", "sparse", "condensed_osqp"}
@@ -191,7 +190,7 @@ def test_applied_inputs_respect_the_bound_and_it_is_active(formulation):
     rms = np.sqrt(np.mean(reference ** 2))
     tolerance = 1e-5
     mpc = LinearMPC(model, horizon=20, output_weight=1 / rms ** 2, input_weight=1e-4 / 0.1 ** 2,
-                    input_bound=0.1, formulation=formulation, tolerance=tolerance)
+                    input_bound=0.1, formulation=formulation, solver=QPSolver(tolerance=tolerance))
     result = closed_loop(StateSpacePlant(model), mpc, KalmanObserver(model), reference)
     applied = np.abs(result.inputs[:, 1:])
     # OSQP stops when the primal residual is below eps_abs + eps_rel * max|u|, |u| <= ~0.1
@@ -211,7 +210,7 @@ def test_a_wide_bound_changes_nothing_on_a_small_reference():
     runs = []
     for bound in (0.1, None):
         mpc = LinearMPC(model, horizon=20, output_weight=1 / rms ** 2, input_weight=1e-4 / 0.01,
-                        input_bound=bound, solver="CLARABEL", tolerance=1e-9)
+                        input_bound=bound, solver=QPSolver("clarabel", tolerance=1e-9))
         runs.append(closed_loop(StateSpacePlant(model), mpc, KalmanObserver(model), reference))
     assert np.max(np.abs(runs[0].inputs)) < 0.1 - 1e-3
     # two interior-point solves at 1e-9 of the same unconstrained optimum
@@ -490,28 +489,18 @@ def test_a_formulation_written_outside_the_package_registers_and_is_checked_for_
         QP_FORMULATIONS.remove("product_of_parameters")
 
 
-# -- layers ----------------------------------------------------------------------------------
-
-LOWER = {"solvers", "mesh", "fem", "scene", "integrators", "snapshots", "linalg", "basis", "inference", "rom"}
-
-
-def _femrom_imports(path):
-    for node in ast.walk(ast.parse(path.read_text())):
-        if isinstance(node, ast.ImportFrom) and node.module and node.module.startswith("femrom"):
-            yield node.module
-        elif isinstance(node, ast.Import):
-            yield from (alias.name for alias in node.names if alias.name.startswith("femrom"))
-
-
-def test_control_sits_between_rom_and_post():
-    package = pathlib.Path(__import__("femrom").__file__).parent
-    for path in (package / "control").rglob("*.py"):
-        for module in _femrom_imports(path):
-            parts = module.split(".")
-            if len(parts) == 1 or parts[1] in ("_progress", "_json", "_registry") or parts[1] == "control":
-                continue
-            # downward only, and only public names of the lower layers
-            assert parts[1] in LOWER and len(parts) == 2, f"{path.name} imports {module}"
-    for layer in LOWER:
-        for path in (package / layer).rglob("*.py"):
-            assert not any(m.startswith("femrom.control") for m in _femrom_imports(path)), path
+def test_the_qp_solver_is_an_object_and_the_old_names_still_work_for_one_release():
+    model = exact_model(chain())
+    mpc = LinearMPC(model, horizon=5, input_weight=1.0, solver=QPSolver("CLARABEL", tolerance=1e-9))
+    assert mpc.config.solver == QPSolver("clarabel", tolerance=1e-9)
+    assert mpc.config.formulation_name == "condensed"
+    described = mpc.describe()
+    assert (described["solver"], described["tolerance"], described["max_iterations"],
+            described["solver_options"]) == ("CLARABEL", 1e-9, 10_000, {})
+    with pytest.warns(DeprecationWarning, match="QPSolver"):
+        old = LinearMPC(model, horizon=5, input_weight=1.0, solver="CLARABEL", tolerance=1e-9)
+    assert old.config.solver == mpc.config.solver
+    with pytest.raises(TypeError, match="solver must be a QPSolver"):
+        MPCConfig(solver="OSQP")
+    with pytest.raises(ValueError, match="OSQP only"):
+        LinearMPC(model, horizon=5, input_weight=1.0, formulation="condensed_osqp", solver=QPSolver("clarabel"))

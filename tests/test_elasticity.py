@@ -8,8 +8,8 @@ from skfem.helpers import dot
 from skfem.models.elasticity import linear_elasticity
 
 from femrom.fem._elasticity import elasticity_stiffness, lame_parameters, vector_mass
-from femrom.fem._vector_ops import (average_rows, dirichlet_dofs, point_load, probe_rows,
-                                    rigid_body_modes, surface_pressure, surface_traction)
+from femrom.fem import (average_rows, dirichlet_dofs, point_load, probe_rows, rigid_body_modes,
+                        surface_pressure, surface_traction)
 from femrom.mesh import MeshError
 
 ELEMENTS = {"P1": skfem.ElementTetP1, "P2": skfem.ElementTetP2}

@@ -16,9 +16,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from femrom.fem import Condensation, SolidSpace
+from femrom.fem import Condensation, SolidSpace, average_rows, surface_pressure, surface_traction
 from femrom.solvers import make_solver
-from femrom.fem import _vector_ops
 from femrom.mesh import build_mesh
 from femrom.basis import POD
 from femrom.inference import reduce_snapshots
@@ -47,7 +46,7 @@ def test_geometry_has_the_named_groups_and_closed_chambers(tiny_model):
         y = mesh.p[1, mesh.facets[:, facets]]
         assert np.all(sign * y >= 0.5 * septum - 1e-9), name  # each chamber on its own side
         # a uniform pressure on a closed cavity has no resultant: sum_I f_I = -p \oint n ds = 0
-        f = _vector_ops.surface_pressure(tiny_model.space.basis, name, 1.0)
+        f = surface_pressure(tiny_model.space.basis, name, 1.0)
         resultant = np.array([f[c::3].sum() for c in range(3)])
         assert np.max(np.abs(resultant)) < 1e-12 * np.abs(f).sum()
     x = mesh.p[0, mesh.facets[:, mesh.boundaries["clamp"]]]
@@ -56,8 +55,8 @@ def test_geometry_has_the_named_groups_and_closed_chambers(tiny_model):
 
 def test_one_input_drives_both_chambers_with_opposite_signs(tiny_model):
     space, cond = tiny_model.space, tiny_model.system.condensation
-    left = cond.vector(_vector_ops.surface_pressure(space.basis, "chamber_left", 1.0))
-    right = cond.vector(_vector_ops.surface_pressure(space.basis, "chamber_right", 1.0))
+    left = cond.vector(surface_pressure(space.basis, "chamber_left", 1.0))
+    right = cond.vector(surface_pressure(space.basis, "chamber_right", 1.0))
     B = np.asarray(tiny_model.system.input_matrix)
     assert B.shape == (tiny_model.system.n_dofs, 1)
     np.testing.assert_allclose(B[:, 0], left - right, rtol=0, atol=1e-15 * np.abs(left).max())
@@ -111,9 +110,9 @@ def _cantilever_ratio(mesh, element, nu):
     E, F = 1.0e6, 1.0
     K = space.stiffness("elasticity", MaterialConfig(youngs_modulus=E, density=1000.0, poisson_ratio=nu))
     cond = Condensation.from_fixed(space.n_total, space.boundary_dofs("left", clamped=True))
-    f = _vector_ops.surface_traction(space.basis, "right", [0.0, 0.0, -F / (width * height)])
+    f = surface_traction(space.basis, "right", [0.0, 0.0, -F / (width * height)])
     q = make_solver(cond.matrix(K)).solve(cond.vector(f))
-    deflection = -(cond.columns(_vector_ops.average_rows(space.basis, "right", 2)) @ q)[0]
+    deflection = -(cond.columns(average_rows(space.basis, "right", 2)) @ q)[0]
     inertia, area, shear = width * height**3 / 12, width * height, E / (2 * (1 + nu))
     return deflection / (F * length**3 / (3 * E * inertia) + F * length / (5 / 6 * shear * area))
 

@@ -18,6 +18,8 @@ from femrom.fem import (Condensation, axial_stiffness, bending_stiffness, line_b
                         rayleigh_damping)
 from femrom.inference import (
     Block,
+    ConicSolver,
+    FastSolver,
     GramProblem,
     LagrangianOpInf,
     Regularization,
@@ -162,13 +164,13 @@ def test_newmark_accelerations_give_the_intrusive_operators_exactly(beam):
     data = reduce_snapshots(V, trajectory.q, dt, product=M, velocities=trajectory.v,
                             accelerations=trajectory.a, derivatives="stored", inputs=U)
     intrusive = galerkin(system, V, mass_orthonormal=True)
-    for solver in ("fast", "clarabel"):
+    for solver in (FastSolver(), ConicSolver("clarabel")):
         learned = LagrangianOpInf(["damping"], solver=solver).fit(data)
         # the FOM trajectory leaves span(V) (the input excites every mode), but
         # with a modal basis the projected equations decouple exactly: the data
         # then satisfy the intrusive ROM to round-off (fast: 1e-8; Clarabel's
         # interior point stops at ~1e-8 relative accuracy, hence 1e-6)
-        tol = 1e-8 if solver == "fast" else 1e-6
+        tol = 1e-8 if solver.name == "fast" else 1e-6
         assert relative(learned.stiffness_, intrusive.stiffness) < tol
         assert relative(learned.damping_, intrusive.damping) < tol * 1e3  # C is 1e3 x smaller
         assert relative(learned.input_matrix_, intrusive.input_matrix) < tol
@@ -279,7 +281,7 @@ def random_data(rng, r, K, m=2, noise=0.1, rank=None):
 
 
 @pytest.mark.parametrize("case", ["noisy", "rank_deficient", "few_snapshots"])
-@pytest.mark.parametrize("solver", ["fast", "clarabel"])
+@pytest.mark.parametrize("solver", [FastSolver(), ConicSolver("clarabel")], ids=["fast", "clarabel"])
 def test_learned_operators_are_symmetric_and_definite(case, solver):
     rng = np.random.default_rng({"noisy": 2, "rank_deficient": 3, "few_snapshots": 4}[case])
     r = 8
@@ -585,10 +587,10 @@ def test_gap_bound_bounds_the_true_gap(string_snapshots):
     """``gap_bound`` is rigorous: at feasible points near and far from the optimum
     of an ill-conditioned problem it never falls below the true gap against the
     certified optimum (up to that optimum's own 1e-8 certificate)."""
-    from femrom.inference._fast import _eliminate_free
-    from femrom.inference._ipm import gap_bound
+    from femrom.inference._structured_lstsq import eliminate_free
+    from femrom.inference._duality_gap import gap_bound
     problem = string_problem(string_snapshots, 12, 1e-8)
-    reduced, _ = _eliminate_free(problem.scaled()[0])
+    reduced, _ = eliminate_free(problem.scaled()[0])
     X_opt, info = solve_fast(reduced)
     assert info["gap_estimate"] < 1e-8
     f_opt = reduced.objective(X_opt)
@@ -605,11 +607,10 @@ def test_gap_bound_bounds_the_true_gap(string_snapshots):
 def test_interior_point_and_first_order_paths_agree(seed):
     """Both methods of the fast solver on random data with many active
     constraints (well conditioned: either may be used): same optimum, both certified."""
-    from femrom.inference import FastOptions
     rng = np.random.default_rng(20 + seed)
     problem = LagrangianOpInf(["damping"], regularization=1e-8).regression(random_data(rng, 12, 150))
-    X_ipm, ipm = solve_fast(problem, FastOptions(method="interior_point"))
-    X_fo, fo = solve_fast(problem, FastOptions(method="first_order"))
+    X_ipm, ipm = solve_fast(problem, FastSolver(method="interior_point"))
+    X_fo, fo = solve_fast(problem, FastSolver(method="first_order"))
     assert ipm["method"] == "interior_point" and fo["method"] == "first_order"
     assert ipm["gap_estimate"] < 1e-8 and fo["gap_estimate"] < 1e-8
     # two certified points: objectives within the sum of their 1e-8 certificates
@@ -621,7 +622,7 @@ def test_newton_operators_in_svec_coordinates():
     """The pieces of the Newton matrix against their definitions: the sparse
     Hessian reproduces the quadratic form 2 <X G, X> and the symmetrised
     Kronecker product maps svec(E) to svec(A E A) (round-off: 1e-12 relative)."""
-    from femrom.inference._ipm import hessian, smat, svec, svec_index, sym_kron
+    from femrom.inference._svec import hessian, smat, svec, svec_index, sym_kron
     rng = np.random.default_rng(13)
     r = 5
     D, Y = rng.standard_normal((2 * r, 40)), rng.standard_normal((r, 40))
@@ -650,7 +651,6 @@ def test_interior_point_converges_when_the_gram_matrix_is_numerically_singular(s
     16x above it, and 3.8 % above it on the fishtail, where that cost a 5x larger
     test error). It must go on and reach a point at least as good as both conic
     solvers' (they stop 4e-6 to 5e-4 above the optimum on this data)."""
-    from femrom.inference import FastOptions
     rng = np.random.default_rng(40 + seed)
     r, K = 10, 400
     energies = np.logspace(0, -8, r)[:, None]           # amplitudes: G spans 1e16
@@ -660,7 +660,7 @@ def test_interior_point_converges_when_the_gram_matrix_is_numerically_singular(s
     Y = -((A + A.T) @ Q + B @ B.T / r @ Qd) + 1e-3 * energies * rng.standard_normal((r, K))
     problem = GramProblem.from_data(Y, [Q, Qd], [Block("stiffness", r, "psd", shift=1e-10),
                                                  Block("damping", r, "psd")])
-    X, info = solve_fast(problem, FastOptions(method="interior_point"))
+    X, info = solve_fast(problem, FastSolver(method="interior_point"))
     assert info["condition"] > 1e15 and info["certificate"] == "complementarity"
     assert info["status"] == "optimal" and info["gap_estimate"] < 1e-8
     assert problem.is_feasible(X, tol=1e-12)
@@ -724,7 +724,7 @@ def test_the_first_order_certificate_refuses_an_inaccurate_dual_on_singular_data
     first-order path stopped at a residual of 2.9e-2 and called it optimal, because its
     dual estimate (an inexact conjugate-gradient solve) came out negative and was
     clipped to a zero gap. A negative estimate now certifies nothing."""
-    first = LagrangianOpInf(["damping"], solver_options={"method": "first_order", "max_iterations": 200})
+    first = LagrangianOpInf(["damping"], solver=FastSolver(method="first_order", max_iterations=200))
     first.fit(_singular_chain_data())
     assert not first.solver_info_["status"].startswith("optimal")
 
@@ -736,3 +736,16 @@ def test_auto_returns_the_interior_point_on_singular_data():
     better point: measured residual 5.7e-9, where the false certificate returned 2.9e-2."""
     auto = LagrangianOpInf(["damping"]).fit(_singular_chain_data())
     assert auto.error_split_.optimization < 1e-6
+
+
+def test_a_learner_takes_a_solver_object_and_refuses_a_name():
+    data = random_data(np.random.default_rng(5), 4, 60)
+    fast = LagrangianOpInf(["damping"]).fit(data)
+    assert isinstance(fast.solver, FastSolver) and fast.describe()["solver"] == "fast"
+    conic = LagrangianOpInf(["damping"], solver=ConicSolver("CLARABEL")).fit(data)
+    assert conic.describe()["solver"] == "clarabel"
+    assert conic.objective_ == pytest.approx(fast.objective_, rel=1e-5)
+    with pytest.raises(TypeError, match="solver must be a solver object"):
+        LagrangianOpInf(["damping"], solver="clarabel")
+    with pytest.raises(ValueError, match="cannot solve the regression's semidefinite program"):
+        LagrangianOpInf(["damping"], solver=ConicSolver("osqp"))

@@ -385,7 +385,7 @@ def test_dask_agrees_with_in_memory(geometric, tmp_path):
     weighted = randomized_svd_dask(geometric, r, product=weights, scheduler="synchronous")
     assert np.abs(weighted.U.T @ (weights[:, None] * weighted.U) - np.eye(r)).max() < 1e-12
     assert np.allclose(weighted.s, randomized_svd(geometric, r, product=weights).s, rtol=1e-9)
-    with pytest.raises(KeyError, match="no dataset"):
+    with pytest.raises(ValueError, match="no dataset"):
         randomized_svd_dask(path, r, dataset="v")
     with pytest.raises(ValueError, match="scheduler_address"):
         randomized_svd_dask(geometric, r, scheduler="tcp://127.0.0.1:8786")

@@ -38,7 +38,7 @@ from femrom.snapshots import (
     recover,
     resume,
 )
-from femrom.snapshots import _format, _journal, _store, _writer
+from femrom.snapshots import _format, _journal, _recovery, _writer
 from femrom.snapshots._superblock import lookup3, read_superblock
 
 REPO = Path(__file__).resolve().parents[1]
@@ -353,7 +353,7 @@ def test_sigkill_at_random_moments_keeps_chunks_and_resumes_bit_identically(tmp_
                         _format.check_on_disk(f, half)
             # a live writer is never overridden
             with pytest.MonkeyPatch.context() as patch:
-                patch.setattr(_store, "_process_alive", lambda pid: True)
+                patch.setattr(_recovery, "_process_alive", lambda pid: True)
                 with pytest.raises(SnapshotStoreError, match="open for writing by process"):
                     resume(path, model, scheme)
         resume(path, model, scheme)
@@ -568,7 +568,7 @@ def test_sigkill_while_a_store_is_made_or_a_trajectory_added(tmp_path):
         _kill_in_layout_change(path, f"write:{kill_at}")
         assert _journal.journal_path(path).exists()
         with pytest.MonkeyPatch.context() as patch:  # a live journal's process is respected
-            patch.setattr(_store, "_process_alive", lambda pid: True)
+            patch.setattr(_recovery, "_process_alive", lambda pid: True)
             with pytest.raises(SnapshotStoreError, match="is adding or resuming a trajectory"):
                 SnapshotStore.open(path)
         store = SnapshotStore.open(path, system=system)

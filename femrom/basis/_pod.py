@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 import scipy.linalg as sla
 
+from femrom._errors import FemromTypeError, FemromValueError
 from femrom.linalg import (
     InnerProduct,
     LowRankSVD,
@@ -57,7 +58,7 @@ def exact_svd(data: np.ndarray, inner: InnerProduct) -> LowRankSVD:
     """
     a = np.asarray(data, dtype=np.float64)
     if a.ndim != 2:
-        raise ValueError(f"snapshot matrix must be 2-D (n, K), got shape {a.shape}")
+        raise FemromValueError(f"snapshot matrix must be 2-D (n, K), got shape {a.shape}")
     inner.check_dimension(a.shape[0])
     if inner.kind == "euclidean":
         u, s, vt = np.linalg.svd(a, full_matrices=False)
@@ -91,19 +92,19 @@ def truncation_rank(singular_values: np.ndarray, total_energy: float, *, rank: i
     given = [name for name, value in (("rank", rank), ("energy", energy), ("tolerance", tolerance))
              if value is not None]
     if len(given) != 1:
-        raise ValueError(f"give exactly one of rank, energy, tolerance (got {given or 'none'})")
+        raise FemromValueError(f"give exactly one of rank, energy, tolerance (got {given or 'none'})")
     available = singular_values.size
     if rank is not None:
         if not 1 <= int(rank) <= available:
-            raise ValueError(f"rank {rank} is not in 1..{available} (singular values available)")
+            raise FemromValueError(f"rank {rank} is not in 1..{available} (singular values available)")
         return int(rank)
     if energy is not None:
         if not 0 < energy <= 1:
-            raise ValueError(f"energy must be in (0, 1], got {energy}")
+            raise FemromValueError(f"energy must be in (0, 1], got {energy}")
         target, label = float(energy), f"energy {energy}"
     else:
         if not 0 <= tolerance < 1:
-            raise ValueError(f"tolerance must be in [0, 1), got {tolerance}")
+            raise FemromValueError(f"tolerance must be in [0, 1), got {tolerance}")
         target, label = 1.0 - float(tolerance) ** 2, f"tolerance {tolerance}"
     retained = np.cumsum(singular_values**2) / total_energy if total_energy > 0 else np.ones(available)
     # Round-off: the cumulative energy of a full SVD reaches 1 only to ~1e-15.
@@ -181,16 +182,16 @@ class POD:
                  seed: int = 0, block_columns: int | None = None, scheme: str | None = None,
                  options: dict | None = None):
         if method not in METHODS:
-            raise ValueError(f"unknown POD method {method!r}; valid: {', '.join(METHODS)}")
+            raise FemromValueError(f"unknown POD method {method!r}; valid: {', '.join(METHODS)}")
         given = [v for v in (rank, energy, tolerance) if v is not None]
         if len(given) != 1:
-            raise ValueError("give exactly one of rank, energy, tolerance")
+            raise FemromValueError("give exactly one of rank, energy, tolerance")
         if rank is not None and (isinstance(rank, bool) or not isinstance(rank, (int, np.integer))):
-            raise ValueError(f"rank must be a whole number, got {rank!r}")
+            raise FemromValueError(f"rank must be a whole number, got {rank!r}")
         for name, value in (("energy", energy), ("tolerance", tolerance)):
             if value is not None and (isinstance(value, bool) or not isinstance(value, (int, float))
                                       or not np.isfinite(value)):
-                raise ValueError(f"{name} must be a finite number, got {value!r}")
+                raise FemromValueError(f"{name} must be a finite number, got {value!r}")
         self.rank, self.energy, self.tolerance = rank, energy, tolerance
         self.product = product
         self.method = method
@@ -206,24 +207,24 @@ class POD:
         if self.rank is not None:
             return int(self.rank) if self.max_rank is None else max(int(self.rank), int(self.max_rank))
         if self.max_rank is None:
-            raise ValueError(f"method {method!r} with energy/tolerance truncation needs max_rank "
-                             "(the largest rank it may pick)")
+            raise FemromValueError(f"method {method!r} with energy/tolerance truncation needs max_rank "
+                                   "(the largest rank it may pick)")
         return int(self.max_rank)
 
     def _decompose(self, data: Any, method: str, inner: InnerProduct) -> LowRankSVD:
         if self.scheme is not None and method != "randomized":
-            raise ValueError(f"scheme={self.scheme!r} applies to method 'randomized' only, "
-                             f"this POD uses {method!r}")
+            raise FemromValueError(f"scheme={self.scheme!r} applies to method 'randomized' only, "
+                                   f"this POD uses {method!r}")
         if method == "svd":
             if not isinstance(data, np.ndarray):
-                raise TypeError(f"method 'svd' needs an in-memory ndarray, got {type(data).__name__}; "
-                                "use method='randomized' for block sources")
+                raise FemromTypeError(f"method 'svd' needs an in-memory ndarray, got {type(data).__name__}; "
+                                      "use method='randomized' for block sources")
             # the one path that reads no blocks (those are checked as they are read)
             if data.dtype.kind not in "fiu":
-                raise ValueError(f"POD: snapshots must be real numbers, got dtype {data.dtype}")
+                raise FemromValueError(f"POD: snapshots must be real numbers, got dtype {data.dtype}")
             if not np.all(np.isfinite(data)):
                 bad = np.argwhere(~np.isfinite(data))[0]
-                raise ValueError(f"POD: snapshot column {bad[1]} is not finite (row {bad[0]})")
+                raise FemromValueError(f"POD: snapshot column {bad[1]} is not finite (row {bad[0]})")
             return exact_svd(data, inner)
         if method == "randomized":
             scheme = {} if self.scheme is None else {"scheme": self.scheme}
@@ -239,8 +240,8 @@ class POD:
         if isinstance(data, StreamingSketch):
             sketch = data
             if (inner.kind, inner.n) != (sketch.product.kind, sketch.product.n):
-                raise ValueError(f"the sketch was built with product {sketch.product}, "
-                                 f"this POD has {inner}")
+                raise FemromValueError(f"the sketch was built with product {sketch.product}, "
+                                       f"this POD has {inner}")
         else:
             opts = dict(self.options)
             sketch = None
@@ -250,7 +251,7 @@ class POD:
                                              product=inner.matrix, **opts)
                 sketch.update(block)
             if sketch is None:
-                raise ValueError("the snapshot source yielded no columns")
+                raise FemromValueError("the snapshot source yielded no columns")
         return sketch.finalize(rank)
 
     def fit(self, data: Any) -> "POD":
@@ -272,7 +273,7 @@ class POD:
         inner = InnerProduct(product)
         svd = self._decompose(data, method, inner)
         if not svd.total_energy > 0:
-            raise ValueError("POD: every snapshot is zero; there is nothing to build a basis from")
+            raise FemromValueError("POD: every snapshot is zero; there is nothing to build a basis from")
         rank = truncation_rank(svd.s, svd.total_energy, rank=self.rank, energy=self.energy,
                                tolerance=self.tolerance)
         self.svd_ = svd
@@ -295,7 +296,7 @@ class POD:
     def _check_rows(self, states: np.ndarray) -> np.ndarray:
         states = np.asarray(states, dtype=np.float64)
         if states.shape[0] != self.basis_.shape[0]:
-            raise ValueError(f"states have {states.shape[0]} rows, the basis {self.basis_.shape[0]}")
+            raise FemromValueError(f"states have {states.shape[0]} rows, the basis {self.basis_.shape[0]}")
         return states
 
     def compress(self, states: np.ndarray) -> np.ndarray:
@@ -309,7 +310,7 @@ class POD:
         self._check_fitted()
         reduced = np.asarray(reduced, dtype=np.float64)
         if reduced.shape[0] != self.rank_:
-            raise ValueError(f"reduced states have {reduced.shape[0]} rows, the basis rank is {self.rank_}")
+            raise FemromValueError(f"reduced states have {reduced.shape[0]} rows, the basis rank is {self.rank_}")
         return self.basis_ @ reduced
 
     def projection_error(self, states: np.ndarray) -> float:

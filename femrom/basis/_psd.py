@@ -20,6 +20,7 @@ from typing import Any
 
 import numpy as np
 
+from femrom._errors import FemromValueError
 from femrom.basis._pod import POD
 from femrom.linalg import as_block_source
 
@@ -28,7 +29,7 @@ def apply_j(z: np.ndarray) -> np.ndarray:
     r"""J_{2m} z = [z_p; -z_q] for z = [z_q; z_p] of shape (2m,) or (2m, k)."""
     half = z.shape[0] // 2
     if 2 * half != z.shape[0]:
-        raise ValueError(f"a phase-space array has an even number of rows, got {z.shape[0]}")
+        raise FemromValueError(f"a phase-space array has an even number of rows, got {z.shape[0]}")
     return np.concatenate([z[half:], -z[:half]], axis=0)
 
 
@@ -41,7 +42,7 @@ def _stacked_source(positions: Any, momenta: Any):
     """Blocks of [Q, P]: all blocks of Q, then all blocks of P (arrays are stacked directly)."""
     if isinstance(positions, np.ndarray) and isinstance(momenta, np.ndarray):
         if positions.shape[0] != momenta.shape[0]:
-            raise ValueError(f"Q has {positions.shape[0]} rows but P has {momenta.shape[0]}")
+            raise FemromValueError(f"Q has {positions.shape[0]} rows but P has {momenta.shape[0]}")
         return np.hstack([positions, momenta])
     sources = [as_block_source(positions), as_block_source(momenta)]
 
@@ -84,8 +85,8 @@ class CotangentLiftPSD:
     def __init__(self, rank: int | None = None, *, energy: float | None = None,
                  tolerance: float | None = None, method: str = "auto", **pod_options: Any):
         if "product" in pod_options:
-            raise ValueError("CotangentLiftPSD is Euclidean (A^T J A = J needs Phi^T Phi = I); "
-                             "a product is not supported")
+            raise FemromValueError("CotangentLiftPSD is Euclidean (A^T J A = J needs Phi^T Phi = I); "
+                                   "a product is not supported")
         self.rank, self.energy, self.tolerance = rank, energy, tolerance
         self.method = method
         self.pod_options = pod_options
@@ -125,7 +126,7 @@ class CotangentLiftPSD:
         self._check_fitted()
         states = np.asarray(states, dtype=np.float64)
         if states.shape[0] != self.basis_.shape[0]:
-            raise ValueError(f"states have {states.shape[0]} rows, the basis {self.basis_.shape[0]}")
+            raise FemromValueError(f"states have {states.shape[0]} rows, the basis {self.basis_.shape[0]}")
         return apply_j_transpose(self.basis_.T @ apply_j(states))
 
     def decompress(self, reduced: np.ndarray) -> np.ndarray:
@@ -133,7 +134,7 @@ class CotangentLiftPSD:
         self._check_fitted()
         reduced = np.asarray(reduced, dtype=np.float64)
         if reduced.shape[0] != self.basis_.shape[1]:
-            raise ValueError(f"reduced states have {reduced.shape[0]} rows, expected {self.basis_.shape[1]}")
+            raise FemromValueError(f"reduced states have {reduced.shape[0]} rows, expected {self.basis_.shape[1]}")
         return self.basis_ @ reduced
 
     def projection_error(self, states: np.ndarray) -> float:

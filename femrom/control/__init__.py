@@ -5,7 +5,7 @@ designed on any :class:`~femrom.rom.DiscreteStateSpace` (a ROM's
 ``to_state_space(dt)``, an identified model) and run against any plant, the
 full-order model included.
 
-- :class:`LinearMPC` (:class:`MPCConfig`): output tracking with input bounds, a
+- :class:`LinearMPC` (:class:`MPCConfig`, its :class:`QPSolver`): output tracking with input bounds, a
   horizon of ``N`` inputs, weights on outputs, inputs and input moves, an optional
   terminal cost (``"dare"``: the LQR cost-to-go); the QP is built once as a
   parametrised cvxpy problem and re-solved each step (OSQP warm-started, or
@@ -49,10 +49,11 @@ from femrom.control._mpc import LinearMPC, MPCError, MPCWarning
 from femrom.control._observers import KalmanObserver, LinearObserver, PolePlacementObserver
 from femrom.control._plants import FullOrderPlant, Plant, ReducedPlant, StateSpacePlant
 from femrom.control._problem import CondensedQP, MPCConfig, MPCProblem
+from femrom.control._qp_solver import QPSolver
 
 __all__ = [
     "QP_FORMULATIONS", "ClosedLoopResult", "CondensedQP", "CvxpyFormulation", "DisturbanceModel", "FullOrderPlant",
     "KalmanObserver", "LinearMPC", "LinearObserver", "MPCConfig", "MPCError", "MPCProblem", "MPCWarning",
-    "Plant", "PolePlacementObserver", "QPFormulation", "QPSolution", "ReducedPlant", "StateSpacePlant", "closed_loop",
+    "Plant", "PolePlacementObserver", "QPFormulation", "QPSolution", "QPSolver", "ReducedPlant", "StateSpacePlant", "closed_loop",
     "open_loop", "register_formulation", "registered_formulations", "travelling_wave",
 ]

@@ -22,6 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from femrom._errors import FemromValueError
 from femrom._json import dumps
 from femrom._progress import Progress
 from femrom.control._problem import vector
@@ -84,7 +85,7 @@ class ClosedLoopResult:
         e = self.outputs[:, start:] - self.reference[:, start:]
         scale = np.sqrt(np.sum(self.reference[:, start:] ** 2))
         if scale == 0:
-            raise ValueError("the reference is zero over the window: use the RMS output instead")
+            raise FemromValueError("the reference is zero over the window: use the RMS output instead")
         return float(np.sqrt(np.sum(e ** 2)) / scale)
 
     def input_effort(self, start: int = 1) -> float:
@@ -151,7 +152,7 @@ class ClosedLoopResult:
 
         with h5py.File(path, "r") as f:
             if f.attrs.get("format") != "femrom.ClosedLoopResult":
-                raise ValueError(f"{path} is not a femrom ClosedLoopResult file")
+                raise FemromValueError(f"{path} is not a femrom ClosedLoopResult file")
             arrays = {name: f[name][()] for name in cls._ARRAYS}
             statuses = tuple(s.decode() if isinstance(s, bytes) else str(s) for s in f["statuses"][()])
             states = f["plant_states"][()] if "plant_states" in f else None
@@ -208,23 +209,23 @@ def closed_loop(plant, controller, observer, reference, n_steps: int | None = No
     R = np.asarray(reference, dtype=float)
     p, m, N = controller.n_outputs, controller.n_inputs, controller.horizon
     if R.ndim != 2 or R.shape[0] != p:
-        raise ValueError(f"reference has shape {R.shape}, expected ({p}, K): one row per output")
+        raise FemromValueError(f"reference has shape {R.shape}, expected ({p}, K): one row per output")
     if not np.all(np.isfinite(R)):
-        raise ValueError("reference has non-finite entries")
+        raise FemromValueError("reference has non-finite entries")
     K = R.shape[1]
     if n_steps is None:
         if K - 1 - N < 1:
-            raise ValueError(f"the reference has {K} samples: give at least the horizon N = {N} + 2, "
-                             "or n_steps explicitly")
+            raise FemromValueError(f"the reference has {K} samples: give at least the horizon N = {N} + 2, "
+                                   "or n_steps explicitly")
         n_steps = K - 1 - N
     n_steps = int(n_steps)
     if not 0 <= n_steps <= K - 1:
-        raise ValueError(f"n_steps must be in [0, {K - 1}] for a reference of {K} samples, got {n_steps}")
+        raise FemromValueError(f"n_steps must be in [0, {K - 1}] for a reference of {K} samples, got {n_steps}")
     if observer.model.n_states != controller.n_states or observer.model.n_outputs != p \
             or observer.model.n_inputs != m:
-        raise ValueError(f"observer's model has (n, m, p) = ({observer.model.n_states}, "
-                         f"{observer.model.n_inputs}, {observer.model.n_outputs}), the controller's "
-                         f"({controller.n_states}, {m}, {p})")
+        raise FemromValueError(f"observer's model has (n, m, p) = ({observer.model.n_states}, "
+                               f"{observer.model.n_inputs}, {observer.model.n_outputs}), the controller's "
+                               f"({controller.n_states}, {m}, {p})")
     y = vector(plant.output, p, "plant output")
     u = vector(u0, m, "u0")
     window_source = _padded(R, N)

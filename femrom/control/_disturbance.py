@@ -34,6 +34,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from femrom._errors import FemromValueError
 from femrom.rom import DiscreteStateSpace
 
 
@@ -68,7 +69,7 @@ class DisturbanceModel:
         """The disturbance model named ``kind`` (``"output"`` or ``"input"``)."""
         makers = {"output": cls.output, "input": cls.input}
         if kind not in makers:
-            raise ValueError(f"unknown disturbance model {kind!r}; valid: {', '.join(makers)}")
+            raise FemromValueError(f"unknown disturbance model {kind!r}; valid: {', '.join(makers)}")
         return makers[kind](model)
 
     def augment(self, model: DiscreteStateSpace) -> DiscreteStateSpace:
@@ -78,14 +79,14 @@ class DisturbanceModel:
         """
         n, m, p, nd = model.n_states, model.n_inputs, model.n_outputs, self.n_disturbances
         if self.state_matrix.shape != (n, nd) or self.output_matrix.shape != (p, nd):
-            raise ValueError(f"{self.kind} disturbance matrices have shapes {self.state_matrix.shape}, "
-                             f"{self.output_matrix.shape}; the model needs ({n}, n_d), ({p}, n_d)")
+            raise FemromValueError(f"{self.kind} disturbance matrices have shapes {self.state_matrix.shape}, "
+                                   f"{self.output_matrix.shape}; the model needs ({n}, n_d), ({p}, n_d)")
         test = np.block([[np.eye(n) - model.A, -self.state_matrix], [model.C, self.output_matrix]])
         rank = np.linalg.matrix_rank(test)
         if rank < n + nd:
-            raise ValueError(f"{self.kind} disturbance model is not detectable with this model: "
-                             f"rank [[I - A, -B_d], [C, C_d]] = {rank} < n + n_d = {n + nd} "
-                             "(an integrating model, or more disturbances than independent outputs)")
+            raise FemromValueError(f"{self.kind} disturbance model is not detectable with this model: "
+                                   f"rank [[I - A, -B_d], [C, C_d]] = {rank} < n + n_d = {n + nd} "
+                                   "(an integrating model, or more disturbances than independent outputs)")
         A = np.block([[model.A, self.state_matrix], [np.zeros((nd, n)), np.eye(nd)]])
         B = np.vstack([model.B, np.zeros((nd, m))])
         C = np.hstack([model.C, self.output_matrix])

@@ -1,7 +1,7 @@
 r"""How the MPC's tracking problem becomes a QP and is solved: registered formulations.
 
 A formulation builds its QP once from an :class:`~femrom.control.MPCProblem` and
-the :class:`~femrom.control.MPCConfig` (solver and its settings), and on every step
+the :class:`~femrom.control.MPCConfig` (its :class:`~femrom.control.QPSolver`), and on every step
 writes the new state, reference window, previous input and offsets into it and
 solves. Each is one class in one module of ``femrom/control/formulations``,
 registered by name (:func:`register_formulation`), with
@@ -26,6 +26,7 @@ from dataclasses import dataclass
 import cvxpy as cp
 import numpy as np
 
+from femrom._errors import FemromRuntimeError, FemromValueError
 from femrom._registry import Registry
 
 #: The QP formulations by name (sorted).
@@ -70,11 +71,11 @@ class CvxpyFormulation(QPFormulation):
     def compiled(self) -> None:
         """Check that the problem is DPP (compiled once) and that the solver is there."""
         if not self.problem.is_dcp(dpp=True):
-            raise RuntimeError(f"formulation {self.name!r} is not DPP: cvxpy would recompile the QP every solve")
-        if self.config.solver not in cp.installed_solvers():
-            raise ValueError(f"solver {self.config.solver!r} is not installed for cvxpy; "
-                             f"installed: {', '.join(cp.installed_solvers())}")
-        self._options = solve_options(self.config)
+            raise FemromRuntimeError(f"formulation {self.name!r} is not DPP: cvxpy would recompile the QP every solve")
+        if self.config.solver.name.upper() not in cp.installed_solvers():
+            raise FemromValueError(f"solver {self.config.solver.name!r} is not installed for cvxpy; "
+                                   f"installed: {', '.join(cp.installed_solvers())}")
+        self._options = self.config.solver.cvxpy_keywords()
 
     def plan(self) -> np.ndarray | None:
         raise NotImplementedError
@@ -95,23 +96,10 @@ class CvxpyFormulation(QPFormulation):
         return QPSolution(status, self.plan() if status in ACCEPTED_STATUSES else None, seconds, iterations)
 
 
-def solve_options(config) -> dict:
-    """Keyword arguments of ``cvxpy.Problem.solve`` for the config's solver, tolerance and iterations."""
-    tol, iters = float(config.tolerance), int(config.max_iterations)
-    if config.solver == "OSQP":
-        options = dict(eps_abs=tol, eps_rel=tol, max_iter=iters, polish=False)
-    elif config.solver == "CLARABEL":
-        options = dict(tol_gap_abs=tol, tol_gap_rel=tol, tol_feas=tol, max_iter=iters)
-    else:
-        options = {}
-    options.update(config.solver_options)
-    return dict(solver=config.solver, warm_start=True, **options)
-
-
 def register_formulation(cls: type[QPFormulation]) -> type[QPFormulation]:
     """Class decorator: ``LinearMPC(..., formulation=cls.name)`` builds its QP with ``cls``."""
     if not cls.name:
-        raise ValueError(f"formulation class {cls.__name__} has no name")
+        raise FemromValueError(f"formulation class {cls.__name__} has no name")
     QP_FORMULATIONS.add(cls.name, cls)
     return cls
 

@@ -17,12 +17,14 @@ import warnings
 
 import numpy as np
 
+from femrom._errors import FemromRuntimeError, FemromValueError
 from femrom.control._formulation import QP_FORMULATIONS
 from femrom.control._problem import MPCConfig, MPCProblem, vector
+from femrom.control._qp_solver import QPSolver
 from femrom.rom import DiscreteStateSpace
 
 
-class MPCError(RuntimeError):
+class MPCError(FemromRuntimeError):
     """A QP solve failed and the controller's policy is ``on_failure="raise"``."""
 
 
@@ -50,8 +52,11 @@ class LinearMPC:
     config : MPCConfig, optional
         Settings; keyword arguments override its fields (``horizon``,
         ``output_weight``, ``input_weight``, ``input_rate_weight``,
-        ``input_bound``, ``terminal_weight``, ``formulation``, ``solver``,
-        ``tolerance``, ``max_iterations``, ``solver_options``, ``on_failure``).
+        ``input_bound``, ``terminal_weight``, ``formulation``, ``solver`` (a
+        :class:`~femrom.control.QPSolver`), ``on_failure``). For one release a
+        solver name (``solver="OSQP"``) and the keywords ``tolerance``,
+        ``max_iterations`` and ``solver_options`` are still taken, into a
+        ``QPSolver``, with a DeprecationWarning.
 
     Attributes
     ----------
@@ -75,6 +80,7 @@ class LinearMPC:
     """
 
     def __init__(self, model: DiscreteStateSpace, config: MPCConfig | None = None, **settings):
+        settings = _solver_from_names(settings, config)
         config = MPCConfig(**settings) if config is None else dataclasses.replace(config, **settings)
         self.model, self.config = model, config
         self.qp = MPCProblem.from_model(model, config)
@@ -136,9 +142,9 @@ class LinearMPC:
         if R.ndim == 1 and R.shape == (p,):
             R = np.repeat(R[:, None], N, axis=1)
         if R.shape != (p, N):
-            raise ValueError(f"reference has shape {R.shape}, expected ({p}, {N}) (outputs, horizon) or ({p},)")
+            raise FemromValueError(f"reference has shape {R.shape}, expected ({p}, {N}) (outputs, horizon) or ({p},)")
         if not np.all(np.isfinite(R)):
-            raise ValueError("reference has non-finite entries")
+            raise FemromValueError("reference has non-finite entries")
         u_prev = vector(u_previous, m, "u_previous")
         w_z = vector(state_offset, n, "state_offset")
         w_y = vector(output_offset, p, "output_offset")
@@ -162,7 +168,7 @@ class LinearMPC:
     def _fallback(self, status: str, u_previous: np.ndarray) -> np.ndarray:
         policy = self.config.on_failure
         if policy == "raise":
-            raise MPCError(f"QP solve failed with status {status!r} ({self.config.solver}, "
+            raise MPCError(f"QP solve failed with status {status!r} ({self.config.solver.name}, "
                            f"{self.config.formulation_name}) at solve {len(self.statuses)}")
         self.n_fallbacks += 1
         if not self._warned:
@@ -187,3 +193,24 @@ class LinearMPC:
         return {**self.config.describe(), "n_states": self.n_states, "n_inputs": self.n_inputs,
                 "n_outputs": self.n_outputs}
 
+
+#: The settings a LinearMPC took before the QPSolver object (one release more).
+_SOLVER_KEYWORDS = {"tolerance": "tolerance", "max_iterations": "max_iterations", "solver_options": "options"}
+
+
+def _solver_from_names(settings: dict, config: MPCConfig | None) -> dict:
+    """``settings`` with a solver name and the old solver keywords folded into a QPSolver
+    (a DeprecationWarning says what to write instead); unchanged without them."""
+    old = {key: settings.pop(key) for key in list(settings) if key in _SOLVER_KEYWORDS}
+    solver = settings.get("solver")
+    if not old and not isinstance(solver, str):
+        return settings
+    warnings.warn("LinearMPC(solver='OSQP', tolerance=..., max_iterations=..., solver_options=...) is "
+                  "deprecated: pass solver=QPSolver('osqp', tolerance=..., max_iterations=..., options=...)",
+                  DeprecationWarning, stacklevel=3)
+    if solver is None:
+        solver = config.solver if config is not None else QPSolver()
+    elif isinstance(solver, str):
+        solver = QPSolver(solver)
+    changes = {_SOLVER_KEYWORDS[key]: value for key, value in old.items()}
+    return {**settings, "solver": dataclasses.replace(solver, **changes)}

@@ -24,6 +24,7 @@ import numpy as np
 import scipy.linalg as sla
 import scipy.signal as ssig
 
+from femrom._errors import FemromValueError
 from femrom.control._disturbance import DisturbanceModel
 from femrom.control._problem import vector, weight_matrix
 from femrom.rom import DiscreteStateSpace
@@ -56,13 +57,13 @@ class LinearObserver:
     def __init__(self, model: DiscreteStateSpace, gain: np.ndarray, *,
                  disturbance: DisturbanceModel | None = None, initial_state=None):
         if not isinstance(model, DiscreteStateSpace):
-            raise ValueError(f"model must be a DiscreteStateSpace, got a {type(model).__name__}")
+            raise FemromValueError(f"model must be a DiscreteStateSpace, got a {type(model).__name__}")
         self.model, self.disturbance = model, disturbance
         self.augmented = model if disturbance is None else disturbance.augment(model)
         n_a, p = self.augmented.n_states, model.n_outputs
         gain = np.asarray(gain, dtype=float)
         if gain.shape != (n_a, p):
-            raise ValueError(f"gain has shape {gain.shape}, expected ({n_a}, {p})")
+            raise FemromValueError(f"gain has shape {gain.shape}, expected ({n_a}, {p})")
         self.gain_ = gain
         self.reset(initial_state)
 
@@ -83,16 +84,16 @@ class LinearObserver:
         z = np.zeros(n) if initial_state is None else np.asarray(initial_state, dtype=float).ravel()
         d = np.zeros(nd) if disturbance is None else np.asarray(disturbance, dtype=float).ravel()
         if z.size != n:
-            raise ValueError(f"initial_state has {z.size} entries, expected {n}")
+            raise FemromValueError(f"initial_state has {z.size} entries, expected {n}")
         if d.size != nd:
-            raise ValueError(f"disturbance has {d.size} entries, expected {nd}")
+            raise FemromValueError(f"disturbance has {d.size} entries, expected {nd}")
         self.estimate = np.concatenate([z, d])
 
     def update(self, y, u=None) -> np.ndarray:
         """(n_a,) filtered estimate after the measurement ``y_k`` (p,) taken with input ``u_k`` (m,)."""
         model = self.augmented
         if y is None:
-            raise ValueError("update needs the measured output y")
+            raise FemromValueError("update needs the measured output y")
         y = vector(y, model.n_outputs, "output")
         u = vector(u, model.n_inputs, "u")
         innovation = y - model.C @ self.estimate - model.D @ u
@@ -182,14 +183,14 @@ class KalmanObserver(LinearObserver):
     def __init__(self, model: DiscreteStateSpace, process_noise=None, measurement_noise=None, *,
                  disturbance=None, disturbance_noise=None, initial_state=None):
         if not isinstance(model, DiscreteStateSpace):
-            raise ValueError(f"model must be a DiscreteStateSpace, got a {type(model).__name__}")
+            raise FemromValueError(f"model must be a DiscreteStateSpace, got a {type(model).__name__}")
         disturbance = _disturbance(disturbance, model)
         augmented = model if disturbance is None else disturbance.augment(model)
         n, p = model.n_states, model.n_outputs
         W = weight_matrix(1.0 if process_noise is None else process_noise, n, "process_noise")
         V = weight_matrix(1.0 if measurement_noise is None else measurement_noise, p, "measurement_noise")
         if np.linalg.eigvalsh(V)[0] <= 0:
-            raise ValueError("measurement_noise must be positive definite")
+            raise FemromValueError("measurement_noise must be positive definite")
         if disturbance is not None:
             nd = disturbance.n_disturbances
             if disturbance_noise is None:
@@ -198,13 +199,13 @@ class KalmanObserver(LinearObserver):
             Wd = weight_matrix(disturbance_noise, nd, "disturbance_noise")
             W = sla.block_diag(W, Wd)
         elif disturbance_noise is not None:
-            raise ValueError("disturbance_noise needs a disturbance model")
+            raise FemromValueError("disturbance_noise needs a disturbance model")
         A, C = augmented.A, augmented.C
         try:
             P = sla.solve_discrete_are(A.T, C.T, W, V)
         except (np.linalg.LinAlgError, ValueError) as err:
-            raise ValueError(f"no stabilising Kalman gain: the model is not detectable from its outputs, "
-                             f"or the process noise misses a mode on the unit circle ({err})") from None
+            raise FemromValueError(f"no stabilising Kalman gain: the model is not detectable from its outputs, "
+                                   f"or the process noise misses a mode on the unit circle ({err})") from None
         P = 0.5 * (P + P.T)
         gain = np.linalg.solve(C @ P @ C.T + V, C @ P).T
         self.covariance_ = P
@@ -229,16 +230,16 @@ class PolePlacementObserver(LinearObserver):
 
     def __init__(self, model: DiscreteStateSpace, poles, *, disturbance=None, initial_state=None):
         if not isinstance(model, DiscreteStateSpace):
-            raise ValueError(f"model must be a DiscreteStateSpace, got a {type(model).__name__}")
+            raise FemromValueError(f"model must be a DiscreteStateSpace, got a {type(model).__name__}")
         disturbance = _disturbance(disturbance, model)
         augmented = model if disturbance is None else disturbance.augment(model)
         A, C = augmented.A, augmented.C
         n_a = A.shape[0]
         poles = np.atleast_1d(np.asarray(poles, dtype=complex))
         if poles.shape != (n_a,):
-            raise ValueError(f"poles has {poles.size} entries, expected {n_a} (the observer's states)")
+            raise FemromValueError(f"poles has {poles.size} entries, expected {n_a} (the observer's states)")
         if np.any(np.abs(poles) >= 1):
-            raise ValueError(f"poles must lie inside the unit circle, got moduli up to {np.abs(poles).max():.4g}")
+            raise FemromValueError(f"poles must lie inside the unit circle, got moduli up to {np.abs(poles).max():.4g}")
         CA_T = (C @ A).T
         U, s, Vt = np.linalg.svd(CA_T, full_matrices=False)
         rank = int(np.sum(s > s[0] * 1e-12)) if s.size else 0
@@ -249,9 +250,9 @@ class PolePlacementObserver(LinearObserver):
                 warnings.simplefilter("ignore", UserWarning)
                 placed = ssig.place_poles(A.T, Ur, poles.real if np.all(poles.imag == 0) else poles)
         except ValueError as err:
-            raise ValueError(f"cannot place the observer poles: {err}") from None
+            raise FemromValueError(f"cannot place the observer poles: {err}") from None
         gain = (Vr / sr) @ placed.gain_matrix          # M^T = V_r S_r^-1 K_r
         super().__init__(model, gain.T, disturbance=disturbance, initial_state=initial_state)
         achieved = np.sort_complex(self.error_poles())
         if np.max(np.abs(achieved - np.sort_complex(poles))) > 1e-6:
-            raise ValueError("the observer poles could not be placed accurately (a nearly unobservable mode?)")
+            raise FemromValueError("the observer poles could not be placed accurately (a nearly unobservable mode?)")

@@ -28,6 +28,7 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
+from femrom._errors import FemromValueError
 from femrom.control._problem import vector
 from femrom.integrators import Newmark, iterate
 from femrom.rom import DiscreteStateSpace
@@ -62,7 +63,7 @@ class StateSpacePlant:
 
     def __init__(self, model: DiscreteStateSpace, initial_state=None, u0=None):
         if not isinstance(model, DiscreteStateSpace):
-            raise ValueError(f"model must be a DiscreteStateSpace, got a {type(model).__name__}")
+            raise FemromValueError(f"model must be a DiscreteStateSpace, got a {type(model).__name__}")
         self.model = model
         self.n_inputs, self.n_outputs = model.n_inputs, model.n_outputs
         self._stepper = model.stepper(initial=vector(initial_state, model.n_states, "initial_state"),
@@ -97,8 +98,8 @@ class ReducedPlant:
 
     def __init__(self, model, dt: float, *, q0=None, v0=None, u0=None, scheme: str = "newmark"):
         if not callable(getattr(model, "stepper", None)):
-            raise ValueError(f"model must have a stepper(dt, initial=, u0=, scheme=) method; "
-                             f"got a {type(model).__name__}")
+            raise FemromValueError(f"model must have a stepper(dt, initial=, u0=, scheme=) method; "
+                                   f"got a {type(model).__name__}")
         initial = None if q0 is None and v0 is None else (q0, v0)
         if initial is not None and q0 is None:
             initial = (np.zeros_like(np.asarray(v0, dtype=float)), v0)
@@ -169,9 +170,9 @@ class FullOrderPlant:
 
     def __init__(self, system, dt: float, *, scheme=None, q0=None, v0=None, u0=None, solver="auto"):
         if system.input_matrix is None or system.output_matrix is None:
-            raise ValueError("system needs inputs and outputs to be a plant "
-                             f"(input_matrix is {'set' if system.input_matrix is not None else 'None'}, "
-                             f"output_matrix is {'set' if system.output_matrix is not None else 'None'})")
+            raise FemromValueError("system needs inputs and outputs to be a plant "
+                                   f"(input_matrix is {'set' if system.input_matrix is not None else 'None'}, "
+                                   f"output_matrix is {'set' if system.output_matrix is not None else 'None'})")
         n = system.n_dofs
         self.system, self.dt = system, float(dt)
         self.n_inputs, self.n_outputs = system.n_inputs, system.n_outputs

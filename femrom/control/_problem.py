@@ -22,11 +22,13 @@ formulation (``femrom/control/formulations``) is built from.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 import scipy.linalg as sla
 
+from femrom._errors import FemromTypeError, FemromValueError
+from femrom.control._qp_solver import QPSolver
 from femrom.rom import DiscreteStateSpace
 
 #: What an MPC does when a solve fails (infeasible, solver error, no solution).
@@ -62,17 +64,9 @@ class MPCConfig:
         (the condensed QP in OSQP without cvxpy's per-solve work). ``None``: the
         fastest measured for the solver (``benchmarks/mpc_solve.py``),
         ``"condensed_osqp"`` with OSQP and ``"condensed"`` with any other.
-    solver : str
-        A cvxpy QP solver: ``"OSQP"`` (warm-started ADMM) or ``"CLARABEL"`` (interior point).
-    tolerance : float
-        OSQP ``eps_abs = eps_rel``; Clarabel ``tol_gap_abs = tol_gap_rel = tol_feas``.
-        OSQP stops when the bound residual is at most
-        ``tolerance * (1 + max|u|)``: the largest bound violation an accepted
-        solve can have (a polished solve has none).
-    max_iterations : int
-        Solver iteration limit.
-    solver_options : dict
-        Further keyword arguments for ``problem.solve`` (e.g. ``{"polish": True}``).
+    solver : QPSolver
+        The QP solver and its settings (tolerance, iteration limit, options):
+        ``QPSolver("osqp")`` (the default) or ``QPSolver("clarabel", tolerance=1e-9)``.
     on_failure : {"shift", "hold", "raise"}
         After a failed solve (infeasible, solver error, non-finite solution):
         ``"shift"`` applies the next input of the last successful plan (the
@@ -88,28 +82,24 @@ class MPCConfig:
     input_bound: object = 0.1
     terminal_weight: object = None
     formulation: str | None = None
-    solver: str = "OSQP"
-    tolerance: float = 1e-6
-    max_iterations: int = 10_000
-    solver_options: dict = field(default_factory=dict)
+    solver: QPSolver = QPSolver()
     on_failure: str = "shift"
 
     def __post_init__(self):
         if not (isinstance(self.horizon, (int, np.integer)) and self.horizon >= 1):
-            raise ValueError(f"horizon must be a positive integer, got {self.horizon!r}")
+            raise FemromValueError(f"horizon must be a positive integer, got {self.horizon!r}")
         if self.on_failure not in FAILURE_POLICIES:
-            raise ValueError(f"on_failure must be one of {', '.join(FAILURE_POLICIES)}, got {self.on_failure!r}")
-        if not (self.tolerance > 0):
-            raise ValueError(f"tolerance must be positive, got {self.tolerance!r}")
-        if not (isinstance(self.max_iterations, (int, np.integer)) and self.max_iterations >= 1):
-            raise ValueError(f"max_iterations must be a positive integer, got {self.max_iterations!r}")
+            raise FemromValueError(f"on_failure must be one of {', '.join(FAILURE_POLICIES)}, got {self.on_failure!r}")
+        if not isinstance(self.solver, QPSolver):
+            raise FemromTypeError(f"solver must be a QPSolver (QPSolver('osqp'), QPSolver('clarabel')), "
+                                  f"got {self.solver!r}")
 
     @property
     def formulation_name(self) -> str:
         """The formulation used: ``formulation``, or the default for the solver."""
         if self.formulation is not None:
             return self.formulation
-        return "condensed_osqp" if self.solver == "OSQP" else "condensed"
+        return "condensed_osqp" if self.solver.name == "osqp" else "condensed"
 
     def describe(self) -> dict:
         """The settings as plain JSON values (weights as given, arrays as lists)."""
@@ -117,7 +107,12 @@ class MPCConfig:
             if isinstance(value, np.ndarray):
                 return value.tolist()
             return value
-        settings = {name: plain(getattr(self, name)) for name in self.__dataclass_fields__}
+        settings = {}
+        for name in self.__dataclass_fields__:
+            if name == "solver":        # flat, under the keys the settings have always had
+                settings.update(self.solver.describe())
+            else:
+                settings[name] = plain(getattr(self, name))
         settings["formulation"] = self.formulation_name
         return settings
 
@@ -128,9 +123,9 @@ def vector(x, size: int, name: str) -> np.ndarray:
         return np.zeros(size)
     x = np.asarray(x, dtype=float).ravel()
     if x.size != size:
-        raise ValueError(f"{name} has {x.size} entries, expected {size}")
+        raise FemromValueError(f"{name} has {x.size} entries, expected {size}")
     if not np.all(np.isfinite(x)):
-        raise ValueError(f"{name} has non-finite entries")
+        raise FemromValueError(f"{name} has non-finite entries")
     return x
 
 
@@ -139,24 +134,24 @@ def weight_matrix(weight, size: int, name: str, *, allow_none: bool = False) -> 
     if weight is None:
         if allow_none:
             return None
-        raise ValueError(f"{name} is required")
+        raise FemromValueError(f"{name} is required")
     W = np.asarray(weight, dtype=float)
     if W.ndim == 0:
         W = float(W) * np.eye(size)
     elif W.ndim == 1:
         if W.size != size:
-            raise ValueError(f"{name} has {W.size} diagonal entries, expected {size}")
+            raise FemromValueError(f"{name} has {W.size} diagonal entries, expected {size}")
         W = np.diag(W)
     elif W.shape != (size, size):
-        raise ValueError(f"{name} has shape {W.shape}, expected ({size}, {size})")
+        raise FemromValueError(f"{name} has shape {W.shape}, expected ({size}, {size})")
     if not np.all(np.isfinite(W)):
-        raise ValueError(f"{name} has non-finite entries")
+        raise FemromValueError(f"{name} has non-finite entries")
     if not np.allclose(W, W.T, rtol=1e-10, atol=1e-14 * max(1.0, np.abs(W).max())):
-        raise ValueError(f"{name} is not symmetric")
+        raise FemromValueError(f"{name} is not symmetric")
     W = 0.5 * (W + W.T)
     smallest = np.linalg.eigvalsh(W)[0] if size else 0.0
     if smallest < -1e-10 * max(1.0, np.abs(W).max()):
-        raise ValueError(f"{name} is not positive semidefinite (smallest eigenvalue {smallest:.3g})")
+        raise FemromValueError(f"{name} is not positive semidefinite (smallest eigenvalue {smallest:.3g})")
     return W
 
 
@@ -220,17 +215,17 @@ class MPCProblem:
     def from_model(cls, model: DiscreteStateSpace, config: MPCConfig) -> "MPCProblem":
         """The matrices of ``model`` and the weights and bounds of ``config``; one clear error for bad input."""
         if not isinstance(model, DiscreteStateSpace):
-            raise ValueError(f"model must be a DiscreteStateSpace (e.g. rom.to_state_space(dt)), "
-                             f"got a {type(model).__name__}")
+            raise FemromValueError(f"model must be a DiscreteStateSpace (e.g. rom.to_state_space(dt)), "
+                                   f"got a {type(model).__name__}")
         if model.metadata.get("constant_input"):
-            raise ValueError("model has a constant input channel (a constant load, metadata['constant_input']): "
-                             "the MPC decides every input; control a model exported without the load")
+            raise FemromValueError("model has a constant input channel (a constant load, metadata['constant_input']): "
+                                   "the MPC decides every input; control a model exported without the load")
         m, p = model.n_inputs, model.n_outputs
         if m == 0 or p == 0:
-            raise ValueError(f"model needs inputs and outputs to be controlled, has m = {m}, p = {p}")
+            raise FemromValueError(f"model needs inputs and outputs to be controlled, has m = {m}, p = {p}")
         for name in ("A", "B", "C", "D"):
             if not np.all(np.isfinite(getattr(model, name))):
-                raise ValueError(f"model.{name} has non-finite entries")
+                raise FemromValueError(f"model.{name} has non-finite entries")
         Q = weight_matrix(config.output_weight, p, "output_weight")
         R = weight_matrix(config.input_weight, m, "input_weight")
         S = weight_matrix(config.input_rate_weight, m, "input_rate_weight", allow_none=True)
@@ -238,8 +233,8 @@ class MPCProblem:
             S = None
         definite = np.linalg.eigvalsh(R)[0] > 0 or (S is not None and np.linalg.eigvalsh(S)[0] > 0)
         if not definite:
-            raise ValueError("input_weight or input_rate_weight must be positive definite "
-                             "(otherwise the QP's inputs are not unique)")
+            raise FemromValueError("input_weight or input_rate_weight must be positive definite "
+                                   "(otherwise the QP's inputs are not unique)")
         bound = _bounds(config.input_bound, m)
         P = _terminal(config.terminal_weight, model, Q, R, S)
         return cls(A=model.A, B=model.B, C=model.C, D=model.D, horizon=int(config.horizon),
@@ -253,9 +248,9 @@ def _bounds(bound, m: int) -> np.ndarray:
     if b.ndim == 0:
         b = np.full(m, float(b))
     if b.shape != (m,):
-        raise ValueError(f"input_bound has shape {b.shape}, expected a scalar or ({m},)")
+        raise FemromValueError(f"input_bound has shape {b.shape}, expected a scalar or ({m},)")
     if np.any(np.isnan(b)) or np.any(b <= 0):
-        raise ValueError(f"input_bound must be positive (inf for no bound), got {b}")
+        raise FemromValueError(f"input_bound must be positive (inf for no bound), got {b}")
     return b
 
 
@@ -264,15 +259,15 @@ def _terminal(weight, model: DiscreteStateSpace, Q, R, S) -> np.ndarray | None:
         return None
     if isinstance(weight, str):
         if weight != "dare":
-            raise ValueError(f"terminal_weight must be None, 'dare' or a matrix, got {weight!r}")
+            raise FemromValueError(f"terminal_weight must be None, 'dare' or a matrix, got {weight!r}")
         if S is not None or np.any(model.D):
-            raise ValueError("terminal_weight='dare' is the LQR cost-to-go of a model without "
-                             "feedthrough (D = 0) and without input_rate_weight")
+            raise FemromValueError("terminal_weight='dare' is the LQR cost-to-go of a model without "
+                                   "feedthrough (D = 0) and without input_rate_weight")
         try:
             P = sla.solve_discrete_are(model.A, model.B, model.C.T @ Q @ model.C, R)
         except (np.linalg.LinAlgError, ValueError) as err:
-            raise ValueError(f"terminal_weight='dare': the Riccati equation has no stabilising "
-                             f"solution ({err})") from None
+            raise FemromValueError(f"terminal_weight='dare': the Riccati equation has no stabilising "
+                                   f"solution ({err})") from None
         return 0.5 * (P + P.T)
     return weight_matrix(weight, model.n_states, "terminal_weight")
 

@@ -6,6 +6,7 @@ component over the nodes nearest to a point (:func:`nearest_node_rows`).
 """
 
 from femrom.fem._condensation import Condensation
+from femrom.fem._constraints import dirichlet_dofs, rigid_body_modes
 from femrom.fem._damping import rayleigh_damping, rayleigh_from_damping_ratios
 from femrom.fem._elasticity import elasticity_stiffness, lame_parameters, vector_mass
 from femrom.fem._material import ElementMaterial
@@ -27,6 +28,8 @@ from femrom.fem._interface_law import (
     register_interface_law,
 )
 from femrom.fem._joint import JointForce, interface_frames, relative_displacement_map
+from femrom.fem._loads import point_load, surface_pressure, surface_traction
+from femrom.fem._outputs import average_rows, nearest_node_rows, probe_rows
 from femrom.fem._nonlinear import (
     FORCES,
     ForceSum,
@@ -39,16 +42,6 @@ from femrom.fem._nonlinear import (
 from femrom.fem._transformed_force import TransformedForce, dense_projection, transform_force
 from femrom.fem._potentials import DENSITIES, LocalPotential, QuarticPotential
 from femrom.fem._spaces import LineSpace, SolidSpace, SpaceError
-from femrom.fem._vector_ops import (
-    average_rows,
-    dirichlet_dofs,
-    nearest_node_rows,
-    point_load,
-    probe_rows,
-    rigid_body_modes,
-    surface_pressure,
-    surface_traction,
-)
 from femrom.fem.interface_laws.clamped_friction import ClampedFrictionLaw, clamped_state
 from femrom.fem.interface_laws.clamped_iwan import ClampedIwanLaw, clamped_iwan_state
 from femrom.fem.interface_laws.dry_friction import DryFrictionLaw

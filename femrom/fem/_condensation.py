@@ -7,6 +7,8 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
+from femrom._errors import FemromValueError
+
 
 @dataclass(frozen=True, eq=False)
 class Condensation:
@@ -34,8 +36,8 @@ class Condensation:
     def from_fixed(cls, n_total: int, fixed) -> "Condensation":
         fixed = np.unique(np.asarray(fixed, dtype=np.int64))
         if fixed.size and (fixed[0] < 0 or fixed[-1] >= n_total):
-            raise ValueError(f"fixed dof indices must lie in [0, {n_total}), got "
-                             f"[{fixed[0]}, {fixed[-1]}]")
+            raise FemromValueError(f"fixed dof indices must lie in [0, {n_total}), got "
+                                   f"[{fixed[0]}, {fixed[-1]}]")
         mask = np.ones(n_total, dtype=bool)
         mask[fixed] = False
         free = np.flatnonzero(mask)
@@ -74,7 +76,7 @@ class Condensation:
         """Full field of a free-dof (n,) or (n, k) array; zeros on fixed dofs."""
         q = np.asarray(q)
         if q.shape[0] != self.n_free:
-            raise ValueError(f"expected {self.n_free} free dofs, got {q.shape[0]}")
+            raise FemromValueError(f"expected {self.n_free} free dofs, got {q.shape[0]}")
         full = np.zeros((self.n_total,) + q.shape[1:], dtype=q.dtype)
         full[self.free] = q
         return full

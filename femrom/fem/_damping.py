@@ -5,6 +5,8 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
+from femrom._errors import FemromValueError
+
 
 def rayleigh_damping(mass: sp.spmatrix, stiffness: sp.spmatrix, alpha: float, beta: float) -> sp.csr_matrix:
     """Rayleigh damping ``C = alpha M + beta K`` (symmetric positive semidefinite).
@@ -14,11 +16,11 @@ def rayleigh_damping(mass: sp.spmatrix, stiffness: sp.spmatrix, alpha: float, be
     for name, value in (("alpha", alpha), ("beta", beta)):
         if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)) \
                 or not np.isfinite(value):
-            raise ValueError(f"Rayleigh {name} must be a finite number, got {value!r}")
+            raise FemromValueError(f"Rayleigh {name} must be a finite number, got {value!r}")
     if alpha < 0 or beta < 0:
-        raise ValueError(f"Rayleigh coefficients must be non-negative, got alpha={alpha}, beta={beta}")
+        raise FemromValueError(f"Rayleigh coefficients must be non-negative, got alpha={alpha}, beta={beta}")
     if alpha == 0 and beta == 0:
-        raise ValueError("Rayleigh damping with alpha = beta = 0: remove the damping effect instead")
+        raise FemromValueError("Rayleigh damping with alpha = beta = 0: remove the damping effect instead")
     return (alpha * sp.csr_matrix(mass) + beta * sp.csr_matrix(stiffness)).tocsr()
 
 

@@ -40,6 +40,8 @@ import skfem
 from skfem.quadrature import get_quadrature
 from skfem.refdom import RefTet
 
+from femrom._errors import FemromRuntimeError, FemromTypeError, FemromValueError
+
 __all__ = [
     "elasticity_stiffness",
     "lame_parameters",
@@ -79,10 +81,10 @@ def lame_parameters(youngs_modulus, poisson_ratio) -> tuple:
     E = np.asarray(youngs_modulus, dtype=float)
     nu = np.asarray(poisson_ratio, dtype=float)
     if not np.all(np.isfinite(E)) or np.any(E <= 0.0):
-        raise ValueError(f"youngs_modulus must be finite and > 0, got min {E.min()}")
+        raise FemromValueError(f"youngs_modulus must be finite and > 0, got min {E.min()}")
     if not np.all(np.isfinite(nu)) or np.any(nu <= -1.0) or np.any(nu >= 0.5):
-        raise ValueError("poisson_ratio must lie strictly inside (-1, 0.5) "
-                         f"(0.5 is incompressible), got [{nu.min()}, {nu.max()}]")
+        raise FemromValueError("poisson_ratio must lie strictly inside (-1, 0.5) "
+                               f"(0.5 is incompressible), got [{nu.min()}, {nu.max()}]")
     lam = E * nu / ((1.0 + nu) * (1.0 - 2.0 * nu))
     mu = E / (2.0 * (1.0 + nu))
     if lam.ndim == 0:
@@ -95,13 +97,13 @@ def _scalar_element(basis) -> skfem.Element:
     """The scalar element of a 3D ``ElementVector`` basis on a straight ``MeshTet``."""
     elem = getattr(basis, "elem", None)
     if not isinstance(elem, skfem.ElementVector) or elem.dim != 3:
-        raise TypeError("expected a skfem.Basis with ElementVector(ElementTetP1() or "
-                        f"ElementTetP2()), got element {type(elem).__name__}")
+        raise FemromTypeError("expected a skfem.Basis with ElementVector(ElementTetP1() or "
+                              f"ElementTetP2()), got element {type(elem).__name__}")
     if type(elem.elem) not in _SUPPORTED_ELEMENTS:
-        raise TypeError("supported scalar elements are ElementTetP1 and ElementTetP2, "
-                        f"got {type(elem.elem).__name__}")
+        raise FemromTypeError("supported scalar elements are ElementTetP1 and ElementTetP2, "
+                              f"got {type(elem.elem).__name__}")
     if type(basis.mesh) is not skfem.MeshTet1:
-        raise TypeError(f"expected a straight-sided skfem.MeshTet, got {type(basis.mesh).__name__}")
+        raise FemromTypeError(f"expected a straight-sided skfem.MeshTet, got {type(basis.mesh).__name__}")
     return elem.elem
 
 
@@ -121,8 +123,8 @@ def _scalar_element_dofs(basis) -> np.ndarray:
     scalar = dofs[0::3]
     if not (np.array_equal(dofs[1::3], scalar + 1) and np.array_equal(dofs[2::3], scalar + 2)
             and not np.any(scalar % 3)):
-        raise RuntimeError("skfem's ElementVector dofs are not interleaved (3 s + c); "
-                           "femrom's fast assembly relies on that ordering")
+        raise FemromRuntimeError("skfem's ElementVector dofs are not interleaved (3 s + c); "
+                                 "femrom's fast assembly relies on that ordering")
     return np.ascontiguousarray((scalar // 3).T, dtype=np.int64)
 
 
@@ -145,7 +147,7 @@ def _affine_maps(mesh, elements) -> tuple[np.ndarray, np.ndarray]:
     adj = np.stack([np.cross(c1, c2), np.cross(c2, c0), np.cross(c0, c1)], axis=1)
     det = np.einsum("ej,ej->e", c0, adj[:, 0])
     if np.any(det == 0.0):
-        raise ValueError(f"{int(np.sum(det == 0.0))} degenerate (zero-volume) tetrahedra")
+        raise FemromValueError(f"{int(np.sum(det == 0.0))} degenerate (zero-volume) tetrahedra")
     return adj / det[:, None, None], np.abs(det)
 
 
@@ -175,7 +177,7 @@ def _per_element(value, n_elements: int, name: str) -> np.ndarray:
     if arr.ndim == 0:
         return np.full(n_elements, float(arr))
     if arr.shape != (n_elements,):
-        raise ValueError(f"{name} must be a scalar or have shape ({n_elements},), got {arr.shape}")
+        raise FemromValueError(f"{name} must be a scalar or have shape ({n_elements},), got {arr.shape}")
     return arr
 
 
@@ -327,7 +329,7 @@ def _scalar_mass(basis, density, *, lumped: bool):
     n_e = elements.size
     rho = _per_element(density, n_e, "density")
     if np.any(rho <= 0.0):
-        raise ValueError(f"density must be > 0, got min {rho.min()}")
+        raise FemromValueError(f"density must be > 0, got min {rho.min()}")
     Mref = _reference_mass_matrix(elem)
     scalar_dofs = _scalar_element_dofs(basis)
     scale = rho * _affine_maps(basis.mesh, elements)[1]

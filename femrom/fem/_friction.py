@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from femrom._errors import FemromValueError
 from femrom.fem._nonlinear import NonlinearForce, register_force
 
 
@@ -53,7 +54,7 @@ class JenkinsForce(NonlinearForce):
         self.stiffness = np.broadcast_to(np.asarray(stiffness, dtype=float), (s,)).copy()
         self.slip_force = np.broadcast_to(np.asarray(slip_force, dtype=float), (s,)).copy()
         if not (np.all(self.stiffness > 0) and np.all(self.slip_force > 0)):
-            raise ValueError("Jenkins elements need stiffness > 0 and slip_force > 0")
+            raise FemromValueError("Jenkins elements need stiffness > 0 and slip_force > 0")
 
     def initial_state(self) -> np.ndarray:
         return np.zeros(self.n_local)

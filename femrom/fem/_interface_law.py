@@ -33,6 +33,7 @@ from typing import ClassVar
 
 import numpy as np
 
+from femrom._errors import FemromValueError
 from femrom._registry import Registry
 
 #: The interface laws by name (the modules of :mod:`femrom.fem.interface_laws` are imported on first read).
@@ -43,13 +44,13 @@ INTERFACE_LAWS = Registry("interface law", "femrom.fem.interface_laws", order=la
 def register_interface_law(cls):
     """Class decorator: the law can be selected by ``cls.name`` (:func:`interface_law`)."""
     if not getattr(cls, "name", ""):
-        raise ValueError(f"interface law class {cls.__name__} has no name")
+        raise FemromValueError(f"interface law class {cls.__name__} has no name")
     INTERFACE_LAWS.add(cls.name, cls)
     return cls
 
 
 def interface_law(name: str, **parameters) -> "InterfaceLaw":
-    """The registered law ``name`` with its ``parameters`` (one ValueError for an unknown name)."""
+    """The registered law ``name`` with its ``parameters`` (one FemromValueError for an unknown name)."""
     return INTERFACE_LAWS.get(name)(**parameters)
 
 
@@ -64,7 +65,7 @@ def check_parameters(law, rules) -> None:
     """Validate and coerce the parameters of a frozen dataclass ``law`` in place.
 
     ``rules``: ``(name, valid, ok)`` triples, ``ok(value) -> bool`` on the float value and
-    ``valid`` the range in words. The first bad one raises one ValueError naming it.
+    ``valid`` the range in words. The first bad one raises one FemromValueError naming it.
     """
     kinds = {f.name: f.type for f in dataclasses.fields(law)}
     for name, valid, ok in rules:
@@ -74,7 +75,7 @@ def check_parameters(law, rules) -> None:
         except (TypeError, ValueError):
             value = float("nan")
         if not (np.isfinite(value) and ok(value)):
-            raise ValueError(f"{type(law).__name__}: {name} must be {valid}, got {given!r}")
+            raise FemromValueError(f"{type(law).__name__}: {name} must be {valid}, got {given!r}")
         object.__setattr__(law, name, int(value) if kinds.get(name) in (int, "int") else value)
 
 
@@ -178,7 +179,7 @@ def split_gap(gap) -> tuple[np.ndarray, np.ndarray]:
     """``(g_t (s, 2), g_n (s,))`` of a (s, 3) local relative displacement, checked."""
     gap = np.asarray(gap, dtype=float)
     if gap.ndim != 2 or gap.shape[1] != 3:
-        raise ValueError(f"gap must be (s, 3) (g_t1, g_t2, g_n) per contact point, got shape {gap.shape}")
+        raise FemromValueError(f"gap must be (s, 3) (g_t1, g_t2, g_n) per contact point, got shape {gap.shape}")
     return gap[:, :2], gap[:, 2]
 
 

@@ -30,6 +30,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
+from femrom._errors import FemromValueError
 from femrom.fem._interface_law import InterfaceLaw, interface_law_from_parameters
 from femrom.fem._nonlinear import NonlinearForce, register_force
 
@@ -50,10 +51,10 @@ def interface_frames(normals, first_tangents=None) -> np.ndarray:
     """
     normals = np.asarray(normals, dtype=float)
     if normals.ndim != 2 or normals.shape[1] != 3:
-        raise ValueError(f"normals must be (s, 3), got shape {normals.shape}")
+        raise FemromValueError(f"normals must be (s, 3), got shape {normals.shape}")
     length = np.linalg.norm(normals, axis=1)
     if not np.all(length > 0):
-        raise ValueError(f"normals must be nonzero; {int(np.sum(~(length > 0)))} are zero or not finite")
+        raise FemromValueError(f"normals must be nonzero; {int(np.sum(~(length > 0)))} are zero or not finite")
     n = normals / length[:, None]
     if first_tangents is None:
         t = np.zeros_like(n)
@@ -63,7 +64,7 @@ def interface_frames(normals, first_tangents=None) -> np.ndarray:
     t = t - np.einsum("si,si->s", t, n)[:, None] * n
     t_length = np.linalg.norm(t, axis=1)
     if not np.all(t_length > 1e-12):
-        raise ValueError("first_tangents must not be parallel to the normals")
+        raise FemromValueError("first_tangents must not be parallel to the normals")
     t1 = t / t_length[:, None]
     t2 = np.cross(n, t1)
     return np.stack([t1, t2, n], axis=1)
@@ -72,10 +73,10 @@ def interface_frames(normals, first_tangents=None) -> np.ndarray:
 def _side(dofs, name: str, n_dofs: int) -> np.ndarray:
     dofs = np.asarray(dofs)
     if dofs.ndim != 2 or dofs.shape[1] != 3 or not np.issubdtype(dofs.dtype, np.integer):
-        raise ValueError(f"{name} must be an (s, 3) integer array of dof indices, got shape {dofs.shape} "
-                         f"and dtype {dofs.dtype}")
+        raise FemromValueError(f"{name} must be an (s, 3) integer array of dof indices, got shape {dofs.shape} "
+                               f"and dtype {dofs.dtype}")
     if dofs.size and dofs.max() >= n_dofs:
-        raise ValueError(f"{name} must lie in [0, {n_dofs}) (or be -1 for a fixed component), got {dofs.max()}")
+        raise FemromValueError(f"{name} must lie in [0, {n_dofs}) (or be -1 for a fixed component), got {dofs.max()}")
     return dofs.astype(np.int64)
 
 
@@ -129,24 +130,25 @@ class JointForce(NonlinearForce):
     def __init__(self, law: InterfaceLaw, dofs_a, dofs_b, normals, areas, n_dofs: int, *, initial_gap=0.0,
                  first_tangents=None, name: str | None = None):
         if not isinstance(law, InterfaceLaw):
-            raise ValueError(f"law must be an InterfaceLaw (see femrom.fem.interface_law), got {type(law).__name__}")
+            raise FemromValueError("law must be an InterfaceLaw (see femrom.fem.interface_law), "
+                                   f"got {type(law).__name__}")
         n_dofs = int(n_dofs)
         dofs_a, dofs_b = _side(dofs_a, "dofs_a", n_dofs), _side(dofs_b, "dofs_b", n_dofs)
         if dofs_a.shape != dofs_b.shape:
-            raise ValueError(f"dofs_a and dofs_b must have one shape, got {dofs_a.shape} and {dofs_b.shape}")
+            raise FemromValueError(f"dofs_a and dofs_b must have one shape, got {dofs_a.shape} and {dofs_b.shape}")
         s = dofs_a.shape[0]
         if np.any((dofs_a == dofs_b) & (dofs_a >= 0)):
-            raise ValueError("dofs_a and dofs_b must differ component by component (a pair joins two nodes)")
+            raise FemromValueError("dofs_a and dofs_b must differ component by component (a pair joins two nodes)")
         normals = np.asarray(normals, dtype=float)
         if normals.shape != (s, 3):
-            raise ValueError(f"normals must be ({s}, 3) like the dofs, got shape {normals.shape}")
+            raise FemromValueError(f"normals must be ({s}, 3) like the dofs, got shape {normals.shape}")
         areas = np.asarray(areas, dtype=float)
         if areas.shape != (s,) or not np.all(areas > 0):
-            raise ValueError(f"areas must be ({s},) and > 0, got shape {areas.shape}"
-                             + (f" with minimum {areas.min()!r}" if areas.size else ""))
+            raise FemromValueError(f"areas must be ({s},) and > 0, got shape {areas.shape}"
+                                   + (f" with minimum {areas.min()!r}" if areas.size else ""))
         gap = np.broadcast_to(np.asarray(initial_gap, dtype=float), (s,)).copy()
         if not np.all(np.isfinite(gap)):
-            raise ValueError("initial_gap must be finite")
+            raise FemromValueError("initial_gap must be finite")
         frames = interface_frames(normals, first_tangents)
         super().__init__(n_dofs, local_map=relative_displacement_map(dofs_a, dofs_b, frames, n_dofs), name=name)
         self.law, self.dofs_a, self.dofs_b, self.areas = law, dofs_a, dofs_b, areas
@@ -219,12 +221,12 @@ class JointForce(NonlinearForce):
         """
         pairs = np.asarray(pairs)
         if pairs.ndim != 1 or pairs.size == 0 or not np.issubdtype(pairs.dtype, np.integer):
-            raise ValueError(f"pairs must be a non-empty 1-D integer array, got shape {pairs.shape}")
+            raise FemromValueError(f"pairs must be a non-empty 1-D integer array, got shape {pairs.shape}")
         if pairs.min() < 0 or pairs.max() >= self.n_pairs or np.unique(pairs).size != pairs.size:
-            raise ValueError(f"pairs must be distinct indices in [0, {self.n_pairs})")
+            raise FemromValueError(f"pairs must be distinct indices in [0, {self.n_pairs})")
         w = np.ones(pairs.size) if weights is None else np.asarray(weights, dtype=float)
         if w.shape != pairs.shape or not np.all(np.isfinite(w) & (w > 0)):
-            raise ValueError(f"weights must be ({pairs.size},) finite and > 0")
+            raise FemromValueError(f"weights must be ({pairs.size},) finite and > 0")
         tangents = self._given.get("first_tangents")
         if tangents is not None and tangents.ndim == 2:
             tangents = tangents[pairs]

@@ -16,6 +16,8 @@ import scipy.sparse as sp
 from skfem import Basis, BilinearForm, ElementLineHermite, ElementLineP1, MeshLine
 from skfem.helpers import dd, grad
 
+from femrom._errors import FemromValueError
+
 #: Line elements by scene name: (element factory, quadrature order exact for the mass).
 LINE_ELEMENTS = {
     "hermite": (ElementLineHermite, 6),  # cubic x cubic = degree 6
@@ -28,7 +30,7 @@ def line_basis(mesh: MeshLine, element: str = "hermite") -> Basis:
     try:
         factory, intorder = LINE_ELEMENTS[element]
     except KeyError:
-        raise ValueError(f"unknown line element {element!r}; valid: {', '.join(LINE_ELEMENTS)}") from None
+        raise FemromValueError(f"unknown line element {element!r}; valid: {', '.join(LINE_ELEMENTS)}") from None
     return Basis(mesh, factory(), intorder=intorder)
 
 
@@ -61,7 +63,7 @@ def axial_stiffness(basis: Basis, rigidity: float) -> sp.csr_matrix:
 
 def _slope_or_curvature(basis, form, rigidity):
     if not rigidity > 0:
-        raise ValueError(f"rigidity must be positive, got {rigidity}")
+        raise FemromValueError(f"rigidity must be positive, got {rigidity}")
     return form.assemble(basis, rigidity=float(rigidity)).tocsr()
 
 
@@ -76,7 +78,7 @@ def line_mass(basis: Basis, mass_per_length: float, *, lumped: bool = False) -> 
     scaling equals the element-by-element one.
     """
     if not mass_per_length > 0:
-        raise ValueError(f"mass per length must be positive, got {mass_per_length}")
+        raise FemromValueError(f"mass per length must be positive, got {mass_per_length}")
     M = _value_product.assemble(basis, density=float(mass_per_length)).tocsr()
     if not lumped:
         return M
@@ -110,4 +112,4 @@ def node_positions(basis: Basis) -> np.ndarray:
 
 def _require_element(basis, element_type, what):
     if not isinstance(basis.elem, element_type):
-        raise ValueError(f"{what} needs {element_type.__name__}, got {type(basis.elem).__name__}")
+        raise FemromValueError(f"{what} needs {element_type.__name__}, got {type(basis.elem).__name__}")

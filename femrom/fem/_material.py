@@ -24,6 +24,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from femrom._errors import FemromValueError
+
 __all__ = ["ElementMaterial"]
 
 
@@ -42,7 +44,7 @@ class ElementMaterial:
 
     Raises
     ------
-    ValueError
+    FemromValueError
         Arrays of different shapes, not one-dimensional, or values out of range
         (the message names the attribute and its worst value).
     """
@@ -60,16 +62,16 @@ class ElementMaterial:
             object.__setattr__(self, name, value)
         shapes = {value.shape for value in arrays.values()}
         if len(shapes) != 1 or arrays["density"].ndim != 1:
-            raise ValueError(f"ElementMaterial needs three 1D arrays of one length, got shapes "
-                             f"{[v.shape for v in arrays.values()]}")
+            raise FemromValueError(f"ElementMaterial needs three 1D arrays of one length, got shapes "
+                                   f"{[v.shape for v in arrays.values()]}")
         for name in ("youngs_modulus", "density"):
             value = arrays[name]
             if value.size and not (np.all(np.isfinite(value)) and value.min() > 0):
-                raise ValueError(f"ElementMaterial {name} must be finite and > 0, got min {value.min()}")
+                raise FemromValueError(f"ElementMaterial {name} must be finite and > 0, got min {value.min()}")
         nu = arrays["poisson_ratio"]
         if nu.size and not (np.all(np.isfinite(nu)) and nu.min() > -1.0 and nu.max() < 0.5):
-            raise ValueError(f"ElementMaterial poisson_ratio must lie in (-1, 0.5), got "
-                             f"[{nu.min()}, {nu.max()}]")
+            raise FemromValueError(f"ElementMaterial poisson_ratio must lie in (-1, 0.5), got "
+                                   f"[{nu.min()}, {nu.max()}]")
 
     @property
     def n_elements(self) -> int:

@@ -33,6 +33,8 @@ from typing import Any, ClassVar
 import numpy as np
 import scipy.sparse as sp
 
+from femrom._errors import FemromValueError
+
 #: Forces that can be rebuilt from :meth:`NonlinearForce.parameters`, by ``kind``.
 FORCES: dict[str, type["NonlinearForce"]] = {}
 
@@ -47,7 +49,7 @@ def force_from_parameters(parameters: dict) -> "NonlinearForce":
     """Inverse of :meth:`NonlinearForce.parameters`."""
     kind = str(parameters["kind"])
     if kind not in FORCES:
-        raise ValueError(f"unknown nonlinear force kind {kind!r}; known: {', '.join(FORCES)}")
+        raise FemromValueError(f"unknown nonlinear force kind {kind!r}; known: {', '.join(FORCES)}")
     return FORCES[kind].from_parameters(parameters)
 
 
@@ -65,7 +67,7 @@ def _as_diagonal_or_matrix(D, size: int):
         return D
     D = np.asarray(D, dtype=float)
     if D.ndim == 1 and D.size != size or D.ndim == 2 and D.shape != (size, size):
-        raise ValueError(f"local tangent has shape {D.shape}, expected ({size},) or ({size}, {size})")
+        raise FemromValueError(f"local tangent has shape {D.shape}, expected ({size},) or ({size}, {size})")
     return D
 
 
@@ -109,13 +111,13 @@ class NonlinearForce:
     def __init__(self, n_dofs: int, *, dofs=None, local_map=None, name: str | None = None):
         n_dofs = int(n_dofs)
         if dofs is not None and local_map is not None:
-            raise ValueError("give dofs or local_map, not both")
+            raise FemromValueError("give dofs or local_map, not both")
         self.n_dofs = n_dofs
         self.name = name or (self.kind or type(self).__name__)
         if local_map is not None:
             L = sp.csr_matrix(local_map, dtype=float)
             if L.shape[1] != n_dofs:
-                raise ValueError(f"local_map has {L.shape[1]} columns, the system {n_dofs} dofs")
+                raise FemromValueError(f"local_map has {L.shape[1]} columns, the system {n_dofs} dofs")
             self._dofs = None
             self.local_map = L
         else:
@@ -124,9 +126,9 @@ class NonlinearForce:
             else:
                 idx = np.asarray(dofs, dtype=np.int64).ravel()
                 if idx.size and (idx.min() < 0 or idx.max() >= n_dofs):
-                    raise ValueError(f"dofs must lie in [0, {n_dofs}), got [{idx.min()}, {idx.max()}]")
+                    raise FemromValueError(f"dofs must lie in [0, {n_dofs}), got [{idx.min()}, {idx.max()}]")
                 if np.unique(idx).size != idx.size:
-                    raise ValueError("dofs of a nonlinear force must be distinct")
+                    raise FemromValueError("dofs of a nonlinear force must be distinct")
             idx.setflags(write=False)
             self._dofs = idx
             self.local_map = selection_map(idx, n_dofs)
@@ -278,13 +280,13 @@ class ForceSum(NonlinearForce):
     def __init__(self, forces):
         forces = tuple(forces)
         if len(forces) < 2:
-            raise ValueError("a ForceSum needs at least two forces")
+            raise FemromValueError("a ForceSum needs at least two forces")
         n = forces[0].n_dofs
         if any(f.n_dofs != n for f in forces):
-            raise ValueError(f"forces act in systems of different sizes: {[f.n_dofs for f in forces]}")
+            raise FemromValueError(f"forces act in systems of different sizes: {[f.n_dofs for f in forces]}")
         names = [f.name for f in forces]
         if len(set(names)) != len(names):
-            raise ValueError(f"forces in a sum need distinct names, got {names}")
+            raise FemromValueError(f"forces in a sum need distinct names, got {names}")
         self.forces = forces
         super().__init__(n, local_map=sp.vstack([f.local_map for f in forces]).tocsr(), name="sum")
         sizes = np.cumsum([0] + [f.n_local for f in forces])

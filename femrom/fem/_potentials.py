@@ -16,6 +16,7 @@ from typing import Callable
 
 import numpy as np
 
+from femrom._errors import FemromValueError
 from femrom.fem._nonlinear import NonlinearForce, register_force
 
 
@@ -75,12 +76,12 @@ class LocalPotential(NonlinearForce):
                  density_parameters: dict | None = None, name: str | None = None):
         self.weights = np.asarray(weights, dtype=float)
         if self.weights.ndim != 1:
-            raise ValueError(f"weights must be (s,), got shape {self.weights.shape}")
+            raise FemromValueError(f"weights must be (s,), got shape {self.weights.shape}")
         if dofs is not None and np.size(dofs) != self.weights.size:
-            raise ValueError(f"{np.size(dofs)} dofs but {self.weights.size} weights")
+            raise FemromValueError(f"{np.size(dofs)} dofs but {self.weights.size} weights")
         if n_dofs is None:
             if dofs is not None:
-                raise ValueError("a potential on some dofs needs n_dofs, the system's size")
+                raise FemromValueError("a potential on some dofs needs n_dofs, the system's size")
             n_dofs = self.weights.size
         super().__init__(n_dofs, dofs=dofs, name=name)
         self.phi, self.dphi, self.ddphi = phi, dphi, ddphi
@@ -92,7 +93,7 @@ class LocalPotential(NonlinearForce):
                    name: str | None = None, **parameters) -> "LocalPotential":
         """A potential with a named density of :data:`DENSITIES` (e.g. ``"duffing", linear=, cubic=``)."""
         if density not in DENSITIES:
-            raise ValueError(f"unknown potential density {density!r}; valid: {', '.join(DENSITIES)}")
+            raise FemromValueError(f"unknown potential density {density!r}; valid: {', '.join(DENSITIES)}")
         phi, dphi, ddphi = DENSITIES[density](**parameters)
         return cls(weights, phi, dphi, ddphi, dofs=dofs, n_dofs=n_dofs, density=density,
                    density_parameters=parameters, name=name)
@@ -127,7 +128,7 @@ class LocalPotential(NonlinearForce):
     def from_parameters(cls, parameters):
         placement = cls._placement_from(parameters)
         if "local_map" in placement:
-            raise ValueError("a LocalPotential is placed on dofs, not through a general map")
+            raise FemromValueError("a LocalPotential is placed on dofs, not through a general map")
         density = {k.split(".", 1)[1]: float(v) for k, v in parameters.items() if k.startswith("density.")}
         dofs = placement["dofs"]
         full = dofs.size == placement["n_dofs"] and np.array_equal(dofs, np.arange(dofs.size))

@@ -13,11 +13,12 @@ import numpy as np
 import scipy.sparse as sp
 from skfem import Basis, LinearForm
 
-from femrom.fem import _elasticity, _line, _vector_ops
+from femrom._errors import FemromValueError
+from femrom.fem import _constraints, _elasticity, _line, _loads, _outputs
 from femrom.mesh import boundary_facets, subdomain_elements
 
 
-class SpaceError(ValueError):
+class SpaceError(FemromValueError):
     """A request a space cannot serve (unknown component, unsupported load)."""
 
 
@@ -182,23 +183,23 @@ class SolidSpace:
 
     def boundary_dofs(self, name: str, *, clamped: bool) -> np.ndarray:
         boundary_facets(self.mesh, name)  # one clear error for an unknown name
-        return _vector_ops.dirichlet_dofs(self.basis, name)
+        return _constraints.dirichlet_dofs(self.basis, name)
 
     def rigid_body_modes(self) -> np.ndarray:
         """(n_total, 6) translations and rotations: the near-nullspace for AMG."""
-        return _vector_ops.rigid_body_modes(self.basis)
+        return _constraints.rigid_body_modes(self.basis)
 
     def load_vector(self, load) -> np.ndarray:
         """(n_total,) load: point force, constant traction or normal pressure."""
         if load.kind == "surface_pressure":
-            return _vector_ops.surface_pressure(self.basis, _name(load.at, load.kind), load.magnitude)
+            return _loads.surface_pressure(self.basis, _name(load.at, load.kind), load.magnitude)
         vector = self._direction(load) * load.magnitude
         if load.kind == "surface_traction":
-            return _vector_ops.surface_traction(self.basis, _name(load.at, load.kind), vector)
+            return _loads.surface_traction(self.basis, _name(load.at, load.kind), vector)
         if isinstance(load.at, str):
             raise SpaceError("a solid point_load needs a point [x, y, z] in 'at' (use surface_traction "
                              "for a load on a named boundary)")
-        return _vector_ops.point_load(self.basis, load.at, vector)
+        return _loads.point_load(self.basis, load.at, vector)
 
     def output_row(self, probe) -> sp.csr_matrix:
         """(1, n_total) row of a probe: the component at a point (interpolated, or averaged over
@@ -209,17 +210,17 @@ class SolidSpace:
             if isinstance(probe.at, str):
                 raise SpaceError(f"a nearest-node probe needs a point [x, y, z], got {probe.at!r}")
             if self._node_tree is None:     # built once, for the many points of a line of probes
-                self._node_tree = _vector_ops.node_tree(self.basis)
+                self._node_tree = _outputs.node_tree(self.basis)
             try:
-                return _vector_ops.nearest_node_rows(self.basis, [probe.at], component, nodes, tree=self._node_tree)
+                return _outputs.nearest_node_rows(self.basis, [probe.at], component, nodes, tree=self._node_tree)
             except ValueError as exc:       # a point outside the mesh, too many nodes
                 raise SpaceError(str(exc)) from None
         if probe.average:
-            return _vector_ops.average_rows(self.basis, _name(probe.at, "average"), component)
+            return _outputs.average_rows(self.basis, _name(probe.at, "average"), component)
         if isinstance(probe.at, str):
             raise SpaceError(f"a solid probe needs a point [x, y, z]; to average over {probe.at!r} "
                              "list it under outputs.averages")
-        return _vector_ops.probe_rows(self.basis, [probe.at], component)
+        return _outputs.probe_rows(self.basis, [probe.at], component)
 
     def coordinates(self, component=None) -> tuple[np.ndarray, np.ndarray]:
         """Dofs of ``component`` and their (3, k) locations (vertices, P2 edge midpoints)."""

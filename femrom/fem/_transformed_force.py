@@ -24,6 +24,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
+from femrom._errors import FemromValueError
 from femrom.fem._nonlinear import NonlinearForce, force_from_parameters, register_force
 
 #: Up to this many new coordinates the tangent ``(L T)^T D (L T)`` is formed with a dense ``L T``:
@@ -72,10 +73,10 @@ class TransformedForce(NonlinearForce):
 
     def __init__(self, force: NonlinearForce, transformation, *, name: str | None = None, reference=None):
         if not isinstance(force, NonlinearForce):
-            raise ValueError(f"force must be a NonlinearForce, got {type(force).__name__}")
+            raise FemromValueError(f"force must be a NonlinearForce, got {type(force).__name__}")
         T = transformation
         if T.ndim != 2 or T.shape[0] != force.n_dofs:
-            raise ValueError(f"transformation must be (n, k) with n = {force.n_dofs} (the force's dofs), "
+            raise FemromValueError(f"transformation must be (n, k) with n = {force.n_dofs} (the force's dofs), "
                              f"got shape {T.shape}")
         L = force.local_map.tocsr()
         touched = np.unique(L.indices[L.data != 0])
@@ -92,7 +93,7 @@ class TransformedForce(NonlinearForce):
         else:
             q0 = np.asarray(reference, dtype=float).reshape(-1)
             if q0.shape != (force.n_dofs,) or not np.all(np.isfinite(q0)):
-                raise ValueError(f"reference must be a finite ({force.n_dofs},) vector, got shape {q0.shape}")
+                raise FemromValueError(f"reference must be a finite ({force.n_dofs},) vector, got shape {q0.shape}")
             self.reference = np.zeros(force.n_dofs)
             self.reference[touched] = q0[touched]   # only what L reads is kept
             self.local_offset = np.asarray(L @ q0).reshape(-1)
@@ -149,10 +150,10 @@ class TransformedForce(NonlinearForce):
         ``force`` must read only dofs this force reads (e.g. a joint restricted to some of its
         pairs, :meth:`femrom.fem.JointForce.restricted`): only those rows of ``T`` are kept."""
         if not isinstance(force, NonlinearForce) or force.n_dofs != self.original_dofs:
-            raise ValueError(f"force must be a NonlinearForce on the original {self.original_dofs} dofs")
+            raise FemromValueError(f"force must be a NonlinearForce on the original {self.original_dofs} dofs")
         L = force.local_map.tocsr()
         if not np.all(np.isin(np.unique(L.indices[L.data != 0]), self.touched_dofs)):
-            raise ValueError("force reads dofs outside the rows of T this transformed force kept")
+            raise FemromValueError("force reads dofs outside the rows of T this transformed force kept")
         T = sp.lil_matrix((self.original_dofs, self.n_dofs))
         T[self.touched_dofs] = self.touched_rows
         return TransformedForce(force, T.tocsr(), name=force.name, reference=self.reference)
@@ -181,7 +182,7 @@ class TransformedForce(NonlinearForce):
         the pairs' 3 x 3 blocks, with no sparse matrix built (:func:`dense_projection`).
         """
         if self.n_dofs > DENSE_COORDINATES:
-            raise ValueError(f"dense_force_and_tangent is for at most {DENSE_COORDINATES} coordinates, "
+            raise FemromValueError(f"dense_force_and_tangent is for at most {DENSE_COORDINATES} coordinates, "
                              f"this force has {self.n_dofs}")
         return dense_projection(self.dense_map(), self, q_hat, v_hat, state)
 
@@ -280,6 +281,6 @@ def transform_force(force: NonlinearForce | None, transformation, *, reference=N
         return shifted
     if isinstance(force, TransformedForce) and getattr(force, "shift_only", False):
         if reference is not None:
-            raise ValueError("a shifted force is transformed about its own reference: give no second one")
+            raise FemromValueError("a shifted force is transformed about its own reference: give no second one")
         return TransformedForce(force.force_model, transformation, name=force.name, reference=force.reference)
     return TransformedForce(force, transformation, reference=reference)

@@ -13,8 +13,9 @@
   :class:`CanonicalData`; snapshots every k-th step refined between by the model
   (:func:`alternating_fill`);
 - learners (``fit(data) -> self``, ``operators_``; :func:`registered_learners` by name):
-  :class:`LagrangianOpInf` (structure-preserving, a semidefinite program
-  solved by :func:`solve_fast` or the cvxpy reference :func:`solve_conic`),
+  :class:`LagrangianOpInf` (structure-preserving, a semidefinite program solved by
+  its ``solver=`` object: :class:`FastSolver` (default, :func:`solve_fast`) or
+  :class:`ConicSolver`, the cvxpy reference, :func:`solve_conic`),
   :class:`SecondOrderOpInf` (plain least squares, the baseline),
   :class:`HamiltonianOpInf` (symmetric ``D^_q``, ``D^_p`` by Lyapunov
   equations), :class:`CanonicalOpInf` (an unconstrained first-order ``A^`` on
@@ -54,8 +55,8 @@ from femrom.inference._data import (
 from femrom.inference._derivatives import finite_difference, stencil_weights
 from femrom.inference._impulse import impulse_response, system_impulse_response
 from femrom.inference._io_data import STATE_LAYOUTS, InputOutputData, MarkovParameters
-from femrom.inference._fill import FillSweep, alternating_fill, fill_between_snapshots, newmark_residual_matrix
-from femrom.inference._fast import FastOptions, solve_fast
+from femrom.inference._every_kth_snapshot import FillSweep, alternating_fill, fill_between_snapshots, newmark_residual_matrix
+from femrom.inference._structured_lstsq import FastSolver, solve_fast
 from femrom.inference._hamiltonian import (
     GRADIENT_DATA,
     HAMILTONIAN_DERIVATIVE_SOURCES,
@@ -88,8 +89,8 @@ from femrom.inference._realization import (
     okid_observer_gain,
     system_markov_from_observer,
 )
-from femrom.inference._sdp import CONIC_SOLVERS, solve_conic
-from femrom.inference._second_order import SOLVERS, ErrorSplit, SecondOrderLearner
+from femrom.inference._sdp import ConicSolver, solve_conic
+from femrom.inference._second_order import ErrorSplit, SecondOrderLearner
 from femrom.inference._state_space import StateSpaceOperators, markov_parameters
 from femrom.inference._terms import (
     TERMS,
@@ -123,9 +124,9 @@ from femrom.inference.terms.projected_force import ProjectedNonlinearForce
 from femrom.inference.terms.stiffness import Stiffness
 
 __all__ = [
-    "CONIC_SOLVERS", "DERIVATIVE_SOURCES", "GRADIENT_DATA", "HAMILTONIAN_DERIVATIVE_SOURCES", "LEARNERS",
-    "SOLVERS", "TERMS", "TORCH_MISSING", "VARIABLES", "ConstantLoad", "ConvexPowers", "LearnedDissipation", "LearnedPotential",
-    "NetworkLayer", "ScalarNetwork", "multi_indices", "SpML", "SpMLConfig", "SymmetricPolynomial", "torch_available", "Block", "CanonicalData", "CanonicalOpInf", "Damping", "ErrorSplit", "FastOptions", "ForcePotential",
+    "DERIVATIVE_SOURCES", "GRADIENT_DATA", "HAMILTONIAN_DERIVATIVE_SOURCES", "LEARNERS",
+    "TERMS", "TORCH_MISSING", "VARIABLES", "ConstantLoad", "ConvexPowers", "LearnedDissipation", "LearnedPotential",
+    "NetworkLayer", "ScalarNetwork", "multi_indices", "SpML", "SpMLConfig", "SymmetricPolynomial", "torch_available", "Block", "CanonicalData", "CanonicalOpInf", "Damping", "ErrorSplit", "ConicSolver", "FastSolver", "ForcePotential",
     "GalerkinProjection", "canonical_from_second_order",
     "GramProblem", "HamiltonianErrorSplit", "HamiltonianOperators", "HamiltonianOpInf", "Input",
     "LagrangianOpInf", "Learner", "LinearTerm", "Mass", "Output", "ProjectedNonlinearForce",

@@ -32,6 +32,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from femrom._errors import FemromValueError
 from femrom.inference._derivatives import finite_difference
 from femrom.linalg import as_block_source
 
@@ -83,27 +84,27 @@ class SecondOrderData:
         starts = tuple(int(s) for s in self.starts)
         if not starts or starts[0] != 0 or any(b <= a for a, b in zip(starts, starts[1:])) \
                 or starts[-1] >= max(shape[-1], 1):
-            raise ValueError(f"starts must begin at 0 and increase inside the {shape[-1]} columns, got {starts}")
+            raise FemromValueError(f"starts must begin at 0 and increase inside the {shape[-1]} columns, got {starts}")
         object.__setattr__(self, "starts", starts)
         if self.states.ndim != 2:
-            raise ValueError(f"states must be (r, K), got shape {shape}")
+            raise FemromValueError(f"states must be (r, K), got shape {shape}")
         for name in ("velocities", "accelerations", "nonlinear_forces"):
             A = getattr(self, name)
             if A is not None and A.shape != shape:
-                raise ValueError(f"{name} has shape {A.shape}, expected {shape}")
+                raise FemromValueError(f"{name} has shape {A.shape}, expected {shape}")
         for name in ("inputs", "outputs"):
             A = getattr(self, name)
             if A is not None and (A.ndim != 2 or A.shape[1] != shape[1]):
-                raise ValueError(f"{name} must be (., {shape[1]}), got shape {A.shape}")
+                raise FemromValueError(f"{name} must be (., {shape[1]}), got shape {A.shape}")
         for name in ("states", "velocities", "accelerations", "nonlinear_forces", "inputs", "outputs"):
             A = getattr(self, name)
             if A is None:
                 continue
             if not np.issubdtype(A.dtype, np.number) or np.iscomplexobj(A):
-                raise ValueError(f"{name} must be real numbers, got dtype {A.dtype}")
+                raise FemromValueError(f"{name} must be real numbers, got dtype {A.dtype}")
             bad = np.flatnonzero(~np.isfinite(A).all(axis=0))
             if bad.size:
-                raise ValueError(f"{name}: snapshot column {bad[0]} is not finite")
+                raise FemromValueError(f"{name}: snapshot column {bad[0]} is not finite")
 
     @property
     def r(self) -> int:
@@ -122,7 +123,7 @@ class SecondOrderData:
         if count <= 0:
             return self
         if len(self.starts) > 1:
-            raise ValueError("trim each trajectory before concatenating them")
+            raise FemromValueError("trim each trajectory before concatenating them")
         keep = slice(count, self.n_samples - count)
         pick = lambda A: None if A is None else A[..., keep]  # noqa: E731
         diagnostics = dict(self.diagnostics, trimmed_columns=self.diagnostics.get("trimmed_columns", 0) + count)
@@ -147,7 +148,7 @@ class SecondOrderData:
         """
         r = int(r)
         if not 1 <= r <= self.r:
-            raise ValueError(f"cannot truncate data of r = {self.r} to r = {r}")
+            raise FemromValueError(f"cannot truncate data of r = {self.r} to r = {r}")
         if r == self.r:
             return self
         rows = lambda A: None if A is None else A[:r]  # noqa: E731
@@ -173,7 +174,7 @@ class SecondOrderData:
         """
         dt = self.diagnostics.get("dt")
         if dt is None or self.diagnostics.get("n_trajectories", 1) != 1:
-            raise ValueError("finite differences need one trajectory with a known step dt")
+            raise FemromValueError("finite differences need one trajectory with a known step dt")
         Qd = finite_difference(self.states, dt, order=order, derivative=1)
         Qdd = finite_difference(self.states, dt, order=order, derivative=2)
         d = dict(self.diagnostics, derivative_source="finite_difference", order=order)
@@ -213,7 +214,7 @@ class SecondOrderData:
         k = int(substeps)
         h = self.diagnostics.get("dt")
         if k < 1 or h is None or self.diagnostics.get("n_trajectories", 1) != 1 or len(self.starts) > 1:
-            raise ValueError("upsampling needs one trajectory with a known step dt and substeps >= 1")
+            raise FemromValueError("upsampling needs one trajectory with a known step dt and substeps >= 1")
         if k == 1:
             return self
         coarse = np.arange(self.n_samples) * h
@@ -228,7 +229,7 @@ class SecondOrderData:
         if inputs is not None:
             inputs = np.atleast_2d(np.asarray(inputs, dtype=float))
             if inputs.shape[1] != fine.size:
-                raise ValueError(f"inputs on the fine grid must have {fine.size} columns, got {inputs.shape[1]}")
+                raise FemromValueError(f"inputs on the fine grid must have {fine.size} columns, got {inputs.shape[1]}")
         states = spline(self.states)
         d = {key: v for key, v in self.diagnostics.items()
              if key not in ("column_residual2", "column_norm2", "velocity_error", "acceleration_error")}
@@ -268,9 +269,9 @@ class SecondOrderData:
         """
         h = self.diagnostics.get("dt")
         if h is None or self.diagnostics.get("n_trajectories", 1) != 1 or len(self.starts) > 1:
-            raise ValueError("integrator-consistent data need one trajectory with a known step dt")
+            raise FemromValueError("integrator-consistent data need one trajectory with a known step dt")
         if self.n_samples < 3:
-            raise ValueError(f"integrator-consistent data need at least 3 snapshots, got {self.n_samples}")
+            raise FemromValueError(f"integrator-consistent data need at least 3 snapshots, got {self.n_samples}")
         Q = self.states
         average = lambda X: None if X is None else 0.25 * (X[:, :-2] + 2.0 * X[:, 1:-1] + X[:, 2:])  # noqa: E731
         d = {k: v for k, v in self.diagnostics.items()
@@ -303,7 +304,7 @@ def concatenate(datasets) -> SecondOrderData:
     """
     datasets = list(datasets)
     if not datasets:
-        raise ValueError("no data sets to concatenate")
+        raise FemromValueError("no data sets to concatenate")
     if len(datasets) == 1:
         return datasets[0]
 
@@ -312,7 +313,7 @@ def concatenate(datasets) -> SecondOrderData:
         if all(v is None for v in values):
             return None
         if any(v is None for v in values):
-            raise ValueError(f"{name} present in some trajectories only")
+            raise FemromValueError(f"{name} present in some trajectories only")
         return np.hstack(values)
 
     diagnostics = {"n_trajectories": sum(d.diagnostics.get("n_trajectories", 1) for d in datasets)}
@@ -384,7 +385,7 @@ def project_columns(basis: np.ndarray, X, product=None, *, per_column: bool = Fa
         residual2.append(np.maximum(np.sum(E * (WX - WV @ coords), axis=0), 0.0))
         norm2.append(np.maximum(np.sum(block * WX, axis=0), 0.0))
     if not parts:
-        raise ValueError("no snapshot columns to project")
+        raise FemromValueError("no snapshot columns to project")
     residual2, norm2 = np.concatenate(residual2), np.concatenate(norm2)
     if per_column:
         return np.hstack(parts), residual2, norm2
@@ -438,14 +439,14 @@ def reduce_snapshots(basis: np.ndarray, states: np.ndarray, dt: float, *, produc
     SecondOrderData
     """
     if derivatives not in DERIVATIVE_SOURCES:
-        raise ValueError(f"unknown derivative source {derivatives!r}; valid: {DERIVATIVE_SOURCES}")
+        raise FemromValueError(f"unknown derivative source {derivatives!r}; valid: {DERIVATIVE_SOURCES}")
     V = np.asarray(basis, dtype=float)
     if V.ndim != 2:
-        raise ValueError(f"basis must be (n, r), got shape {V.shape}")
+        raise FemromValueError(f"basis must be (n, r), got shape {V.shape}")
     source = as_block_source(states)
     if source.n_rows is not None and source.n_rows != V.shape[0]:
-        raise ValueError(f"basis {V.shape} and states with {source.n_rows} rows do not match: "
-                         "expected (n, r), (n, K)")
+        raise FemromValueError(f"basis {V.shape} and states with {source.n_rows} rows do not match: "
+                               "expected (n, r), (n, K)")
     Qh, residual2, norm2 = project_columns(V, source, product, per_column=True)
     residual, norm = float(np.sqrt(np.sum(residual2))), float(np.sqrt(np.sum(norm2)))
     diagnostics = {"projection_error": residual / norm if norm > 0 else 0.0,
@@ -457,7 +458,7 @@ def reduce_snapshots(basis: np.ndarray, states: np.ndarray, dt: float, *, produc
     stored_a = None if accelerations is None else reduced_coordinates(V, accelerations, product)
     if derivatives == "stored":
         if stored_v is None or stored_a is None:
-            raise ValueError("derivatives='stored' needs both velocities and accelerations")
+            raise FemromValueError("derivatives='stored' needs both velocities and accelerations")
         Qd, Qdd = stored_v, stored_a
     else:
         Qd = finite_difference(Qh, dt, order=order, derivative=1)

@@ -22,6 +22,8 @@ import math
 
 import numpy as np
 
+from femrom._errors import FemromValueError
+
 #: Orders of accuracy :func:`finite_difference` offers.
 ORDERS = (2, 4, 6)
 #: Derivatives it offers: first (velocity) and second (acceleration).
@@ -41,7 +43,7 @@ def stencil_weights(offsets: tuple[int, ...], derivative: int) -> np.ndarray:
 
     s = len(offsets)
     if derivative >= s:
-        raise ValueError(f"a {derivative}-th derivative needs more than {s} points")
+        raise FemromValueError(f"a {derivative}-th derivative needs more than {s} points")
     rows = [[Fraction(o) ** i / math.factorial(i) for o in offsets] for i in range(s)]
     rhs = [Fraction(int(i == derivative)) for i in range(s)]
     # Gauss-Jordan elimination with exact fractions
@@ -90,18 +92,18 @@ def finite_difference(Q: np.ndarray, dt: float, order: int = 4, derivative: int 
         The derivative at every column.
     """
     if order not in ORDERS:
-        raise ValueError(f"unknown finite-difference order {order}; valid: {ORDERS}")
+        raise FemromValueError(f"unknown finite-difference order {order}; valid: {ORDERS}")
     if derivative not in DERIVATIVES:
-        raise ValueError(f"unknown derivative {derivative}; valid: {DERIVATIVES}")
+        raise FemromValueError(f"unknown derivative {derivative}; valid: {DERIVATIVES}")
     dt = float(dt)
     if not (dt > 0.0 and math.isfinite(dt)):
-        raise ValueError(f"dt must be positive and finite, got {dt}")
+        raise FemromValueError(f"dt must be positive and finite, got {dt}")
     Q = np.asarray(Q, dtype=float)
     K = Q.shape[-1]
     width = order + derivative
     if K < width:
-        raise ValueError(f"{K} snapshots are too few for an order-{order} derivative "
-                         f"{derivative} (needs at least {width})")
+        raise FemromValueError(f"{K} snapshots are too few for an order-{order} derivative "
+                               f"{derivative} (needs at least {width})")
     half = order // 2
     scale = dt ** derivative
     out = np.empty_like(Q)

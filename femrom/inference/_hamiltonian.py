@@ -59,6 +59,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.linalg as sl
 
+from femrom._errors import FemromValueError
 from femrom.inference._derivatives import finite_difference
 
 
@@ -155,7 +156,7 @@ class ForcePotential:
 
     def __init__(self, force):
         if getattr(force, "stateful", False) or not getattr(force, "conservative", False):
-            raise ValueError(f"{force!r} is not a conservative stateless force: it has no potential U(q)")
+            raise FemromValueError(f"{force!r} is not a conservative stateless force: it has no potential U(q)")
         self.force = force
 
     def value(self, q: np.ndarray, p: np.ndarray):
@@ -204,7 +205,7 @@ def canonical_from_second_order(data) -> CanonicalData:
     CanonicalData
     """
     if data.inputs is not None and np.size(data.inputs) and np.any(data.inputs != 0):
-        raise ValueError("the data carry nonzero inputs: a canonical Hamiltonian ROM has none")
+        raise FemromValueError("the data carry nonzero inputs: a canonical Hamiltonian ROM has none")
     diagnostics = {key: data.diagnostics[key] for key in ("projection_error", "derivative_source", "order", "dt")
                    if key in data.diagnostics}
     forces_p = None if data.nonlinear_forces is None else np.asarray(data.nonlinear_forces, dtype=float)
@@ -308,13 +309,13 @@ class CanonicalData:
     def __post_init__(self):
         shape = np.shape(self.states_q)
         if len(shape) != 2:
-            raise ValueError(f"states_q must be (r, K), got shape {shape}")
+            raise FemromValueError(f"states_q must be (r, K), got shape {shape}")
         for name in ("states_p", "ddt_q", "ddt_p", "forces_q", "forces_p"):
             A = getattr(self, name)
             if A is not None and np.shape(A) != shape:
-                raise ValueError(f"{name} has shape {np.shape(A)}, expected {shape} like states_q")
+                raise FemromValueError(f"{name} has shape {np.shape(A)}, expected {shape} like states_q")
         if self.outputs is not None and np.shape(self.outputs)[-1] != shape[1]:
-            raise ValueError(f"outputs have {np.shape(self.outputs)[-1]} columns, snapshots {shape[1]}")
+            raise FemromValueError(f"outputs have {np.shape(self.outputs)[-1]} columns, snapshots {shape[1]}")
 
     @property
     def r(self) -> int:
@@ -363,28 +364,28 @@ def reduce_canonical_snapshots(basis: np.ndarray, Q: np.ndarray, P: np.ndarray, 
         With the projection error of ``[Q; P]`` and the derivative errors in its diagnostics.
     """
     if gradient_data not in GRADIENT_DATA:
-        raise ValueError(f"unknown gradient_data {gradient_data!r}; valid: {GRADIENT_DATA}")
+        raise FemromValueError(f"unknown gradient_data {gradient_data!r}; valid: {GRADIENT_DATA}")
     if (ddt_q is None) != (ddt_p is None):
-        raise ValueError("give both ddt_q and ddt_p, or neither")
+        raise FemromValueError("give both ddt_q and ddt_p, or neither")
     if derivatives is None:
         derivatives = "finite_difference" if ddt_q is None else "stored"
     if derivatives not in HAMILTONIAN_DERIVATIVE_SOURCES:
-        raise ValueError(f"unknown derivatives {derivatives!r}; valid: "
-                         f"{HAMILTONIAN_DERIVATIVE_SOURCES}")
+        raise FemromValueError(f"unknown derivatives {derivatives!r}; valid: "
+                               f"{HAMILTONIAN_DERIVATIVE_SOURCES}")
     if derivatives == "stored" and ddt_q is None:
-        raise ValueError("derivatives='stored' needs ddt_q and ddt_p")
+        raise FemromValueError("derivatives='stored' needs ddt_q and ddt_p")
     V = np.asarray(basis, dtype=float)
     Q, P = np.asarray(Q, dtype=float), np.asarray(P, dtype=float)
     if V.ndim != 2 or Q.ndim != 2 or Q.shape != P.shape or Q.shape[0] != V.shape[0]:
-        raise ValueError(f"basis {V.shape}, Q {Q.shape} and P {P.shape} do not match: "
-                         "expected (n, r), (n, K), (n, K)")
+        raise FemromValueError(f"basis {V.shape}, Q {Q.shape} and P {P.shape} do not match: "
+                               "expected (n, r), (n, K), (n, K)")
     Qh, Ph = V.T @ Q, V.T @ P
     stored = None if ddt_q is None else (V.T @ ddt_q, V.T @ ddt_p)
     if derivatives == "stored":
         dQ, dP = stored
     else:
         if dt is None:
-            raise ValueError("finite-difference derivatives need dt")
+            raise FemromValueError("finite-difference derivatives need dt")
         dQ, dP = finite_difference(Qh, dt, order), finite_difference(Ph, dt, order)
     Fq = Fp = None
     if potential is not None:

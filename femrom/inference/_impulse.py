@@ -18,6 +18,7 @@ from typing import Callable
 
 import numpy as np
 
+from femrom._errors import FemromValueError
 from femrom._progress import Progress
 from femrom.inference._io_data import MarkovParameters
 from femrom.integrators import Newmark, iterate
@@ -44,7 +45,7 @@ def impulse_response(make_stepper: Callable[[], object], n_inputs: int, count: i
     """
     m, count = int(n_inputs), int(count)
     if m < 1 or count < 2:
-        raise ValueError(f"an impulse response needs n_inputs >= 1 and count >= 2, got {n_inputs}, {count}")
+        raise FemromValueError(f"an impulse response needs n_inputs >= 1 and count >= 2, got {n_inputs}, {count}")
     columns = []
     bar = Progress(m * count, "impulse response", enabled=progress)
     for j in range(m):
@@ -96,14 +97,14 @@ def system_impulse_response(system, dt: float, count: int, *, scheme=None, solve
         As in :func:`femrom.integrators.iterate`.
     """
     if system.nonlinear is not None:
-        raise ValueError("the system has a nonlinear force: Markov parameters describe linear systems only")
+        raise FemromValueError("the system has a nonlinear force: Markov parameters describe linear systems only")
     if system.load is not None:
-        raise ValueError("the system has a constant load: remove it (the impulse response is about u alone)")
+        raise FemromValueError("the system has a constant load: remove it (the impulse response is about u alone)")
     if system.input_matrix is None or system.output_matrix is None:
-        raise ValueError("an impulse response needs the system's input_matrix and output_matrix")
+        raise FemromValueError("an impulse response needs the system's input_matrix and output_matrix")
     dt, count = float(dt), int(count)
     if not dt > 0 or count < 2:
-        raise ValueError(f"an impulse response needs dt > 0 and count >= 2, got dt = {dt}, count = {count}")
+        raise FemromValueError(f"an impulse response needs dt > 0 and count >= 2, got dt = {dt}, count = {count}")
     scheme = Newmark() if scheme is None else scheme
     if isinstance(solver, str):
         solver = SolverCache(solver, size=2)

@@ -34,6 +34,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from femrom._errors import FemromValueError
+
 #: How :meth:`InputOutputData.from_second_order` builds the state rows.
 STATE_LAYOUTS = ("phase", "displacement", "none")
 
@@ -42,13 +44,13 @@ def _real_finite(name: str, A, ndim: int) -> np.ndarray:
     """``A`` as a float array of ``ndim`` dimensions; one clear error when it is not real and finite."""
     A = np.asarray(A)
     if A.ndim != ndim:
-        raise ValueError(f"{name} must have {ndim} dimensions, got shape {A.shape}")
+        raise FemromValueError(f"{name} must have {ndim} dimensions, got shape {A.shape}")
     if not np.issubdtype(A.dtype, np.number) or np.iscomplexobj(A):
-        raise ValueError(f"{name} must be real numbers, got dtype {A.dtype}")
+        raise FemromValueError(f"{name} must be real numbers, got dtype {A.dtype}")
     A = A.astype(float, copy=False)
     if not np.all(np.isfinite(A)):
         bad = np.argwhere(~np.isfinite(A))[0]
-        raise ValueError(f"{name} is not finite at index {tuple(int(i) for i in bad)}")
+        raise FemromValueError(f"{name} is not finite at index {tuple(int(i) for i in bad)}")
     return A
 
 
@@ -56,9 +58,9 @@ def _positive_step(dt) -> float:
     try:
         dt = float(dt)
     except (TypeError, ValueError):
-        raise ValueError(f"dt must be a positive number, got {dt!r}") from None
+        raise FemromValueError(f"dt must be a positive number, got {dt!r}") from None
     if not (np.isfinite(dt) and dt > 0):
-        raise ValueError(f"dt must be a positive number, got {dt}")
+        raise FemromValueError(f"dt must be a positive number, got {dt}")
     return dt
 
 
@@ -93,7 +95,7 @@ class InputOutputData:
     def __post_init__(self):
         U = _real_finite("inputs", self.inputs, 2)
         if U.shape[0] < 1:
-            raise ValueError("inputs must have at least one row (m >= 1)")
+            raise FemromValueError("inputs must have at least one row (m >= 1)")
         K = U.shape[1]
         object.__setattr__(self, "inputs", U)
         object.__setattr__(self, "dt", _positive_step(self.dt))
@@ -103,15 +105,15 @@ class InputOutputData:
                 continue
             A = _real_finite(name, A, 2)
             if A.shape[1] != K:
-                raise ValueError(f"{name} have {A.shape[1]} columns, inputs have {K}")
+                raise FemromValueError(f"{name} have {A.shape[1]} columns, inputs have {K}")
             object.__setattr__(self, name, A)
         starts = tuple(int(s) for s in self.starts)
         if not starts or starts[0] != 0 or any(b <= a for a, b in zip(starts, starts[1:])) or starts[-1] >= K:
-            raise ValueError(f"starts must begin at 0 and increase inside the {K} columns, got {starts}")
+            raise FemromValueError(f"starts must begin at 0 and increase inside the {K} columns, got {starts}")
         ends = starts[1:] + (K,)
         short = [j for j, (a, b) in enumerate(zip(starts, ends)) if b - a < 2]
         if short:
-            raise ValueError(f"trajectory {short[0]} has fewer than 2 samples (starts {starts}, K = {K})")
+            raise FemromValueError(f"trajectory {short[0]} has fewer than 2 samples (starts {starts}, K = {K})")
         object.__setattr__(self, "starts", starts)
 
     # -- sizes ---------------------------------------------------------------------------
@@ -160,13 +162,13 @@ class InputOutputData:
             The sampling step (default ``data.diagnostics["dt"]``).
         """
         if states not in STATE_LAYOUTS:
-            raise ValueError(f"unknown state layout {states!r}; valid: {', '.join(STATE_LAYOUTS)}")
+            raise FemromValueError(f"unknown state layout {states!r}; valid: {', '.join(STATE_LAYOUTS)}")
         if getattr(data, "inputs", None) is None:
-            raise ValueError("the second-order data have no inputs: identification needs them")
+            raise FemromValueError("the second-order data have no inputs: identification needs them")
         if dt is None:
             dt = data.diagnostics.get("dt")
             if dt is None:
-                raise ValueError("the second-order data record no step dt: pass dt=")
+                raise FemromValueError("the second-order data record no step dt: pass dt=")
         X = {"phase": lambda: np.vstack([data.states, data.velocities]),
              "displacement": lambda: data.states, "none": lambda: None}[states]()
         metadata = {"state_layout": states, "r": int(data.states.shape[0]),
@@ -179,15 +181,15 @@ class InputOutputData:
         """One data set from several (trajectories side by side; the same ``dt`` and sizes)."""
         datasets = list(datasets)
         if not datasets:
-            raise ValueError("no data sets to stack")
+            raise FemromValueError("no data sets to stack")
         first = datasets[0]
         for j, d in enumerate(datasets[1:], start=1):
             if not np.isclose(d.dt, first.dt, rtol=1e-12, atol=0.0):
-                raise ValueError(f"data set {j} has dt = {d.dt}, data set 0 has {first.dt}")
+                raise FemromValueError(f"data set {j} has dt = {d.dt}, data set 0 has {first.dt}")
             for name in ("n_inputs", "n_outputs", "n_states"):
                 if getattr(d, name) != getattr(first, name):
-                    raise ValueError(f"data set {j} has {name} = {getattr(d, name)}, "
-                                     f"data set 0 has {getattr(first, name)}")
+                    raise FemromValueError(f"data set {j} has {name} = {getattr(d, name)}, "
+                                           f"data set 0 has {getattr(first, name)}")
 
         def cat(name):
             values = [getattr(d, name) for d in datasets]
@@ -220,7 +222,7 @@ class MarkovParameters:
     def __post_init__(self):
         Y = _real_finite("Markov parameters", self.parameters, 3)
         if Y.shape[0] < 2 or Y.shape[1] < 1 or Y.shape[2] < 1:
-            raise ValueError(f"Markov parameters must be (N >= 2, p >= 1, m >= 1), got shape {Y.shape}")
+            raise FemromValueError(f"Markov parameters must be (N >= 2, p >= 1, m >= 1), got shape {Y.shape}")
         object.__setattr__(self, "parameters", Y)
         object.__setattr__(self, "dt", _positive_step(self.dt))
 
@@ -246,9 +248,9 @@ class MarkovParameters:
         r"""``||Y - Y_ref||_F / ||Y_ref||_F`` over ``Y_0 ... Y_{count-1}`` (``other`` the reference)."""
         count = min(self.count, other.count) if count is None else int(count)
         if count > min(self.count, other.count):
-            raise ValueError(f"count {count} exceeds the {min(self.count, other.count)} parameters available")
+            raise FemromValueError(f"count {count} exceeds the {min(self.count, other.count)} parameters available")
         if self.parameters.shape[1:] != other.parameters.shape[1:]:
-            raise ValueError(f"Markov parameters of shape {self.parameters.shape[1:]} and "
-                             f"{other.parameters.shape[1:]} cannot be compared")
+            raise FemromValueError(f"Markov parameters of shape {self.parameters.shape[1:]} and "
+                                   f"{other.parameters.shape[1:]} cannot be compared")
         reference = other.parameters[:count]
         return float(np.linalg.norm(self.parameters[:count] - reference) / np.linalg.norm(reference))

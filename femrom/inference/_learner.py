@@ -97,7 +97,7 @@ class Regularization(Mapping):
         values = {"default": default, **weights}
         for name, value in values.items():
             if not float(value) >= 0:
-                raise ValueError(f"regularization {name} must be >= 0, got {value}")
+                raise FemromValueError(f"regularization {name} must be >= 0, got {value}")
         self.default = float(default)
         self._weights = {k: float(v) for k, v in weights.items()}
 

@@ -30,6 +30,8 @@ from itertools import combinations_with_replacement, permutations
 
 import numpy as np
 
+from femrom._errors import FemromValueError
+
 #: Columns evaluated together by the batched methods (bounds the r^3 x chunk buffers).
 CHUNK = 1024
 
@@ -90,12 +92,12 @@ class SymmetricPolynomial:
         self.terms = {}
         for degree, (indices, coefficients) in sorted(terms.items()):
             if degree not in self.DEGREES:
-                raise ValueError(f"polynomial degree {degree} is not one of {self.DEGREES}")
+                raise FemromValueError(f"polynomial degree {degree} is not one of {self.DEGREES}")
             indices = np.asarray(indices, dtype=np.int64).reshape(-1, degree)
             coefficients = np.asarray(coefficients, dtype=float).ravel()
             if indices.shape[0] != coefficients.size or (indices.size and indices.max() >= self.r):
-                raise ValueError(f"degree-{degree} monomials: {indices.shape[0]} index rows for "
-                                 f"{coefficients.size} coefficients in r = {self.r}")
+                raise FemromValueError(f"degree-{degree} monomials: {indices.shape[0]} index rows for "
+                                       f"{coefficients.size} coefficients in r = {self.r}")
             self.terms[int(degree)] = (indices, coefficients)
         zero = np.zeros((self.r,) * 3), np.zeros((self.r,) * 4)
         self.T3 = symmetric_tensor(self.r, *self.terms[3]) if 3 in self.terms else zero[0]
@@ -144,8 +146,8 @@ class ConvexPowers:
         self.cubic = np.atleast_2d(np.asarray(cubic, dtype=float))
         self.quartic = np.atleast_2d(np.asarray(quartic, dtype=float))
         if self.cubic.shape[1] != self.quartic.shape[1]:
-            raise ValueError(f"convex powers: cubic rows have {self.cubic.shape[1]} entries, quartic "
-                             f"{self.quartic.shape[1]}")
+            raise FemromValueError(f"convex powers: cubic rows have {self.cubic.shape[1]} entries, quartic "
+                                   f"{self.quartic.shape[1]}")
         self.r = self.cubic.shape[1]
 
     def value_gradient_hessian(self, x: np.ndarray):
@@ -207,10 +209,10 @@ class ScalarNetwork:
 
     def __init__(self, layers, output: np.ndarray, activation: str):
         if activation not in ACTIVATIONS:
-            raise ValueError(f"unknown activation {activation!r}; valid: {', '.join(ACTIVATIONS)}")
+            raise FemromValueError(f"unknown activation {activation!r}; valid: {', '.join(ACTIVATIONS)}")
         self.layers = tuple(layers)
         if not self.layers or self.layers[0].input_weight is None or self.layers[0].weight is not None:
-            raise ValueError("a network's first layer takes the input only (input_weight, no weight)")
+            raise FemromValueError("a network's first layer takes the input only (input_weight, no weight)")
         self.output = np.asarray(output, dtype=float).ravel()
         self.activation = activation
         self._sigma = ACTIVATIONS[activation]

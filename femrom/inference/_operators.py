@@ -90,9 +90,9 @@ class ReducedOperators:
         terms = tuple(sorted(self.terms, key=lambda t: t.order))
         names = [t.name for t in terms]
         if len(set(names)) != len(names):
-            raise ValueError(f"a reduced model holds at most one term of each name, got {names}")
+            raise FemromValueError(f"a reduced model holds at most one term of each name, got {names}")
         if self.term("stiffness", terms) is None:
-            raise ValueError("a reduced second-order model needs a stiffness term")
+            raise FemromValueError("a reduced second-order model needs a stiffness term")
         object.__setattr__(self, "terms", terms)
         r = self.r
         for t in terms:
@@ -100,9 +100,9 @@ class ReducedOperators:
                 rows, cols = t.matrix.shape
                 if t.role == "output":
                     if cols != r:
-                        raise ValueError(f"{t.name} has {cols} columns, expected r = {r}")
+                        raise FemromValueError(f"{t.name} has {cols} columns, expected r = {r}")
                 elif rows != r or (t.variable in ("q", "v", "a") and cols != r):
-                    raise ValueError(f"{t.name} has shape {t.matrix.shape}, expected ({r}, "
+                    raise FemromValueError(f"{t.name} has shape {t.matrix.shape}, expected ({r}, "
                                      f"{r if t.variable in ('q', 'v', 'a') else 'm'})")
 
     @classmethod
@@ -251,7 +251,7 @@ def _load_term(known):
     for cls in known.values():
         if getattr(cls, "variable", None) == "1" and cls.learnable:
             return cls
-    raise ValueError("no registered term holds a constant load (variable '1'): register one")
+    raise FemromValueError("no registered term holds a constant load (variable '1'): register one")
 
 
 def galerkin(system, basis: np.ndarray, *, reference: np.ndarray | None = None, reference_state=None,

@@ -29,6 +29,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from femrom._errors import FemromValueError
+
 #: Block structures a regression knows.
 STRUCTURES = ("free", "symmetric", "psd")
 
@@ -59,9 +61,9 @@ class Block:
 
     def __post_init__(self):
         if self.structure not in STRUCTURES:
-            raise ValueError(f"unknown block structure {self.structure!r}; valid: {STRUCTURES}")
+            raise FemromValueError(f"unknown block structure {self.structure!r}; valid: {STRUCTURES}")
         if self.regularization < 0 or self.shift < 0:
-            raise ValueError(f"block {self.name!r}: regularization and shift must be >= 0")
+            raise FemromValueError(f"block {self.name!r}: regularization and shift must be >= 0")
 
     @property
     def square(self) -> bool:
@@ -95,13 +97,13 @@ class GramProblem:
     def __post_init__(self):
         p = sum(b.size for b in self.blocks)
         if self.gram.shape != (p, p) or self.cross.shape[0] != p:
-            raise ValueError(f"gram {self.gram.shape} / cross {self.cross.shape} do not match "
-                             f"blocks of total size {p}")
+            raise FemromValueError(f"gram {self.gram.shape} / cross {self.cross.shape} do not match "
+                                   f"blocks of total size {p}")
         r = self.cross.shape[1]
         for b in self.blocks:
             if b.square and b.size != r:
-                raise ValueError(f"block {b.name!r} is {b.structure} but has {b.size} columns, "
-                                 f"expected r = {r}")
+                raise FemromValueError(f"block {b.name!r} is {b.structure} but has {b.size} columns, "
+                                       f"expected r = {r}")
 
     # -- construction ----------------------------------------------------
     @classmethod
@@ -110,7 +112,7 @@ class GramProblem:
         Y = np.asarray(target, dtype=float)
         D = np.vstack([np.asarray(d, dtype=float) for d in datablocks])
         if D.shape[1] != Y.shape[1]:
-            raise ValueError(f"data blocks have {D.shape[1]} columns, target has {Y.shape[1]}")
+            raise FemromValueError(f"data blocks have {D.shape[1]} columns, target has {Y.shape[1]}")
         sizes = tuple(np.asarray(d).shape[0] for d in datablocks)
         blocks = tuple(replace(b, size=s) for b, s in zip(blocks, sizes))
         return cls(gram=D @ D.T, cross=D @ Y.T, target=float(np.sum(Y * Y)), blocks=blocks,
@@ -119,7 +121,7 @@ class GramProblem:
     def __add__(self, other: "GramProblem") -> "GramProblem":
         """The problem of both data sets together (columns concatenated)."""
         if [(b.name, b.size) for b in self.blocks] != [(b.name, b.size) for b in other.blocks]:
-            raise ValueError("cannot add regressions with different operator blocks")
+            raise FemromValueError("cannot add regressions with different operator blocks")
         return replace(self, gram=self.gram + other.gram, cross=self.cross + other.cross,
                        target=self.target + other.target,
                        n_samples=self.n_samples + other.n_samples)

@@ -68,6 +68,7 @@ import time
 import numpy as np
 import scipy.linalg
 
+from femrom._errors import FemromTypeError, FemromValueError
 from femrom._progress import Stage
 from femrom.inference._io_data import InputOutputData, MarkovParameters
 from femrom.inference._state_space import StateSpaceOperators
@@ -84,8 +85,8 @@ def block_hankel(markov: np.ndarray, rows: int, columns: int, shift: int = 0) ->
     Y = np.asarray(markov, dtype=float)
     N, p, m = Y.shape
     if N < rows + columns + shift:
-        raise ValueError(f"a ({rows} x {columns}) block Hankel matrix shifted by {shift} needs "
-                         f"{rows + columns + shift} Markov parameters, got {N}")
+        raise FemromValueError(f"a ({rows} x {columns}) block Hankel matrix shifted by {shift} needs "
+                               f"{rows + columns + shift} Markov parameters, got {N}")
     H = np.empty((rows * p, columns * m))
     for i in range(rows):
         # block row i: Y_{1+i+shift} ... Y_{columns+i+shift}, side by side
@@ -105,11 +106,11 @@ def hankel_blocks(count: int, rows: int | None, columns: int | None) -> tuple[in
         columns = usable - int(rows)
     rows, columns = int(rows), int(columns)
     if rows < 1 or columns < 1:
-        raise ValueError(f"ERA needs at least 1 block row and column, got rows = {rows}, columns = {columns} "
-                         f"from {count} Markov parameters")
+        raise FemromValueError(f"ERA needs at least 1 block row and column, got rows = {rows}, columns = {columns} "
+                               f"from {count} Markov parameters")
     if rows + columns > usable:
-        raise ValueError(f"ERA with {rows} block rows and {columns} block columns needs "
-                         f"{rows + columns + 1} Markov parameters (Y_0 ... Y_{rows + columns}), got {count}")
+        raise FemromValueError(f"ERA with {rows} block rows and {columns} block columns needs "
+                               f"{rows + columns + 1} Markov parameters (Y_0 ... Y_{rows + columns}), got {count}")
     return rows, columns
 
 
@@ -121,7 +122,7 @@ def _directions(Y: np.ndarray, count: int | None, side: str) -> np.ndarray | Non
     size = p if side == "output" else m
     count = int(count)
     if not 1 <= count <= size:
-        raise ValueError(f"{side}_directions must be between 1 and {size}, got {count}")
+        raise FemromValueError(f"{side}_directions must be between 1 and {size}, got {count}")
     if side == "output":
         U, _, _ = np.linalg.svd(np.moveaxis(Y[1:], 0, 1).reshape(p, -1), full_matrices=False)
         return U[:, :count]
@@ -158,7 +159,7 @@ def era_realization(markov: MarkovParameters, order: int, *, rows: int | None = 
     Y = markov.parameters
     N, p, m = Y.shape
     if order < 1:
-        raise ValueError(f"order must be at least 1, got {order}")
+        raise FemromValueError(f"order must be at least 1, got {order}")
     rows, columns = hankel_blocks(N, rows, columns)
     W = _directions(Y, output_directions, "output")
     R = _directions(Y, input_directions, "input")
@@ -169,8 +170,8 @@ def era_realization(markov: MarkovParameters, order: int, *, rows: int | None = 
         Yt = np.einsum("npm,ml->npl", Yt, R)
     _, pt, mt = Yt.shape
     if order > min(rows * pt, columns * mt):
-        raise ValueError(f"order {order} exceeds the size of the ({rows * pt} x {columns * mt}) Hankel matrix "
-                         f"({rows} block rows, {columns} block columns): give more Markov parameters or blocks")
+        raise FemromValueError(f"order {order} exceeds the size of the ({rows * pt} x {columns * mt}) Hankel matrix "
+                               f"({rows} block rows, {columns} block columns): give more Markov parameters or blocks")
     H0 = block_hankel(Yt, rows, columns)
     H1 = block_hankel(Yt, rows, columns, shift=1)
     tic = time.perf_counter()
@@ -180,8 +181,8 @@ def era_realization(markov: MarkovParameters, order: int, *, rows: int | None = 
     floor = s[0] * max(H0.shape) * np.finfo(float).eps
     if not s[order - 1] > floor:
         rank = int(np.sum(s > floor))
-        raise ValueError(f"order {order} exceeds the numerical rank {rank} of the Hankel matrix "
-                         f"(singular value {order} is {s[order - 1]:.3g}, largest {s[0]:.3g}): lower the order")
+        raise FemromValueError(f"order {order} exceeds the numerical rank {rank} of the Hankel matrix "
+                               f"(singular value {order} is {s[order - 1]:.3g}, largest {s[0]:.3g}): lower the order")
     root = np.sqrt(s[:order])
     Pn, Qn = P[:, :order], Qt[:order].T
     A = (Pn.T @ H1 @ Qn) / np.outer(root, root)
@@ -219,8 +220,8 @@ def _observer_regression(data: InputOutputData, observer_order: int, feedthrough
     unknowns = (m if feedthrough else 0) + l * (m + data.n_outputs)
     equations = sum(t.shape[1] for t in targets)
     if equations < unknowns:
-        raise ValueError(f"OKID with observer order {l} has {unknowns} unknowns per output but the data give "
-                         f"{equations} equations: more samples or a lower observer_order")
+        raise FemromValueError(f"OKID with observer order {l} has {unknowns} unknowns per output but the data give "
+                               f"{equations} equations: more samples or a lower observer_order")
     return np.hstack(phis), np.hstack(targets)
 
 
@@ -247,12 +248,12 @@ def observer_markov_parameters(data: InputOutputData, observer_order: int, *, fe
         ``residual`` (relative), ``rank`` and ``shape`` of the regression, ``seconds``.
     """
     if not isinstance(data, InputOutputData):
-        raise TypeError(f"OKID takes InputOutputData, got {type(data).__name__}")
+        raise FemromTypeError(f"OKID takes InputOutputData, got {type(data).__name__}")
     if data.outputs is None:
-        raise ValueError("OKID needs outputs: the input-output data have none")
+        raise FemromValueError("OKID needs outputs: the input-output data have none")
     l = int(observer_order)
     if l < 1:
-        raise ValueError(f"observer_order must be at least 1, got {observer_order}")
+        raise FemromValueError(f"observer_order must be at least 1, got {observer_order}")
     Phi, Y = _observer_regression(data, l, feedthrough, at_rest)
     tic = time.perf_counter()
     with Stage(f"OKID: least squares {Phi.shape[1]} x {Phi.shape[0]}", enabled=progress):
@@ -326,7 +327,7 @@ def okid_markov_parameters(data: InputOutputData, observer_order: int, count: in
     """
     count = int(count)
     if count < 2:
-        raise ValueError(f"count must be at least 2, got {count}")
+        raise FemromValueError(f"count must be at least 2, got {count}")
     coefficients, diagnostics = observer_markov_parameters(data, observer_order, feedthrough=feedthrough,
                                                            at_rest=at_rest, progress=progress)
     return markov_from_observer(data, coefficients, diagnostics, int(observer_order), count,

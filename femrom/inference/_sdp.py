@@ -18,13 +18,49 @@ thing for every data set.
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass, field
 
 import numpy as np
 
+from femrom._errors import FemromRuntimeError, FemromValueError
 from femrom.inference._problem import GramProblem
 
 #: cvxpy solvers this reference accepts.
 CONIC_SOLVERS = ("CLARABEL", "SCS")
+
+
+@dataclass(frozen=True)
+class ConicSolver:
+    """A cvxpy conic solver and its settings: for a learner's ``solver=``, the regression as a
+    conic program (the reference of :func:`solve_conic`, ``"clarabel"`` or ``"scs"``); for
+    :class:`~femrom.inference.IwanLOpInf`, its second-order cone program (any cvxpy solver
+    that takes one).
+
+    Attributes
+    ----------
+    name : str
+        The cvxpy solver, any case (``"clarabel"``, ``"scs"``, ...); kept lower-case.
+    options : dict
+        Keyword arguments of ``cvxpy.Problem.solve`` (e.g. ``{"eps": 1e-10}`` for SCS).
+    """
+
+    name: str = "clarabel"
+    options: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        if not isinstance(self.name, str) or not self.name:
+            raise FemromValueError(f"a conic solver needs a cvxpy solver name, got {self.name!r}")
+        object.__setattr__(self, "name", self.name.lower())
+        object.__setattr__(self, "options", dict(self.options))
+
+    @property
+    def keywords(self) -> dict:
+        """The keyword arguments of ``cvxpy.Problem.solve``: ``solver`` and :attr:`options`."""
+        return {"solver": self.name.upper(), **self.options}
+
+    def solve(self, problem: GramProblem):
+        """:func:`solve_conic` with this solver and options: ``(X, info)``."""
+        return solve_conic(problem, self.name, **self.options)
 
 
 def solve_conic(problem: GramProblem, solver: str = "CLARABEL", **options):
@@ -51,7 +87,7 @@ def solve_conic(problem: GramProblem, solver: str = "CLARABEL", **options):
 
     solver = solver.upper()
     if solver not in CONIC_SOLVERS:
-        raise ValueError(f"unknown conic solver {solver!r}; valid: {CONIC_SOLVERS}")
+        raise FemromValueError(f"unknown conic solver {solver!r}; valid: {CONIC_SOLVERS}")
     tic = time.perf_counter()
     scaled, unscale, _ = problem.scaled()
     L, Z, _ = scaled.factor()
@@ -72,7 +108,7 @@ def solve_conic(problem: GramProblem, solver: str = "CLARABEL", **options):
         options.setdefault("max_iters", 100_000)
     program.solve(solver=solver, **options)
     if X.value is None:
-        raise RuntimeError(f"{solver} returned no solution (status {program.status!r})")
+        raise FemromRuntimeError(f"{solver} returned no solution (status {program.status!r})")
     Xs = np.asarray(X.value, dtype=float)
     # interior-point iterates meet the cone only to the solver's tolerance:
     # clip onto it so every returned model satisfies its constraints exactly

@@ -32,17 +32,14 @@ from typing import ClassVar
 
 import numpy as np
 
-from femrom._errors import FemromValueError
+from femrom._errors import FemromTypeError, FemromValueError
 from femrom.inference._data import SecondOrderData, concatenate
-from femrom.inference._fast import FastOptions, solve_fast
 from femrom.inference._learner import Learner, Regularization
 from femrom.inference._operators import ReducedForces, ReducedOperators
 from femrom.inference._problem import Block, GramProblem
-from femrom.inference._sdp import solve_conic
+from femrom.inference._sdp import CONIC_SOLVERS, ConicSolver
+from femrom.inference._structured_lstsq import FastSolver
 from femrom.inference._terms import ReducedTerm, registered_terms, term_class
-
-#: Solvers a learner accepts.
-SOLVERS = ("fast", "clarabel", "scs")
 
 #: Block structure a Lagrangian learner gives each term structure.
 _BLOCKS = {"spd": "psd", "psd": "psd", "symmetric": "symmetric", "free": "free"}
@@ -87,8 +84,8 @@ def system_terms(system, basis: np.ndarray | None = None, *, known_forces: bool 
                 terms.append(term)
             elif term.structure == "known" and known_forces:
                 if basis is None:
-                    raise ValueError(f"the system has a {effect!r} effect: for_system needs the "
-                                     "basis to project its known force")
+                    raise FemromValueError(f"the system has a {effect!r} effect: for_system needs the "
+                                           "basis to project its known force")
                 terms.append(term.galerkin(system, basis))
     return terms
 
@@ -105,7 +102,11 @@ class SecondOrderLearner(Learner):
         known (e.g. a :class:`ProjectedNonlinearForce`) and move to the target.
     regularization : float, mapping or Regularization
         Relative Tikhonov weights (a float applies to every term).
-    solver : {"fast", "clarabel", "scs"}
+    solver : FastSolver or ConicSolver
+        What solves the regression: :class:`FastSolver` (default; its fields are the
+        settings), ``ConicSolver("clarabel")`` or ``ConicSolver("scs")`` (the cvxpy
+        reference), or any object with ``name`` and ``solve(problem) -> (X, info)``
+        (``problem`` a :class:`GramProblem`, ``X`` (r, p)).
     mass : (r, r) ndarray, optional
         Known reduced mass (e.g. ``V^T M V`` of a Euclidean basis); default identity.
     mass_orthonormal : bool
@@ -113,8 +114,6 @@ class SecondOrderLearner(Learner):
         warns that ``M^ = I`` is then an assumption that breaks symmetry.
     stiffness_margin : float
         ``eps = margin * ||Y||_F / ||D_j||_F`` in ``X_j >= eps I`` for ``"spd"`` terms.
-    solver_options : dict
-        :class:`FastOptions` fields, or keyword arguments of cvxpy's ``solve``.
 
     Attributes
     ----------
@@ -132,13 +131,17 @@ class SecondOrderLearner(Learner):
 
     structured: ClassVar[bool] = False
 
-    def __init__(self, terms=(), *, regularization=0.0, solver: str = "fast",
+    def __init__(self, terms=(), *, regularization=0.0, solver=FastSolver(),
                  mass: np.ndarray | None = None, mass_orthonormal: bool = True,
-                 stiffness_margin: float = 1e-10, solver_options: dict | None = None):
+                 stiffness_margin: float = 1e-10):
         if isinstance(terms, (str, type, ReducedTerm)):
             terms = (terms,)
-        if solver.lower() not in SOLVERS:
-            raise ValueError(f"unknown solver {solver!r}; valid: {SOLVERS}")
+        if not callable(getattr(solver, "solve", None)) or not isinstance(getattr(solver, "name", None), str):
+            raise FemromTypeError(f"solver must be a solver object (FastSolver(), ConicSolver('clarabel'), ...), "
+                                  f"got {solver!r}")
+        if isinstance(solver, ConicSolver) and solver.name.upper() not in CONIC_SOLVERS:
+            raise FemromValueError(f"conic solver {solver.name!r} cannot solve the regression's semidefinite "
+                                   f"program; valid: {', '.join(n.lower() for n in CONIC_SOLVERS)}")
         self.learned_terms: list[type[ReducedTerm]] = []
         self.known_terms: list[ReducedTerm] = []
         for item in terms:
@@ -147,21 +150,20 @@ class SecondOrderLearner(Learner):
                 continue
             cls = term_class(item) if isinstance(item, str) else item
             if not (isinstance(cls, type) and issubclass(cls, ReducedTerm)):
-                raise TypeError(f"terms holds {item!r}: give term names, term classes or known term instances")
+                raise FemromTypeError(f"terms holds {item!r}: give term names, term classes or known term instances")
             if not cls.learnable:
-                raise ValueError(f"term {cls.name!r} is not learned from data; pass a known instance of it")
+                raise FemromValueError(f"term {cls.name!r} is not learned from data; pass a known instance of it")
             if cls.name in ("stiffness", "output"):
                 continue                            # always there (the output map: with output data)
             self.learned_terms.append(cls)
         names = [c.name for c in self.learned_terms] + [t.name for t in self.known_terms]
         if len(set(names)) != len(names):
-            raise ValueError(f"each term may be named once, got {names}")
+            raise FemromValueError(f"each term may be named once, got {names}")
         self.regularization = Regularization.of(regularization)
-        self.solver = solver.lower()
+        self.solver = solver
         self.mass = None if mass is None else np.asarray(mass, dtype=float)
         self.mass_orthonormal = bool(mass_orthonormal)
         self.stiffness_margin = float(stiffness_margin)
-        self.solver_options = dict(solver_options or {})
 
     @classmethod
     def for_system(cls, system, basis: np.ndarray | None = None, **options):
@@ -183,8 +185,8 @@ class SecondOrderLearner(Learner):
         """
         system = getattr(system, "system", system)
         if "terms" in options or "damping" in options:
-            raise TypeError(f"for_system sets the terms from the system's effects; "
-                            f"use {cls.__name__}(terms=...) to choose them by hand")
+            raise FemromTypeError(f"for_system sets the terms from the system's effects; "
+                                  f"use {cls.__name__}(terms=...) to choose them by hand")
         return cls(system_terms(system, basis), **options)
 
     # -- views -------------------------------------------------------------------------
@@ -217,8 +219,8 @@ class SecondOrderLearner(Learner):
         linear = [t for t in self.known_terms if hasattr(t, "matrix")]
         if data.nonlinear_forces is not None:
             if not forces:
-                raise ValueError("the data carry nonlinear_forces but the learner has no known force term "
-                                 "to pair them with (name one in terms=, or use for_system)")
+                raise FemromValueError("the data carry nonlinear_forces but the learner has no known force term "
+                                       "to pair them with (name one in terms=, or use for_system)")
             Y = Y + data.nonlinear_forces
         else:
             for term in forces:
@@ -243,7 +245,7 @@ class SecondOrderLearner(Learner):
                 "structure argument breaks; pass mass=V^T M V or use a mass-orthonormal basis",
                 UserWarning, stacklevel=3)
         if not any(np.any(D) for D in blocks_data):
-            raise ValueError(f"{type(self).__name__}: every snapshot of the data is zero: nothing to learn from")
+            raise FemromValueError(f"{type(self).__name__}: every snapshot of the data is zero: nothing to learn from")
         unknowns, columns = sum(D.shape[0] for D in blocks_data), Y.shape[1]
         if columns < unknowns and not any(self.regularization[t.name] > 0 for t in self._learned(data)):
             warnings.warn(
@@ -254,8 +256,8 @@ class SecondOrderLearner(Learner):
         for term, D in zip(self._learned(data), blocks_data):
             structure = _BLOCKS.get(term.structure) if self.structured else "free"
             if structure is None:
-                raise ValueError(f"term {term.name!r} of structure {term.structure!r} cannot be learned "
-                                 f"by {type(self).__name__}")
+                raise FemromValueError(f"term {term.name!r} of structure {term.structure!r} cannot be learned "
+                                       f"by {type(self).__name__}")
             shift = 0.0
             if structure == "psd" and term.structure == "spd":
                 shift = self.stiffness_margin * np.linalg.norm(Y) / max(np.linalg.norm(D), np.finfo(float).tiny)
@@ -273,10 +275,7 @@ class SecondOrderLearner(Learner):
         return float(np.linalg.norm(R) / max(np.linalg.norm(Y), np.finfo(float).tiny))
 
     def _solve(self, problem: GramProblem):
-        if self.solver == "fast":
-            options = FastOptions(**self.solver_options) if self.solver_options else FastOptions()
-            return solve_fast(problem, options)
-        return solve_conic(problem, self.solver.upper(), **self.solver_options)
+        return self.solver.solve(problem)
 
     # -- fit -----------------------------------------------------------------------------
     def fit(self, data, *, validation=None) -> "SecondOrderLearner":
@@ -341,7 +340,7 @@ class SecondOrderLearner(Learner):
 
     def describe(self) -> dict:
         """What was fitted how (stored with a saved ROM)."""
-        out = {"method": self.method, "solver": self.solver,
+        out = {"method": self.method, "solver": self.solver.name,
                "terms": ["stiffness"] + [c.name for c in self.learned_terms],
                "known_terms": [t.name for t in self.known_terms],
                "damping": self.damping,

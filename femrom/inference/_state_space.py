@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from femrom._errors import FemromValueError
 from femrom.inference._io_data import MarkovParameters, _positive_step, _real_finite
 
 
@@ -60,31 +61,31 @@ class StateSpaceOperators:
         A = _real_finite("A", np.atleast_2d(self.A), 2)
         n = A.shape[0]
         if A.shape != (n, n):
-            raise ValueError(f"A has shape {A.shape}, expected square")
+            raise FemromValueError(f"A has shape {A.shape}, expected square")
         B, C, D = (_real_finite(name, getattr(self, name), 2) for name in ("B", "C", "D"))
         if B.shape[0] != n:
-            raise ValueError(f"B has {B.shape[0]} rows, A is ({n}, {n})")
+            raise FemromValueError(f"B has {B.shape[0]} rows, A is ({n}, {n})")
         if C.shape[1] != n:
-            raise ValueError(f"C has {C.shape[1]} columns, A is ({n}, {n})")
+            raise FemromValueError(f"C has {C.shape[1]} columns, A is ({n}, {n})")
         if D.shape != (C.shape[0], B.shape[1]):
-            raise ValueError(f"D has shape {D.shape}, expected ({C.shape[0]}, {B.shape[1]})")
+            raise FemromValueError(f"D has shape {D.shape}, expected ({C.shape[0]}, {B.shape[1]})")
         for name, value in (("A", A), ("B", B), ("C", C), ("D", D)):
             object.__setattr__(self, name, value)
         object.__setattr__(self, "dt", _positive_step(self.dt))
         if self.state_basis is not None:
             V = _real_finite("state_basis", self.state_basis, 2)
             if V.shape[1] != n:
-                raise ValueError(f"state_basis has {V.shape[1]} columns, the model has {n} states")
+                raise FemromValueError(f"state_basis has {V.shape[1]} columns, the model has {n} states")
             object.__setattr__(self, "state_basis", V)
         if self.input_offset is not None:
             E = _real_finite("input_offset", self.input_offset, 2)
             if E.shape != B.shape:
-                raise ValueError(f"input_offset has shape {E.shape}, expected {B.shape}")
+                raise FemromValueError(f"input_offset has shape {E.shape}, expected {B.shape}")
             object.__setattr__(self, "input_offset", E)
         if self.observer_gain is not None:
             L = _real_finite("observer_gain", self.observer_gain, 2)
             if L.shape != (n, C.shape[0]):
-                raise ValueError(f"observer_gain has shape {L.shape}, expected ({n}, {C.shape[0]})")
+                raise FemromValueError(f"observer_gain has shape {L.shape}, expected ({n}, {C.shape[0]})")
             object.__setattr__(self, "observer_gain", L)
 
     @property
@@ -127,7 +128,7 @@ def markov_parameters(model, count: int, dt: float | None = None) -> MarkovParam
     """
     count = int(count)
     if count < 2:
-        raise ValueError(f"count must be at least 2, got {count}")
+        raise FemromValueError(f"count must be at least 2, got {count}")
     A, B, C, D = (np.asarray(getattr(model, name), dtype=float) for name in ("A", "B", "C", "D"))
     Y = np.empty((count, C.shape[0], B.shape[1]))
     Y[0] = D

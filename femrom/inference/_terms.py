@@ -37,6 +37,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from femrom._errors import FemromValueError
 from femrom._registry import Registry
 
 #: Data variables a linear term multiplies (``"1"``: a constant).
@@ -165,7 +166,7 @@ class LinearTerm(ReducedTerm):
         if matrix.ndim == 1 and self.variable == "1":
             matrix = matrix[:, None]
         if matrix.ndim != 2:
-            raise ValueError(f"term {self.name!r}: matrix must be 2-d, got shape {matrix.shape}")
+            raise FemromValueError(f"term {self.name!r}: matrix must be 2-d, got shape {matrix.shape}")
         self.matrix = matrix
 
     @property
@@ -179,7 +180,7 @@ class LinearTerm(ReducedTerm):
             return np.ones((1, data.n_samples))
         value = {"q": data.states, "v": data.velocities, "a": data.accelerations, "u": data.inputs}[cls.variable]
         if value is None:
-            raise ValueError(f"term {cls.name!r} needs data of {cls.variable!r}, which these data lack")
+            raise FemromValueError(f"term {cls.name!r} needs data of {cls.variable!r}, which these data lack")
         return value
 
     @classmethod
@@ -199,7 +200,7 @@ class LinearTerm(ReducedTerm):
         if self.variable == "1":
             return self.sign * self.matrix[:, 0]
         if x is None:
-            raise ValueError(f"term {self.name!r} needs {self.variable!r}")
+            raise FemromValueError(f"term {self.name!r} needs {self.variable!r}")
         return self.sign * (self.matrix @ x)
 
     def tangent(self, q, v=None, state=None):
@@ -229,11 +230,11 @@ class LinearTerm(ReducedTerm):
 def register_term(cls: type[ReducedTerm]) -> type[ReducedTerm]:
     """Class decorator: :func:`galerkin`, learners (by name) and ROM files know ``cls``."""
     if not cls.name:
-        raise ValueError(f"term class {cls.__name__} has no name")
+        raise FemromValueError(f"term class {cls.__name__} has no name")
     if cls.structure not in STRUCTURES:
-        raise ValueError(f"term {cls.name!r} has structure {cls.structure!r}; valid: {', '.join(STRUCTURES)}")
+        raise FemromValueError(f"term {cls.name!r} has structure {cls.structure!r}; valid: {', '.join(STRUCTURES)}")
     if issubclass(cls, LinearTerm) and cls.variable not in VARIABLES:
-        raise ValueError(f"term {cls.name!r} multiplies {cls.variable!r}; valid: {', '.join(VARIABLES)}")
+        raise FemromValueError(f"term {cls.name!r} multiplies {cls.variable!r}; valid: {', '.join(VARIABLES)}")
     TERMS.add(cls.name, cls)
     return cls
 

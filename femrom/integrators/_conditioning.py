@@ -28,13 +28,15 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
+from femrom._errors import FemromValueError
+
 #: Largest (and, inverted, smallest) matrix scale whose squares double precision still holds.
 SCALE_LIMIT = 1e150
 #: ``omega_diag dt`` above which the step resolves nothing of the mesh's dynamics.
 OMEGA_DT_LIMIT = 1e6
 
 
-class ConditioningError(ValueError):
+class ConditioningError(FemromValueError):
     """A system whose scales a double-precision run cannot carry."""
 
 

@@ -12,13 +12,15 @@ import time
 
 import numpy as np
 
+from femrom._errors import FemromValueError
+
 _FIELDS = ("q", "v", "a")
 
 
 def _check_every(every: int) -> int:
     every = int(every)
     if every < 1:
-        raise ValueError(f"every must be >= 1, got {every}")
+        raise FemromValueError(f"every must be >= 1, got {every}")
     return every
 
 
@@ -45,7 +47,7 @@ class Trajectory:
     def __init__(self, every: int = 1, fields: tuple[str, ...] = _FIELDS):
         unknown = [f for f in fields if f not in _FIELDS]
         if unknown or not fields:
-            raise ValueError(f"unknown trajectory fields {unknown}; valid: {', '.join(_FIELDS)}")
+            raise FemromValueError(f"unknown trajectory fields {unknown}; valid: {', '.join(_FIELDS)}")
         self.every = _check_every(every)
         self.fields = tuple(fields)
         self._t: list[float] = []
@@ -58,7 +60,7 @@ class Trajectory:
         for name in self.fields:
             value = getattr(result, name)
             if value is None:
-                raise ValueError(f"step {result.step} has no {name!r} (e.g. ImplicitMidpoint "
+                raise FemromValueError(f"step {result.step} has no {name!r} (e.g. ImplicitMidpoint "
                                  "with accelerations=False); drop it from fields")
             self._columns[name].append(value)  # read-only arrays: no copy needed
         self._t.append(result.t)
@@ -109,7 +111,7 @@ class OutputRecorder:
 
     def __init__(self, system, every: int = 1):
         if system.output_matrix is None:
-            raise ValueError("system has no outputs (output_matrix is None)")
+            raise FemromValueError("system has no outputs (output_matrix is None)")
         self.system = system
         self.every = _check_every(every)
         self.names = tuple(system.output_names)
@@ -145,7 +147,7 @@ class EnergyRecorder:
     def __init__(self, system, every: int = 1):
         nl = system.nonlinear
         if nl is not None and not nl.conservative:
-            raise ValueError(f"{type(nl).__name__} is not conservative: the system has no "
+            raise FemromValueError(f"{type(nl).__name__} is not conservative: the system has no "
                              "potential energy to record")
         self.system = system
         self.every = _check_every(every)

@@ -43,6 +43,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from threadpoolctl import threadpool_limits
 
+from femrom._errors import FemromValueError
 from femrom.integrators._newton import ConvergenceError, Newton
 
 #: Schemes of :func:`integrate_canonical`.
@@ -213,7 +214,7 @@ def integrate_canonical(system: CanonicalSystem, q0: np.ndarray, p0: np.ndarray,
     CanonicalTrajectory
     """
     if scheme not in CANONICAL_SCHEMES:
-        raise ValueError(f"unknown canonical scheme {scheme!r}; valid: {CANONICAL_SCHEMES}")
+        raise FemromValueError(f"unknown canonical scheme {scheme!r}; valid: {CANONICAL_SCHEMES}")
     h = float(dt)
     m = system.m
     if scheme == "midpoint":

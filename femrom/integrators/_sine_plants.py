@@ -26,6 +26,7 @@ from typing import Iterator
 
 import numpy as np
 
+from femrom._errors import FemromValueError
 from femrom.integrators._driver import StepResult, iterate
 from femrom.integrators.schemes.newmark import Newmark
 from femrom.scene import Signal, SignalVector
@@ -35,7 +36,7 @@ QUANTITIES = ("acceleration", "displacement")
 
 def _quantity(quantity: str) -> str:
     if quantity not in QUANTITIES:
-        raise ValueError(f"quantity must be one of {', '.join(QUANTITIES)}, got {quantity!r}")
+        raise FemromValueError(f"quantity must be one of {', '.join(QUANTITIES)}, got {quantity!r}")
     return quantity
 
 
@@ -75,13 +76,13 @@ class SystemPlant:
     def __init__(self, system, force_vector, *, scheme=None, solver="auto", quantity: str = "acceleration",
                  rest: StepResult | None = None):
         if system.output_matrix is None:
-            raise ValueError("system has no outputs (output_matrix is None): "
+            raise FemromValueError("system has no outputs (output_matrix is None): "
                              "a stepped sine reports outputs such as accelerometers")
         n = system.n_dofs
         f_hat = np.asarray(force_vector.toarray() if hasattr(force_vector, "toarray") else force_vector,
                            dtype=float).ravel()
         if f_hat.shape != (n,) or not np.all(np.isfinite(f_hat)) or not np.any(f_hat):
-            raise ValueError(f"force_vector must be a finite, nonzero ({n},) vector, got shape {f_hat.shape}")
+            raise FemromValueError(f"force_vector must be a finite, nonzero ({n},) vector, got shape {f_hat.shape}")
         self.system = system
         self.force_vector = f_hat
         self.scheme = Newmark() if scheme is None else scheme
@@ -89,7 +90,7 @@ class SystemPlant:
         self.quantity = _quantity(quantity)
         self.output_names = tuple(system.output_names) or tuple(f"y{i}" for i in range(system.n_outputs))
         if rest is not None and (rest.q.shape != (n,) or rest.t != 0.0):
-            raise ValueError(f"rest must be a StepResult at t = 0 on the system's {n} dofs")
+            raise FemromValueError(f"rest must be a StepResult at t = 0 on the system's {n} dofs")
         self.rest = rest
         self._last: StepResult | None = rest
 
@@ -131,7 +132,7 @@ class SystemPlant:
                 result = next(run)
                 x = result.a if use_acceleration else result.q
                 if x is None:
-                    raise ValueError(f"scheme {getattr(self.scheme, 'name', self.scheme)!r} gives no "
+                    raise FemromValueError(f"scheme {getattr(self.scheme, 'name', self.scheme)!r} gives no "
                                      "accelerations: use quantity='displacement'")
                 columns.append(x)
             self._last = result
@@ -162,22 +163,22 @@ class StepperPlant:
     def __init__(self, model, input_index: int = 0, *, scheme: str = "newmark",
                  quantity: str = "acceleration", output_names=None):
         if not callable(getattr(model, "stepper", None)):
-            raise ValueError(f"model must have a stepper(dt, initial=, t0=, u0=, scheme=) method; "
+            raise FemromValueError(f"model must have a stepper(dt, initial=, t0=, u0=, scheme=) method; "
                              f"got a {type(model).__name__}")
         self.model, self.scheme = model, str(scheme)
         self.quantity = _quantity(quantity)
         probe = model.stepper(1.0, scheme=self.scheme)
         m = 0 if probe.input_matrix is None else probe.input_matrix.shape[1]
         if not (isinstance(input_index, (int, np.integer)) and 0 <= input_index < m):
-            raise ValueError(f"input_index must be an integer in [0, {m}), got {input_index!r}")
+            raise FemromValueError(f"input_index must be an integer in [0, {m}), got {input_index!r}")
         if self.quantity == "acceleration" and probe.a is None:
-            raise ValueError(f"scheme {self.scheme!r} carries no acceleration: use quantity='displacement'")
+            raise FemromValueError(f"scheme {self.scheme!r} carries no acceleration: use quantity='displacement'")
         self.input_index, self.n_inputs = int(input_index), m
         p = probe.outputs.size
         names = output_names if output_names is not None else getattr(model, "output_names", None)
         self.output_names = tuple(names) if names else tuple(f"y{i}" for i in range(p))
         if len(self.output_names) != p:
-            raise ValueError(f"output_names has {len(self.output_names)} names for {p} outputs")
+            raise FemromValueError(f"output_names has {len(self.output_names)} names for {p} outputs")
         self._r = probe.q.size
         self.reset()
 

@@ -36,6 +36,7 @@ import scipy.linalg as sla
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from femrom._errors import FemromValueError
 from femrom.solvers import is_diagonal, make_solver
 
 #: Below this size the dense eigensolver is cheaper and exact.
@@ -98,7 +99,7 @@ def bound_max_frequency(stiffness, mass, *, rtol: float = 1e-3, seed: int = 0) -
     if diagonal_mass:
         d = np.asarray(mass.diagonal(), dtype=float)
         if np.any(d <= 0.0):
-            raise ValueError(f"mass has {np.count_nonzero(d <= 0)} non-positive diagonal entries")
+            raise FemromValueError(f"mass has {np.count_nonzero(d <= 0)} non-positive diagonal entries")
         scale = sp.diags(1.0 / np.sqrt(d))
         A = sp.csr_matrix(scale @ K @ scale)
     if n <= _DENSE_LIMIT:

@@ -48,6 +48,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from femrom._errors import FemromValueError
+
 #: A change this small relative to the response is round-off: steady whatever the ratio.
 ROUNDOFF_CHANGE = 1e-12
 
@@ -68,7 +70,7 @@ def first_harmonic(samples) -> np.ndarray:
     y = np.asarray(samples, dtype=float)
     n = y.shape[-1]
     if n < 3:
-        raise ValueError(f"samples need at least 3 points per period, got {n}")
+        raise FemromValueError(f"samples need at least 3 points per period, got {n}")
     kernel = np.exp(-2j * np.pi * np.arange(1, n + 1) / n)
     return (2j / n) * (y @ kernel)
 
@@ -96,11 +98,11 @@ class SteadyStateCriterion:
 
     def __post_init__(self):
         if not (isinstance(self.tolerance, (int, float)) and 0.0 < self.tolerance < 1.0):
-            raise ValueError(f"tolerance must lie in (0, 1), got {self.tolerance!r}")
+            raise FemromValueError(f"tolerance must lie in (0, 1), got {self.tolerance!r}")
         if not (isinstance(self.min_periods, (int, np.integer)) and self.min_periods >= 3):
-            raise ValueError(f"min_periods must be an integer >= 3, got {self.min_periods!r}")
+            raise FemromValueError(f"min_periods must be an integer >= 3, got {self.min_periods!r}")
         if not (isinstance(self.max_periods, (int, np.integer)) and self.max_periods >= self.min_periods):
-            raise ValueError(f"max_periods must be an integer >= min_periods = {self.min_periods}, "
+            raise FemromValueError(f"max_periods must be an integer >= min_periods = {self.min_periods}, "
                              f"got {self.max_periods!r}")
 
     def monitor(self) -> "SteadyStateMonitor":

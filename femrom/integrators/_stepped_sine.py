@@ -43,6 +43,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
+from femrom._errors import FemromValueError
 from femrom.integrators._steady_state import SteadyStateCriterion, first_harmonic
 
 #: Key of the amplitude in :meth:`FrequencyResponse.rows`, by quantity (SI units assumed).
@@ -218,12 +219,12 @@ def _frequencies(values) -> tuple[float, ...]:
     try:
         f = np.asarray(values, dtype=float).ravel()
     except (TypeError, ValueError):
-        raise ValueError(f"frequencies_hz must be numbers, got {values!r}") from None
+        raise FemromValueError(f"frequencies_hz must be numbers, got {values!r}") from None
     if f.size == 0 or not np.all(np.isfinite(f)) or np.any(f <= 0):
-        raise ValueError(f"frequencies_hz must be a non-empty list of positive finite numbers, got {values!r}")
+        raise FemromValueError(f"frequencies_hz must be a non-empty list of positive finite numbers, got {values!r}")
     steps = np.diff(f)
     if f.size > 1 and not (np.all(steps > 0) or np.all(steps < 0)):
-        raise ValueError("frequencies_hz must be strictly increasing (step up) or strictly decreasing "
+        raise FemromValueError("frequencies_hz must be strictly increasing (step up) or strictly decreasing "
                          "(step down)")
     return tuple(float(x) for x in f)
 
@@ -232,9 +233,9 @@ def _force_amplitudes(values) -> tuple[float, ...]:
     try:
         F = np.atleast_1d(np.asarray(values, dtype=float)).ravel()
     except (TypeError, ValueError):
-        raise ValueError(f"force_amplitudes must be numbers, got {values!r}") from None
+        raise FemromValueError(f"force_amplitudes must be numbers, got {values!r}") from None
     if F.size == 0 or not np.all(np.isfinite(F)) or np.any(F <= 0):
-        raise ValueError(f"force_amplitudes must be positive finite numbers, got {values!r}")
+        raise FemromValueError(f"force_amplitudes must be positive finite numbers, got {values!r}")
     return tuple(float(x) for x in F)
 
 
@@ -269,9 +270,9 @@ class SteppedSine:
         object.__setattr__(self, "frequencies_hz", _frequencies(self.frequencies_hz))
         N = self.steps_per_period
         if not (isinstance(N, (int, np.integer)) and not isinstance(N, bool) and N >= 16):
-            raise ValueError(f"steps_per_period must be an integer >= 16, got {N!r}")
+            raise FemromValueError(f"steps_per_period must be an integer >= 16, got {N!r}")
         if not isinstance(self.steady_state, SteadyStateCriterion):
-            raise ValueError(f"steady_state must be a SteadyStateCriterion, got {type(self.steady_state).__name__}")
+            raise FemromValueError(f"steady_state must be a SteadyStateCriterion, got {type(self.steady_state).__name__}")
 
     @property
     def direction(self) -> str:
@@ -304,7 +305,7 @@ class SteppedSine:
         scheme = getattr(plant, "scheme", None)
         tustin = getattr(plant, "tustin", False)
         if self.prewarp and not (hasattr(scheme, "continuous_frequency") or tustin):
-            raise ValueError("prewarp=True needs a plant whose scheme has a frequency map (plant.scheme) "
+            raise FemromValueError("prewarp=True needs a plant whose scheme has a frequency map (plant.scheme) "
                              "or that is stepped by Newmark average acceleration (plant.tustin); "
                              "pass prewarp=False")
         N, criterion = int(self.steps_per_period), self.steady_state

@@ -28,6 +28,8 @@ from typing import Any, Callable, Iterator
 
 import numpy as np
 
+from femrom._errors import FemromTypeError, FemromValueError
+
 # Default block: about 128 MB of float64 columns, at least 32 columns (skinny blocks
 # make the block products slow matrix-vector-like kernels).
 _BLOCK_BYTES = 128 * 2**20
@@ -51,19 +53,19 @@ def as_column_block(block: Any, n: int | None = None, *, finite: bool = True) ->
     """
     raw = np.asarray(block)
     if raw.dtype.kind not in "fiu":
-        raise ValueError(f"a block of snapshot columns must hold real numbers, got dtype {raw.dtype}")
+        raise FemromValueError(f"a block of snapshot columns must hold real numbers, got dtype {raw.dtype}")
     block = np.asarray(raw, dtype=np.float64)
     if block.ndim == 1:
         block = block[:, None]
     if block.ndim != 2:
-        raise ValueError(f"a block of snapshot columns must be (n, b), got shape {block.shape}")
+        raise FemromValueError(f"a block of snapshot columns must be (n, b), got shape {block.shape}")
     if n is not None and block.shape[0] != n:
-        raise ValueError(f"block has {block.shape[0]} rows, expected n = {n} "
-                         "(blocks are columns of the (n, K) snapshot matrix)")
+        raise FemromValueError(f"block has {block.shape[0]} rows, expected n = {n} "
+                               "(blocks are columns of the (n, K) snapshot matrix)")
     if finite and not np.isfinite(block).all():
         row, column = np.argwhere(~np.isfinite(block))[0]
-        raise ValueError(f"a block of snapshot columns is not finite: entry ({row}, {column}) of the block is "
-                         f"{block[row, column]}")
+        raise FemromValueError(f"a block of snapshot columns is not finite: entry ({row}, {column}) of the block is "
+                               f"{block[row, column]}")
     return block
 
 
@@ -149,8 +151,8 @@ class BlockSource:
     def blocks(self) -> Iterator[np.ndarray]:
         """Iterate over one pass: (n, b) float64 blocks, rows checked against n (and finite on the first pass)."""
         if self.passes >= 1 and not self.reiterable:
-            raise ValueError(f"{self.description} can be read only once; pass a zero-argument "
-                             "callable returning a fresh iterator, or an object with iter_blocks()")
+            raise FemromValueError(f"{self.description} can be read only once; pass a zero-argument "
+                                   "callable returning a fresh iterator, or an object with iter_blocks()")
         self.passes += 1
         n = self.n_rows
         blocks = self._open_pass()
@@ -167,9 +169,9 @@ class BlockSource:
     def require_passes(self, passes: int, method: str) -> None:
         """Raise if ``method`` needs more than one pass over a one-shot source."""
         if passes > 1 and not self.reiterable:
-            raise ValueError(f"{method} reads the data {passes} times but {self.description} "
-                             "can be read only once; pass a zero-argument callable returning a "
-                             "fresh iterator, an object with iter_blocks(), or an array")
+            raise FemromValueError(f"{method} reads the data {passes} times but {self.description} "
+                                   "can be read only once; pass a zero-argument callable returning a "
+                                   "fresh iterator, an object with iter_blocks(), or an array")
 
 
 def _array_passes(array: Any, block_columns: int) -> Callable[[], Iterator[Any]]:
@@ -212,10 +214,10 @@ def as_block_source(data: Any, *, block_columns: int | None = None,
     if hasattr(data, "shape") and hasattr(data, "__getitem__") and not callable(data):
         shape = tuple(data.shape)
         if len(shape) != 2:
-            raise ValueError(f"snapshot array must be 2-D (n, K), got shape {shape}")
+            raise FemromValueError(f"snapshot array must be 2-D (n, K), got shape {shape}")
         b = default_block_columns(shape[0]) if block_columns is None else int(block_columns)
         if b < 1:
-            raise ValueError(f"block_columns must be >= 1, got {block_columns}")
+            raise FemromValueError(f"block_columns must be >= 1, got {block_columns}")
         return BlockSource(_array_passes(data, b), reiterable=True, n_rows=shape[0],
                            description=f"{type(data).__name__} of shape {shape}", prefetch=ahead)
     iter_blocks = getattr(data, "iter_blocks", None)
@@ -229,9 +231,9 @@ def as_block_source(data: Any, *, block_columns: int | None = None,
                            description=f"one-shot iterator ({type(data).__name__})")
     if callable(data):
         return BlockSource(data, reiterable=True, description="block callable", prefetch=ahead)
-    raise TypeError(f"cannot read snapshot blocks from {type(data).__name__}: give an (n, K) "
-                    "array, an object with iter_blocks(), a callable returning an iterator of "
-                    "(n, b) blocks, or a list of blocks")
+    raise FemromTypeError(f"cannot read snapshot blocks from {type(data).__name__}: give an (n, K) "
+                          "array, an object with iter_blocks(), a callable returning an iterator of "
+                          "(n, b) blocks, or a list of blocks")
 
 
 def store_source(store, field: str = "q", trajectories=None, *, block_columns: int | None = None,
@@ -257,7 +259,7 @@ def store_source(store, field: str = "q", trajectories=None, *, block_columns: i
     wanted = block_columns if block_columns is not None else default_block_columns(store.n_dofs)
     plan = store.column_blocks(key, wanted, trajectories)
     if not plan:
-        raise ValueError(f"{store.path}: no committed snapshots of {field!r} to read")
+        raise FemromValueError(f"{store.path}: no committed snapshots of {field!r} to read")
 
     def blocks():
         for trajectory, start, stop in plan:

@@ -52,6 +52,7 @@ from typing import Any, Iterator
 
 import numpy as np
 
+from femrom._errors import FemromValueError
 from femrom.linalg._blocks import default_block_columns
 from femrom.linalg._lowrank import LowRankSVD
 from femrom.linalg._product import InnerProduct
@@ -78,17 +79,17 @@ def _hdf5_array(path: str, name: str | None, chunks: Any):
     with h5py.File(path, "r") as file:
         fmt = file.attrs.get("format")
         if fmt is not None and (fmt.decode() if isinstance(fmt, bytes) else str(fmt)) == FORMAT_NAME:
-            raise ValueError(f"{path} is a femrom snapshot store, whose datasets are (K, n) per "
-                             "trajectory: give field= ('displacement', 'velocity', ...), not "
-                             "dataset=")
+            raise FemromValueError(f"{path} is a femrom snapshot store, whose datasets are (K, n) per "
+                                   "trajectory: give field= ('displacement', 'velocity', ...), not "
+                                   "dataset=")
         if name is None:
-            raise ValueError(f"give dataset= (the name of the (n, K) snapshot dataset in {path}), "
-                             "or field= for a femrom snapshot store")
+            raise FemromValueError(f"give dataset= (the name of the (n, K) snapshot dataset in {path}), "
+                                   "or field= for a femrom snapshot store")
         if name not in file:
-            raise KeyError(f"{path} has no dataset {name!r}; it has: {', '.join(file.keys())}")
+            raise FemromValueError(f"{path} has no dataset {name!r}; it has: {', '.join(file.keys())}")
         shape, storage = file[name].shape, file[name].chunks
     if len(shape) != 2:
-        raise ValueError(f"dataset {name!r} in {path} must be 2-D (n, K), got shape {shape}")
+        raise FemromValueError(f"dataset {name!r} in {path} must be 2-D (n, K), got shape {shape}")
     if chunks is None:
         chunks = ("auto", storage[1] if storage else "auto")
     chunk_rows, chunk_cols = da.core.normalize_chunks(chunks, shape, dtype=np.float64)
@@ -152,7 +153,7 @@ def store_dask_array(store: Any, field: str, *, trajectories=None, block_columns
         width = opened.read(names[0], key, 0, 0).shape[0] if names else 0  # n, or m, p for u, y
         target = default_block_columns(width) if block_columns is None else int(block_columns)
         if target < 1:
-            raise ValueError(f"block_columns must be >= 1, got {block_columns}")
+            raise FemromValueError(f"block_columns must be >= 1, got {block_columns}")
         plan = opened.column_blocks(key, target, trajectories)
         path = str(opened.path)
     finally:
@@ -198,18 +199,18 @@ def as_dask_array(data: Any, *, field: str | None = None, trajectories=None,
 
     if isinstance(data, SnapshotStore) or (isinstance(data, (str, Path)) and field is not None):
         if field is None:
-            raise ValueError("give field= ('displacement', 'velocity', 'acceleration', ...) to "
-                             f"read the snapshot matrix of {data}")
+            raise FemromValueError("give field= ('displacement', 'velocity', 'acceleration', ...) to "
+                                   f"read the snapshot matrix of {data}")
         if dataset is not None or chunks is not None:
-            raise ValueError("a snapshot store is read by field= (and block_columns=), not "
-                             "dataset= or chunks=")
+            raise FemromValueError("a snapshot store is read by field= (and block_columns=), not "
+                                   "dataset= or chunks=")
         return store_dask_array(data, field, trajectories=trajectories, block_columns=block_columns)
     if field is not None or trajectories is not None:
-        raise ValueError(f"field= and trajectories= apply to a snapshot store, not to "
-                         f"{type(data).__name__}")
+        raise FemromValueError(f"field= and trajectories= apply to a snapshot store, not to "
+                               f"{type(data).__name__}")
     if block_columns is not None:
         if chunks is not None:
-            raise ValueError("give chunks= or block_columns=, not both")
+            raise FemromValueError("give chunks= or block_columns=, not both")
         chunks = ("auto", int(block_columns))
     if isinstance(data, (str, Path)):
         array = _hdf5_array(str(data), dataset, chunks)
@@ -218,7 +219,7 @@ def as_dask_array(data: Any, *, field: str | None = None, trajectories=None,
     else:
         array = da.from_array(data, chunks="auto" if chunks is None else chunks)
     if array.ndim != 2:
-        raise ValueError(f"snapshot array must be 2-D (n, K), got shape {array.shape}")
+        raise FemromValueError(f"snapshot array must be 2-D (n, K), got shape {array.shape}")
     return array.astype(np.float64, copy=False)
 
 
@@ -249,7 +250,7 @@ def dask_scheduler(scheduler: Any = None, *, scheduler_address: str | None = Non
     """
     if scheduler_address is not None:
         if scheduler is not None:
-            raise ValueError("give scheduler= or scheduler_address=, not both")
+            raise FemromValueError("give scheduler= or scheduler_address=, not both")
         try:
             from distributed import Client
         except ImportError:
@@ -268,8 +269,8 @@ def dask_scheduler(scheduler: Any = None, *, scheduler_address: str | None = Non
         yield scheduler
         return
     hint = " (an address goes in scheduler_address=)" if isinstance(scheduler, str) else ""
-    raise ValueError(f"scheduler must be None, one of {', '.join(_LOCAL_SCHEDULERS)} or a "
-                     f"distributed.Client; got {scheduler!r}{hint}")
+    raise FemromValueError(f"scheduler must be None, one of {', '.join(_LOCAL_SCHEDULERS)} or a "
+                           f"distributed.Client; got {scheduler!r}{hint}")
 
 
 def _default_scheduler(cluster_options: dict | None, local_data: bool) -> Iterator[Any]:
@@ -357,13 +358,13 @@ def randomized_svd_dask(data: Any, rank: int, *, oversampling: int = 10, power_i
     import dask.array as da
 
     if int(rank) < 1:
-        raise ValueError(f"rank must be >= 1, got {rank}")
+        raise FemromValueError(f"rank must be >= 1, got {rank}")
     inner = InnerProduct(product)
     array = as_dask_array(data, field=field, trajectories=trajectories,
                           block_columns=block_columns, dataset=dataset, chunks=chunks)
     inner.check_dimension(array.shape[0])
     if rank > min(array.shape):
-        raise ValueError(f"rank {rank} exceeds min(n, K) = min{array.shape}")
+        raise FemromValueError(f"rank {rank} exceeds min(n, K) = min{array.shape}")
     local_data = not isinstance(data, (str, Path, da.Array)) and not hasattr(data, "column_blocks")
     with dask_scheduler(scheduler, scheduler_address=scheduler_address,
                         cluster_options=cluster_options, local_data=local_data) as where:

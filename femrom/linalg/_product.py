@@ -25,6 +25,8 @@ import numpy as np
 import scipy.linalg as sla
 import scipy.sparse as sp
 
+from femrom._errors import FemromValueError
+
 
 _TSQR_ROWS = 4096  # rows per leaf of the tall-skinny QR (a leaf of 30 columns is ~1 MB)
 _CONTROLLER: list = []  # threadpoolctl's controller, made once (it scans the loaded libraries)
@@ -104,21 +106,21 @@ class InnerProduct:
         elif sp.issparse(product) or (isinstance(product, np.ndarray) and product.ndim == 2):
             shape = product.shape
             if shape[0] != shape[1]:
-                raise ValueError(f"inner-product matrix must be square, got shape {shape}")
+                raise FemromValueError(f"inner-product matrix must be square, got shape {shape}")
             asym = abs(product - product.T).max()
             scale = abs(product).max()
             if not scale > 0 or asym > 1e-10 * scale:
-                raise ValueError(f"inner-product matrix must be symmetric positive definite "
-                                 f"(max |W - W^T| = {asym:.3g}, max |W| = {scale:.3g})")
+                raise FemromValueError(f"inner-product matrix must be symmetric positive definite "
+                                       f"(max |W - W^T| = {asym:.3g}, max |W| = {scale:.3g})")
             self.kind, self.n = "matrix", shape[0]
             self.matrix = product.tocsr() if sp.issparse(product) else np.asarray(product, float)
         else:
             weights = np.asarray(product, dtype=np.float64)
             if weights.ndim != 1:
-                raise ValueError(f"a lumped (diagonal) product is a 1-D array, got shape {weights.shape}")
+                raise FemromValueError(f"a lumped (diagonal) product is a 1-D array, got shape {weights.shape}")
             if not np.all(weights > 0):
-                raise ValueError(f"lumped product weights must all be > 0 "
-                                 f"(min = {weights.min():.3g})")
+                raise FemromValueError(f"lumped product weights must all be > 0 "
+                                       f"(min = {weights.min():.3g})")
             self.kind, self.n = "diagonal", weights.size
             self._weights = weights
             self._sqrt_weights = np.sqrt(weights)
@@ -131,13 +133,13 @@ class InnerProduct:
     def sqrt_weights(self) -> np.ndarray:
         """(n,) square roots of a diagonal product's weights."""
         if self.kind != "diagonal":
-            raise ValueError(f"only a diagonal product has square-root weights, this one is {self.kind}")
+            raise FemromValueError(f"only a diagonal product has square-root weights, this one is {self.kind}")
         return self._sqrt_weights
 
     def check_dimension(self, n: int) -> None:
         """Raise if the product's dimension differs from ``n``."""
         if self.n is not None and self.n != n:
-            raise ValueError(f"inner product has dimension {self.n} but the data have n = {n} rows")
+            raise FemromValueError(f"inner product has dimension {self.n} but the data have n = {n} rows")
 
     def apply(self, x: np.ndarray) -> np.ndarray:
         """W x for (n,) or (n, k) ``x``."""

@@ -78,6 +78,7 @@ from typing import Any
 
 import numpy as np
 
+from femrom._errors import FemromValueError
 from femrom._progress import Progress
 from femrom.linalg._blocks import as_block_source
 from femrom.linalg._lowrank import LowRankSVD
@@ -134,19 +135,19 @@ def _next_scaling(weighted_q: np.ndarray, coupling: np.ndarray) -> np.ndarray:
 
 def _check_same_columns(source, seen: int, expected: int) -> None:
     if seen != expected:
-        raise ValueError(f"{source.description} gave {seen} columns in pass {source.passes} "
-                         f"but {expected} in the first: the data changed between passes")
+        raise FemromValueError(f"{source.description} gave {seen} columns in pass {source.passes} "
+                               f"but {expected} in the first: the data changed between passes")
 
 
 def _check_rank(rank: int, oversampling: int, power_iterations: int, scheme: str) -> None:
     if int(rank) < 1:
-        raise ValueError(f"rank must be >= 1, got {rank}")
+        raise FemromValueError(f"rank must be >= 1, got {rank}")
     if int(oversampling) < 0:
-        raise ValueError(f"oversampling must be >= 0, got {oversampling}")
+        raise FemromValueError(f"oversampling must be >= 0, got {oversampling}")
     if int(power_iterations) < 0:
-        raise ValueError(f"power_iterations must be >= 0, got {power_iterations}")
+        raise FemromValueError(f"power_iterations must be >= 0, got {power_iterations}")
     if scheme not in SCHEMES:
-        raise ValueError(f"unknown randomized SVD scheme {scheme!r}; valid: {', '.join(SCHEMES)}")
+        raise FemromValueError(f"unknown randomized SVD scheme {scheme!r}; valid: {', '.join(SCHEMES)}")
 
 
 def _right_factor(z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -235,9 +236,9 @@ def randomized_svd(data: Any, rank: int, *, oversampling: int = 10, power_iterat
             n_columns += block.shape[1]
         bar.update()
         if y is None:
-            raise ValueError(f"{source.description} yielded no columns")
+            raise FemromValueError(f"{source.description} yielded no columns")
         if rank > min(n_columns, y.shape[0]):
-            raise ValueError(f"rank {rank} exceeds min(n, K) = min({y.shape[0]}, {n_columns})")
+            raise FemromValueError(f"rank {rank} exceeds min(n, K) = min({y.shape[0]}, {n_columns})")
         width = min(width, n_columns, y.shape[0])
         y, gram = y[:, :width], gram[:width, :width]  # fewer snapshots than k: Y spans range(A)
         basis, r_factor = inner.orthonormalize(y)

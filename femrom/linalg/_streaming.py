@@ -39,6 +39,7 @@ from typing import Any
 
 import numpy as np
 
+from femrom._errors import FemromValueError
 from femrom.linalg._blocks import as_block_source, as_column_block
 from femrom.linalg._lowrank import LowRankSVD
 from femrom.linalg._product import InnerProduct, householder_qr
@@ -89,16 +90,16 @@ class StreamingSketch:
                  test_matrix: str = "gaussian", buffer_columns: int = 32):
         self.n, self.rank = int(n), int(rank)
         if self.rank < 1:
-            raise ValueError(f"rank must be >= 1, got {rank}")
+            raise FemromValueError(f"rank must be >= 1, got {rank}")
         self.range_size = 4 * self.rank + 1 if range_size is None else int(range_size)
         self.core_size = 2 * self.range_size + 1 if core_size is None else int(core_size)
         if self.range_size < self.rank + 2:
-            raise ValueError(f"range_size must be >= rank + 2 = {self.rank + 2} "
-                             f"(TYUC2019 needs k > r + 1 for real data), got {self.range_size}")
+            raise FemromValueError(f"range_size must be >= rank + 2 = {self.rank + 2} "
+                                   f"(TYUC2019 needs k > r + 1 for real data), got {self.range_size}")
         if self.core_size < self.range_size:
-            raise ValueError(f"core_size must be >= range_size = {self.range_size}, got {self.core_size}")
+            raise FemromValueError(f"core_size must be >= range_size = {self.range_size}, got {self.core_size}")
         if self.range_size > self.n:
-            raise ValueError(f"range_size {self.range_size} exceeds n = {self.n}")
+            raise FemromValueError(f"range_size {self.range_size} exceeds n = {self.n}")
         self.seed = int(seed)
         self.product = InnerProduct(product)
         self.product.check_dimension(self.n)
@@ -194,14 +195,14 @@ class StreamingSketch:
         self.flush()
         n_columns = self.n_columns
         if n_columns == 0:
-            raise ValueError("the sketch has received no columns")
+            raise FemromValueError("the sketch has received no columns")
         if len(self._corange) > 1:
             self._corange = [np.concatenate(self._corange, axis=1)]
         corange = self._corange[0]
         k = self.range_size
         if rank > min(k, n_columns):
-            raise ValueError(f"rank {rank} exceeds min(range_size, columns) = "
-                             f"min({k}, {n_columns})")
+            raise FemromValueError(f"rank {rank} exceeds min(range_size, columns) = "
+                                   f"min({k}, {n_columns})")
         if self.product.kind == "matrix":
             q, _ = self.product.orthonormalize(self._range)
         else:
@@ -229,9 +230,9 @@ class SketchConsumer:
 
     def __init__(self, sketch: StreamingSketch, field: str = "q", every: int = 1):
         if field not in _FIELDS:
-            raise ValueError(f"unknown field {field!r}; valid: {', '.join(_FIELDS)}")
+            raise FemromValueError(f"unknown field {field!r}; valid: {', '.join(_FIELDS)}")
         if int(every) < 1:
-            raise ValueError(f"every must be >= 1, got {every}")
+            raise FemromValueError(f"every must be >= 1, got {every}")
         self.sketch, self.field, self.every = sketch, field, int(every)
 
     def __call__(self, result: Any) -> None:
@@ -239,7 +240,7 @@ class SketchConsumer:
             return
         value = getattr(result, self.field)
         if value is None:
-            raise ValueError(f"step {getattr(result, 'step', '?')} has no {self.field!r} to sketch")
+            raise FemromValueError(f"step {getattr(result, 'step', '?')} has no {self.field!r} to sketch")
         self.sketch.update(value)
 
     def close(self) -> None:

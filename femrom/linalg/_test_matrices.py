@@ -16,6 +16,8 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
+from femrom._errors import FemromValueError
+
 # Streams of per-column rows, so that different sketches of one seed are independent.
 RANGE_STREAM = 0        # Omega of the multi-pass range finder
 STREAMING_STREAM = 1    # [Omega | Psi] rows of the single-pass sketch
@@ -67,7 +69,7 @@ class LeftTestMatrix:
             self._dense = None
             self._transposed = sp.csr_matrix((signs, (col_index, row_index)), shape=(n, rows))
         else:
-            raise ValueError(f"unknown test matrix {kind!r}; valid: gaussian, sparse")
+            raise FemromValueError(f"unknown test matrix {kind!r}; valid: gaussian, sparse")
 
     def apply(self, block: np.ndarray) -> np.ndarray:
         """Upsilon B for (n, b) ``B``: (rows, b)."""

@@ -11,7 +11,6 @@ from femrom.post._backbone import (
     default_trim,
     hilbert_backbone,
     peak_backbone,
-    plot_backbones,
     spectral_peaks,
 )
 from femrom.post._export import export_prediction
@@ -24,6 +23,15 @@ from femrom.post._impact import (
     read_hammer_impact,
 )
 from femrom.post._output import OutputFolderError, staged_output
+from femrom.post._plots import (
+    plot_accuracy_cost,
+    plot_accuracy_cost_groups,
+    plot_backbones,
+    plot_response,
+    plot_time_series,
+    pyplot,
+    save_figure,
+)
 from femrom.post._qsma import QuasiStaticBackbone, masing_damping, quasi_static_modal_analysis
 from femrom.post._render import (
     mesh_arrays,
@@ -32,18 +40,7 @@ from femrom.post._render import (
     vertex_displacements,
     write_vtu_series,
 )
-from femrom.post._report import (
-    accuracy_cost_table,
-    machine_description,
-    plot_accuracy_cost,
-    plot_accuracy_cost_groups,
-    plot_response,
-    plot_time_series,
-    pyplot,
-    save_figure,
-    table_section,
-    write_metrics,
-)
+from femrom.post._report import accuracy_cost_table, machine_description, table_section, write_metrics
 
 __all__ = [
     "BandIntegrals", "band_limited_integrals", "band_weights", "ModalRecord", "modal_record",

@@ -63,11 +63,12 @@ took the end windows' ``zeta`` error from 3e-3 to 6e-5.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 import scipy.fft as scipy_fft
 import scipy.signal as signal_tools
+
+from femrom._errors import FemromValueError
 
 #: Relative decay of the slowest filter pole over the default trim (see :func:`default_trim`).
 TRIM_DECAY = 1e-4
@@ -109,7 +110,7 @@ class Backbone:
             arrays[name] = value
         sizes = {name: value.size for name, value in arrays.items()}
         if len(set(sizes.values())) != 1:
-            raise ValueError(f"Backbone arrays need one length, got {sizes}")
+            raise FemromValueError(f"Backbone arrays need one length, got {sizes}")
         for name, value in arrays.items():
             object.__setattr__(self, name, value)
 
@@ -133,17 +134,17 @@ class Backbone:
 
         Raises
         ------
-        ValueError
+        FemromValueError
             An amplitude outside the range the backbone covers (no extrapolation), or
             a backbone whose amplitudes are not all positive.
         """
         amplitude = np.asarray(amplitude, dtype=float)
         if len(self) == 0 or not np.all(self.amplitude > 0):
-            raise ValueError("at_amplitude needs a backbone with positive amplitudes")
+            raise FemromValueError("at_amplitude needs a backbone with positive amplitudes")
         lo, hi = self.amplitude.min(), self.amplitude.max()
         if not np.all((amplitude >= lo) & (amplitude <= hi)):
-            raise ValueError(f"amplitude must lie in the backbone's range [{lo:.6g}, {hi:.6g}], "
-                             f"got {np.min(amplitude):.6g}..{np.max(amplitude):.6g}")
+            raise FemromValueError(f"amplitude must lie in the backbone's range [{lo:.6g}, {hi:.6g}], "
+                                   f"got {np.min(amplitude):.6g}..{np.max(amplitude):.6g}")
         order = np.argsort(self.amplitude)
         log_a = np.log(self.amplitude[order])
         x = np.log(amplitude)
@@ -157,13 +158,13 @@ class Backbone:
 def _check_signal(signal) -> np.ndarray:
     x = np.asarray(signal, dtype=float)
     if x.ndim != 1:
-        raise ValueError(f"signal must be a 1-D array of samples, got shape {x.shape}")
+        raise FemromValueError(f"signal must be a 1-D array of samples, got shape {x.shape}")
     if x.size < 16:
-        raise ValueError(f"signal must have at least 16 samples, got {x.size}")
+        raise FemromValueError(f"signal must have at least 16 samples, got {x.size}")
     if not np.all(np.isfinite(x)):
         bad = np.flatnonzero(~np.isfinite(x))
-        raise ValueError(f"signal has {bad.size} non-finite samples (first at index {bad[0]}); "
-                         "all samples must be finite")
+        raise FemromValueError(f"signal has {bad.size} non-finite samples (first at index {bad[0]}); "
+                               "all samples must be finite")
     return x
 
 
@@ -171,9 +172,9 @@ def _check_rate(sample_rate) -> float:
     try:
         rate = float(sample_rate)
     except (TypeError, ValueError):
-        raise ValueError(f"sample_rate must be a positive finite number [Hz], got {sample_rate!r}") from None
+        raise FemromValueError(f"sample_rate must be a positive finite number [Hz], got {sample_rate!r}") from None
     if not (np.isfinite(rate) and rate > 0):
-        raise ValueError(f"sample_rate must be a positive finite number [Hz], got {sample_rate!r}")
+        raise FemromValueError(f"sample_rate must be a positive finite number [Hz], got {sample_rate!r}")
     return rate
 
 
@@ -181,10 +182,10 @@ def _check_band(band, rate: float) -> tuple[float, float]:
     try:
         low, high = (float(b) for b in band)
     except (TypeError, ValueError):
-        raise ValueError(f"band must be a pair (low, high) in Hz, got {band!r}") from None
+        raise FemromValueError(f"band must be a pair (low, high) in Hz, got {band!r}") from None
     nyquist = rate / 2
     if not (0 < low < high < nyquist):
-        raise ValueError(f"band must satisfy 0 < low < high < Nyquist = {nyquist:g} Hz, got ({low:g}, {high:g})")
+        raise FemromValueError(f"band must satisfy 0 < low < high < Nyquist = {nyquist:g} Hz, got ({low:g}, {high:g})")
     return low, high
 
 
@@ -194,7 +195,7 @@ def _is_positive_integer(value) -> bool:
 
 def _check_order(filter_order) -> int:
     if not _is_positive_integer(filter_order):
-        raise ValueError(f"filter_order must be a positive integer, got {filter_order!r}")
+        raise FemromValueError(f"filter_order must be a positive integer, got {filter_order!r}")
     return int(filter_order)
 
 
@@ -227,10 +228,10 @@ def _trim_samples(trim, rate, band, order, n) -> int:
         trim = default_trim(rate, band, order)
     trim = float(trim)
     if not (np.isfinite(trim) and trim >= 0):
-        raise ValueError(f"trim must be a non-negative number of seconds, got {trim!r}")
+        raise FemromValueError(f"trim must be a non-negative number of seconds, got {trim!r}")
     k = int(round(trim * rate))
     if 2 * k >= n:
-        raise ValueError(f"trim = {trim:g} s from each end leaves nothing of a {n / rate:g} s signal")
+        raise FemromValueError(f"trim = {trim:g} s from each end leaves nothing of a {n / rate:g} s signal")
     return k
 
 
@@ -300,17 +301,17 @@ def hilbert_backbone(signal, sample_rate: float, band, *, window: float, overlap
     order = _check_order(filter_order)
     overlap = float(overlap)
     if not (0 <= overlap < 1):
-        raise ValueError(f"overlap must be a fraction in [0, 1), got {overlap!r}")
+        raise FemromValueError(f"overlap must be a fraction in [0, 1), got {overlap!r}")
     window = float(window)
     n_window = int(round(window * rate)) if np.isfinite(window) else -1
     if n_window < 4:
-        raise ValueError(f"window must be a positive length of at least 4 samples (4 / sample_rate = "
-                         f"{4 / rate:g} s), got {window!r}")
+        raise FemromValueError(f"window must be a positive length of at least 4 samples (4 / sample_rate = "
+                               f"{4 / rate:g} s), got {window!r}")
     cut = _trim_samples(trim, rate, band, order, x.size)
     usable = x.size - 2 * cut
     if n_window > usable:
-        raise ValueError(f"window = {window:g} s is longer than the signal after trimming "
-                         f"({usable / rate:g} s of {x.size / rate:g} s; trim {cut / rate:g} s each end)")
+        raise FemromValueError(f"window = {window:g} s is longer than the signal after trimming "
+                               f"({usable / rate:g} s of {x.size / rate:g} s; trim {cut / rate:g} s each end)")
 
     _, y = _band_pass(x, rate, band, order)
     # zero-padded to twice the length: the FFT's periodic image of the (large) start then
@@ -368,7 +369,7 @@ def peak_backbone(signal, sample_rate: float, band, *, cycles: int = 8, filter_o
     band = _check_band(band, rate)
     order = _check_order(filter_order)
     if not _is_positive_integer(cycles):
-        raise ValueError(f"cycles must be a positive integer, got {cycles!r}")
+        raise FemromValueError(f"cycles must be a positive integer, got {cycles!r}")
     cycles = int(cycles)
     cut = _trim_samples(trim, rate, band, order, x.size)
     _, y = _band_pass(x, rate, band, order)
@@ -379,8 +380,8 @@ def peak_backbone(signal, sample_rate: float, band, *, cycles: int = 8, filter_o
     crossings = i + y[i] / (y[i] - y[i + 1])                    # fractional sample index
     half_cycles = crossings.size - 1
     if half_cycles < 2 * cycles:
-        raise ValueError(f"cycles = {cycles}: the trimmed signal has only {half_cycles // 2} whole cycles "
-                         f"in band {band} Hz")
+        raise FemromValueError(f"cycles = {cycles}: the trimmed signal has only {half_cycles // 2} whole cycles "
+                               f"in band {band} Hz")
     # one extremum between consecutive crossings
     peak_time = np.empty(half_cycles)
     peak_value = np.empty(half_cycles)
@@ -446,10 +447,10 @@ def spectral_peaks(signal, sample_rate: float, *, min_frequency: float = 0.0, ma
     max_frequency = nyquist if max_frequency is None else float(max_frequency)
     min_frequency = float(min_frequency)
     if not (0 <= min_frequency < max_frequency <= nyquist):
-        raise ValueError(f"need 0 <= min_frequency < max_frequency <= Nyquist = {nyquist:g} Hz, "
-                         f"got ({min_frequency:g}, {max_frequency:g})")
+        raise FemromValueError(f"need 0 <= min_frequency < max_frequency <= Nyquist = {nyquist:g} Hz, "
+                               f"got ({min_frequency:g}, {max_frequency:g})")
     if not (floor_db > 0 and prominence_db > 0):
-        raise ValueError(f"floor_db and prominence_db must be positive, got {floor_db!r}, {prominence_db!r}")
+        raise FemromValueError(f"floor_db and prominence_db must be positive, got {floor_db!r}, {prominence_db!r}")
     frequencies, power = signal_tools.periodogram(x, rate, window=window, detrend="constant")
     level = 10 * np.log10(np.maximum(power, np.finfo(float).tiny))
     found, _ = signal_tools.find_peaks(level, prominence=prominence_db)
@@ -462,43 +463,3 @@ def spectral_peaks(signal, sample_rate: float, *, min_frequency: float = 0.0, ma
     curvature = lm - 2 * l0 + lp
     shift = np.where(curvature < 0, 0.5 * (lm - lp) / np.where(curvature < 0, curvature, -1.0), 0.0)
     return np.sort(frequencies[found] + shift * (frequencies[1] - frequencies[0]))
-
-
-# ----------------------------------------------------------------------------- plot
-
-
-def plot_backbones(path, backbones: dict, *, title: str = "", amplitude_label: str = "amplitude") -> Path:
-    """Frequency (top) and damping ratio in % (bottom) against amplitude (log axis), one
-    labelled curve per backbone, on shared axes; returns the path written (PNG, Agg).
-
-    Parameters
-    ----------
-    path : str or Path
-    backbones : dict of label -> Backbone
-    title, amplitude_label : str
-    """
-    from femrom.post._report import pyplot, save_figure
-
-    if not backbones:
-        raise ValueError("backbones must name at least one Backbone")
-    for label, backbone in backbones.items():
-        if not isinstance(backbone, Backbone):
-            raise ValueError(f"backbones[{label!r}] must be a Backbone, got {type(backbone).__name__}")
-    plt = pyplot()
-    fig, (ax_f, ax_z) = plt.subplots(2, 1, figsize=(6.4, 6.0), sharex=True)
-    markers = ("o", "s", "^", "v", "D", "x")
-    for n, (label, backbone) in enumerate(backbones.items()):
-        positive = backbone.amplitude > 0
-        style = dict(marker=markers[n % len(markers)], ms=3.5, lw=1.0, label=str(label))
-        ax_f.plot(backbone.amplitude[positive], backbone.frequency_hz[positive], **style)
-        ax_z.plot(backbone.amplitude[positive], 100 * backbone.damping_ratio[positive], **style)
-    ax_f.set_xscale("log")
-    ax_f.set_ylabel("frequency [Hz]")
-    ax_z.set_ylabel("damping ratio [%]")
-    ax_z.set_xlabel(amplitude_label)
-    for ax in (ax_f, ax_z):
-        ax.grid(alpha=0.3, which="both")
-    ax_f.legend(fontsize=8)
-    if title:
-        ax_f.set_title(title, fontsize=10)
-    return save_figure(fig, path, dpi=110)

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from femrom._errors import FemromValueError
 from femrom.post._render import mesh_arrays, vertex_displacements, write_vtu_series
 
 
@@ -62,7 +63,7 @@ def export_prediction(path, space, condensation, times, basis: np.ndarray, reduc
     times = np.asarray(times, dtype=float)
     reduced = np.asarray(reduced, dtype=float)
     if reduced.shape != (basis.shape[1], times.size):
-        raise ValueError(f"reduced has shape {reduced.shape}, expected (r, k) = ({basis.shape[1]}, {times.size})")
+        raise FemromValueError(f"reduced has shape {reduced.shape}, expected (r, k) = ({basis.shape[1]}, {times.size})")
     picked = np.arange(0, times.size, int(every))
     fields = {"displacement": _LazySteps(space, condensation, lambda i: basis @ reduced[:, picked[i]], picked.size)}
     if reference is not None:
@@ -74,7 +75,7 @@ def export_prediction(path, space, condensation, times, basis: np.ndarray, reduc
     if outputs is not None:
         outputs = np.atleast_2d(np.asarray(outputs, dtype=float))
         if outputs.shape[1] != times.size:
-            raise ValueError(f"outputs have {outputs.shape[1]} columns for {times.size} times")
+            raise FemromValueError(f"outputs have {outputs.shape[1]} columns for {times.size} times")
         names = list(output_names) or [f"y{i}" for i in range(outputs.shape[0])]
         csv = path.with_name(f"{path.stem}_outputs.csv")
         np.savetxt(csv, np.column_stack([times, outputs.T]), delimiter=",", header=",".join(["t", *names]),

@@ -21,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
+from femrom._errors import FemromValueError
 from femrom.post._backbone import Backbone, hilbert_backbone, peak_backbone, spectral_peaks
 
 #: Environment variable naming the folder of the jointed-beam data.
@@ -79,7 +80,7 @@ class ImpactRecord:
     def channel(self, name: str) -> np.ndarray:
         """(k,) samples of channel ``name``."""
         if name not in self.channels:
-            raise ValueError(f"channel must be one of {', '.join(self.channels)}, got {name!r}")
+            raise FemromValueError(f"channel must be one of {', '.join(self.channels)}, got {name!r}")
         return self.acceleration[self.channels.index(name)]
 
     def post_trigger(self, name: str) -> tuple[np.ndarray, np.ndarray]:
@@ -101,7 +102,7 @@ def read_hammer_impact(path=None) -> ImpactRecord:
     ------
     FileNotFoundError
         No such file (or the default folder is missing).
-    ValueError
+    FemromValueError
         The file lacks ``t``/``acc``, their shapes disagree, samples are non-finite or
         the times are not uniformly increasing.
     """
@@ -113,20 +114,20 @@ def read_hammer_impact(path=None) -> ImpactRecord:
     with np.load(path, allow_pickle=False) as data:
         missing = [key for key in ("t", "acc") if key not in data.files]
         if missing:
-            raise ValueError(f"{path}: missing arrays {missing} (has {data.files})")
+            raise FemromValueError(f"{path}: missing arrays {missing} (has {data.files})")
         time = np.array(data["t"], dtype=float)
         acceleration = np.atleast_2d(np.array(data["acc"], dtype=float))
         channels = (tuple(str(c) for c in data["channels"]) if "channels" in data.files
                     else tuple(f"acc{i + 1}" for i in range(acceleration.shape[0])))
     if time.ndim != 1 or acceleration.shape[1:] != time.shape or len(channels) != acceleration.shape[0]:
-        raise ValueError(f"{path}: t {time.shape}, acc {acceleration.shape} and {len(channels)} channel "
-                         "names do not match (expected t (k,), acc (c, k))")
+        raise FemromValueError(f"{path}: t {time.shape}, acc {acceleration.shape} and {len(channels)} channel "
+                               "names do not match (expected t (k,), acc (c, k))")
     if not (np.all(np.isfinite(time)) and np.all(np.isfinite(acceleration))):
-        raise ValueError(f"{path}: non-finite samples")
+        raise FemromValueError(f"{path}: non-finite samples")
     steps = np.diff(time)
     step = float(np.mean(steps))
     if time.size < 2 or not (step > 0 and np.ptp(steps) <= 1e-9 * step):
-        raise ValueError(f"{path}: t must be uniformly increasing (steps {steps.min():g}..{steps.max():g} s)")
+        raise FemromValueError(f"{path}: t must be uniformly increasing (steps {steps.min():g}..{steps.max():g} s)")
     for array in (time, acceleration):
         array.setflags(write=False)
     return ImpactRecord(time=time, acceleration=acceleration, channels=channels,
@@ -162,7 +163,7 @@ def measured_backbone(record: ImpactRecord | None = None, *, channel: str = "acc
                                 start_time=float(t[0]))
     if method == "peaks":
         return peak_backbone(a, record.sample_rate, band, cycles=cycles, trim=trim, start_time=float(t[0]))
-    raise ValueError(f"method must be 'hilbert' or 'peaks', got {method!r}")
+    raise FemromValueError(f"method must be 'hilbert' or 'peaks', got {method!r}")
 
 
 def measured_spectral_peaks(record: ImpactRecord | None = None, *, channel: str = "acc1", **options) -> np.ndarray:

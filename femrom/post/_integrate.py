@@ -25,6 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from femrom._errors import FemromValueError
 from femrom.inference import SecondOrderData
 
 
@@ -76,19 +77,19 @@ def band_limited_integrals(acceleration, sample_rate: float, band, *, roll: floa
     """
     a = np.asarray(acceleration, dtype=float)
     if a.ndim not in (1, 2) or a.shape[-1] < 8 or not np.all(np.isfinite(a)):
-        raise ValueError(f"acceleration must be a finite (k,) or (c, k) array with k >= 8, got shape {a.shape}")
+        raise FemromValueError(f"acceleration must be a finite (k,) or (c, k) array with k >= 8, got shape {a.shape}")
     rate = float(sample_rate)
     if not (np.isfinite(rate) and rate > 0):
-        raise ValueError(f"sample_rate must be a positive number, got {sample_rate!r}")
+        raise FemromValueError(f"sample_rate must be a positive number, got {sample_rate!r}")
     if not 0 <= roll < 1:
-        raise ValueError(f"roll must lie in [0, 1), got {roll!r}")
+        raise FemromValueError(f"roll must lie in [0, 1), got {roll!r}")
     try:
         lo, hi = (float(b) for b in band)
     except (TypeError, ValueError):
-        raise ValueError(f"band must be two frequencies (f_lo, f_hi), got {band!r}") from None
+        raise FemromValueError(f"band must be two frequencies (f_lo, f_hi), got {band!r}") from None
     if not (0 < lo < hi and hi * (1 + roll) < rate / 2):
-        raise ValueError(f"band must satisfy 0 < f_lo < f_hi and f_hi (1 + roll) < {rate / 2:g} Hz "
-                         f"(Nyquist), got {band!r}")
+        raise FemromValueError(f"band must satisfy 0 < f_lo < f_hi and f_hi (1 + roll) < {rate / 2:g} Hz "
+                               f"(Nyquist), got {band!r}")
     k = a.shape[-1]
     n = 1 << int(np.ceil(np.log2(2 * k)))            # zero-padded: no wrap-around of the ring-down
     spectrum = np.fft.rfft(a, n=n, axis=-1)
@@ -164,17 +165,17 @@ def modal_record(acceleration, sample_rate: float, band, *, rank: int = 1, trim:
     """
     a = np.atleast_2d(np.asarray(acceleration, dtype=float))
     if a.ndim != 2:
-        raise ValueError(f"acceleration must be (c, k), got shape {a.shape}")
+        raise FemromValueError(f"acceleration must be (c, k), got shape {a.shape}")
     c, k = a.shape
     if not (isinstance(rank, (int, np.integer)) and 1 <= rank <= c):
-        raise ValueError(f"rank must be an integer in [1, {c}] (the channels), got {rank!r}")
+        raise FemromValueError(f"rank must be an integer in [1, {c}] (the channels), got {rank!r}")
     if not (isinstance(every, (int, np.integer)) and every >= 1):
-        raise ValueError(f"every must be a positive integer, got {every!r}")
+        raise FemromValueError(f"every must be a positive integer, got {every!r}")
     integrals = band_limited_integrals(a, sample_rate, band, roll=roll)
     rate = integrals.sample_rate
     cut = int(round(float(trim) * rate)) if trim else 0
     if trim < 0 or k - 2 * cut < 2 * rank:
-        raise ValueError(f"trim must be >= 0 and leave samples: {trim!r} s of {k / rate:g} s")
+        raise FemromValueError(f"trim must be >= 0 and leave samples: {trim!r} s of {k / rate:g} s")
     kept = slice(cut, k - cut)
     W, S, _ = np.linalg.svd(integrals.displacement[:, kept], full_matrices=False)
     W = W[:, :rank]

@@ -16,13 +16,15 @@ import shutil
 from contextlib import contextmanager
 from pathlib import Path
 
+from femrom._errors import FemromValueError
+
 try:
     import fcntl
 except ImportError:  # pragma: no cover - not on Linux
     fcntl = None
 
 
-class OutputFolderError(ValueError):
+class OutputFolderError(FemromValueError):
     """The output folder cannot take the results (one line naming it)."""
 
 

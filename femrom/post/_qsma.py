@@ -32,6 +32,7 @@ from typing import Callable
 
 import numpy as np
 
+from femrom._errors import FemromValueError
 from femrom.post._backbone import Backbone
 
 
@@ -59,13 +60,13 @@ def masing_damping(modal_amplitude, modal_force) -> tuple[np.ndarray, np.ndarray
     a = np.asarray(modal_amplitude, dtype=float).reshape(-1)
     f = np.asarray(modal_force, dtype=float).reshape(-1)
     if a.shape != f.shape or a.size == 0:
-        raise ValueError(f"modal_amplitude and modal_force need one shape, got {a.shape} and {f.shape}")
+        raise FemromValueError(f"modal_amplitude and modal_force need one shape, got {a.shape} and {f.shape}")
     if not (np.all(np.isfinite(a)) and np.all(np.isfinite(f))):
-        raise ValueError("modal_amplitude and modal_force must be finite")
+        raise FemromValueError("modal_amplitude and modal_force must be finite")
     if a[0] <= 0 or np.any(np.diff(a) <= 0):
-        raise ValueError("modal_amplitude must be positive and increasing (a monotonic loading curve)")
+        raise FemromValueError("modal_amplitude must be positive and increasing (a monotonic loading curve)")
     if np.any(f <= 0):
-        raise ValueError("modal_force must be positive along the loading curve")
+        raise FemromValueError("modal_force must be positive along the loading curve")
     a0, f0 = np.concatenate([[0.0], a]), np.concatenate([[0.0], f])
     work = np.cumsum(0.5 * (f0[1:] + f0[:-1]) * np.diff(a0))
     dissipation = 8.0 * (work - 0.5 * a * f)
@@ -106,14 +107,14 @@ class QuasiStaticBackbone:
             amplitude = self.modal_amplitude
         else:
             if self.output_amplitude is None:
-                raise ValueError("this QSMA was run without outputs; pass output_matrix")
+                raise FemromValueError("this QSMA was run without outputs; pass output_matrix")
             displacement = self.output_amplitude[:, output]
             if quantity == "displacement":
                 amplitude = displacement
             elif quantity == "acceleration":
                 amplitude = (2 * np.pi * self.frequency_hz) ** 2 * displacement
             else:
-                raise ValueError(f"unknown quantity {quantity!r}; valid: acceleration, displacement, modal")
+                raise FemromValueError(f"unknown quantity {quantity!r}; valid: acceleration, displacement, modal")
         return Backbone(time=np.zeros_like(amplitude), amplitude=amplitude, frequency_hz=self.frequency_hz,
                         damping_ratio=self.damping_ratio, method="qsma")
 
@@ -152,11 +153,11 @@ def quasi_static_modal_analysis(solve: Callable[[np.ndarray], np.ndarray], mass,
     m_phi = mass @ phi
     norm = float(phi @ m_phi)
     if not norm > 0:
-        raise ValueError("mode must have positive modal mass phi^T M phi")
+        raise FemromValueError("mode must have positive modal mass phi^T M phi")
     phi, m_phi = phi / np.sqrt(norm), m_phi / np.sqrt(norm)
     alphas = np.asarray(modal_forces, dtype=float).reshape(-1)
     if alphas.size == 0 or not np.all(np.isfinite(alphas)) or alphas[0] <= 0 or np.any(np.diff(alphas) <= 0):
-        raise ValueError("modal_forces must be positive, finite and increasing")
+        raise FemromValueError("modal_forces must be positive, finite and increasing")
     q0 = np.zeros_like(phi) if reference is None else np.asarray(reference, dtype=float).reshape(-1)
     amplitudes, outputs = [], []
     for i, alpha in enumerate(alphas):

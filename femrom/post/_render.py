@@ -25,6 +25,8 @@ from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
+from femrom._errors import FemromRuntimeError, FemromValueError
+
 _REASON: list[str] = []
 
 
@@ -51,7 +53,7 @@ def render_available() -> tuple[bool, str]:
         image = plotter.screenshot(return_img=True)
         plotter.close()
         if image is None or image.size == 0:
-            raise RuntimeError("the off-screen window returned no image")
+            raise FemromRuntimeError("the off-screen window returned no image")
         window = os.environ.get("VTK_DEFAULT_OPENGL_WINDOW", "default window")
         _REASON.extend(["ok", f"pyvista {pv.__version__}, vtk {pv.vtk_version_info}, {window}"])
     except Exception as exc:  # ImportError, missing GL libraries, no display
@@ -76,7 +78,7 @@ def vertex_displacements(basis, field: np.ndarray) -> np.ndarray:
     """
     field = np.asarray(field, dtype=float)
     if field.shape != (basis.N,):
-        raise ValueError(f"field has shape {field.shape}, expected ({basis.N},)")
+        raise FemromValueError(f"field has shape {field.shape}, expected ({basis.N},)")
     return field[np.asarray(basis.nodal_dofs)].T.copy()
 
 

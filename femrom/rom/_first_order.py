@@ -29,6 +29,7 @@ import types
 
 import numpy as np
 
+from femrom._errors import FemromValueError
 from femrom.inference import ProjectedPotential
 from femrom.integrators import ConvergenceError, Newton, solve_newton
 from femrom.rom._base import ReducedModel, uniform_step
@@ -62,9 +63,9 @@ class FirstOrderROM(ReducedModel):
     def __init__(self, operator: np.ndarray | None = None, basis: np.ndarray | None = None, potential=None, *,
                  learner=None, scheme: str = "midpoint", newton: Newton = Newton(rtol=1e-12)):
         if scheme not in FIRST_ORDER_SCHEMES:
-            raise ValueError(f"unknown scheme {scheme!r}; valid: {FIRST_ORDER_SCHEMES}")
+            raise FemromValueError(f"unknown scheme {scheme!r}; valid: {FIRST_ORDER_SCHEMES}")
         if potential is not None and basis is None:
-            raise ValueError("a known potential is evaluated through the basis: give basis")
+            raise FemromValueError("a known potential is evaluated through the basis: give basis")
         self.operators_ = None if operator is None else np.asarray(operator, dtype=float)
         self.basis = None if basis is None else np.asarray(basis, dtype=float)
         self.potential = potential
@@ -74,7 +75,7 @@ class FirstOrderROM(ReducedModel):
     def fit(self, data, *, validation=None) -> "FirstOrderROM":
         """Fit ``A^`` with the learner (:class:`~femrom.inference.CanonicalOpInf` on CanonicalData)."""
         if self.learner is None:
-            raise ValueError("this ROM has no learner; pass learner=CanonicalOpInf(...)")
+            raise FemromValueError("this ROM has no learner; pass learner=CanonicalOpInf(...)")
         self.operators_ = self.learner.fit(data, validation=validation).operators_
         return self
 
@@ -84,7 +85,7 @@ class FirstOrderROM(ReducedModel):
 
     def _operator(self) -> np.ndarray:
         if self.operators_ is None:
-            raise ValueError("this ROM is not fitted: call fit(data) or pass operator")
+            raise FemromValueError("this ROM is not fitted: call fit(data) or pass operator")
         return self.operators_
 
     def rhs(self, y: np.ndarray) -> np.ndarray:
@@ -112,7 +113,7 @@ class FirstOrderROM(ReducedModel):
         """
         scheme = self.scheme if scheme is None else scheme
         if scheme not in FIRST_ORDER_SCHEMES:
-            raise ValueError(f"unknown scheme {scheme!r}; valid: {FIRST_ORDER_SCHEMES}")
+            raise FemromValueError(f"unknown scheme {scheme!r}; valid: {FIRST_ORDER_SCHEMES}")
         times, h = uniform_step(times)
         q0, p0 = self.canonical_initial(initial, inputs)
         y0 = np.concatenate([q0, p0])

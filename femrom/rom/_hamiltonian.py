@@ -44,6 +44,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.linalg as sl
 
+from femrom._errors import FemromTypeError, FemromValueError
 from femrom._json import dumps
 from femrom.inference import CanonicalData, HamiltonianOperators, HamiltonianOpInf, ProjectedPotential
 from femrom.integrators import CANONICAL_SCHEMES, CanonicalSystem, Newton, integrate_canonical, run_linear
@@ -93,7 +94,7 @@ _STEP_MATRICES = {
 def hamiltonian_step_matrix(ops: HamiltonianOperators, dt: float, scheme: str) -> np.ndarray:
     """(2r, 2r) ndarray ``S`` with ``[q; p]_{k+1} = S [q; p]_k`` (``"avf"``: the midpoint rule)."""
     if scheme not in _STEP_MATRICES:
-        raise ValueError(f"unknown Hamiltonian scheme {scheme!r}; valid: {_LINEAR_SCHEMES}")
+        raise FemromValueError(f"unknown Hamiltonian scheme {scheme!r}; valid: {_LINEAR_SCHEMES}")
     return _STEP_MATRICES[scheme](ops, float(dt))
 
 
@@ -186,13 +187,13 @@ class HamiltonianROM(ReducedModel):
                  newton: Newton = Newton(rtol=1e-12), *, learner: HamiltonianOpInf | None = None,
                  output_matrix: np.ndarray | None = None, scheme: str = "midpoint"):
         if potential is not None and basis is None:
-            raise ValueError("a known potential is evaluated through the basis: give basis")
+            raise FemromValueError("a known potential is evaluated through the basis: give basis")
         valid = CANONICAL_SCHEMES if potential is not None else _LINEAR_SCHEMES
         if scheme not in valid:
-            raise ValueError(f"unknown scheme {scheme!r} for this model; valid: {valid}")
+            raise FemromValueError(f"unknown scheme {scheme!r} for this model; valid: {valid}")
         self.basis = None if basis is None else np.asarray(basis, dtype=float)
         if operators is not None and self.basis is not None and self.basis.shape[1] != operators.r:
-            raise ValueError(f"basis has {self.basis.shape[1]} columns, operators have r = {operators.r}")
+            raise FemromValueError(f"basis has {self.basis.shape[1]} columns, operators have r = {operators.r}")
         self.operators_ = operators
         self.newton = newton
         self.learner = learner
@@ -232,7 +233,7 @@ class HamiltonianROM(ReducedModel):
         if output_matrix is not None:
             E_full = output_matrix
             if E_full.shape[1] != 2 * n:
-                raise ValueError(f"output_matrix has {E_full.shape[1]} columns, expected 2n = {2 * n}")
+                raise FemromValueError(f"output_matrix has {E_full.shape[1]} columns, expected 2n = {2 * n}")
             E = np.hstack([np.asarray(E_full[:, :n] @ V), np.asarray(E_full[:, n:] @ V)])
         rom = cls(ops, V, system.potential, newton, output_matrix=E, scheme=scheme)
         rom.metadata_ = {"method": "galerkin"}
@@ -279,14 +280,14 @@ class HamiltonianROM(ReducedModel):
         from femrom.inference import reduce_canonical_snapshots
 
         if self.basis is None:
-            raise ValueError("fit projects full snapshots onto the cotangent lift: pass basis=Phi")
+            raise FemromValueError("fit projects full snapshots onto the cotangent lift: pass basis=Phi")
         _cotangent_lift(self.basis)
         return self.fit(reduce_canonical_snapshots(self.basis, Q, P, dt, potential=self.potential, **options))
 
     # -- evaluation ----------------------------------------------------------
     def _ops(self) -> HamiltonianOperators:
         if self.operators_ is None:
-            raise ValueError("this ROM is not fitted: call fit(Q, P, dt), galerkin(...) or pass operators")
+            raise FemromValueError("this ROM is not fitted: call fit(Q, P, dt), galerkin(...) or pass operators")
         return self.operators_
 
     @property
@@ -310,7 +311,7 @@ class HamiltonianROM(ReducedModel):
     def reconstruct(self, q: np.ndarray, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Full ``(Phi q^, Phi p^)`` now (a solution's :meth:`~HamiltonianSolution.fields` streams them)."""
         if self.basis is None:
-            raise ValueError("this model has no basis: full fields cannot be reconstructed")
+            raise FemromValueError("this model has no basis: full fields cannot be reconstructed")
         return self.basis @ q, self.basis @ p
 
     def predict(self, times, inputs=None, *, initial=None, scheme: str | None = None) -> HamiltonianSolution:
@@ -344,7 +345,7 @@ class HamiltonianROM(ReducedModel):
         tic = time.perf_counter()
         if self.potential_ is not None:
             if scheme not in CANONICAL_SCHEMES:
-                raise ValueError(f"scheme {scheme!r} needs a separable Hamiltonian; with a potential "
+                raise FemromValueError(f"scheme {scheme!r} needs a separable Hamiltonian; with a potential "
                                  f"coupling q and p use one of {CANONICAL_SCHEMES}")
             tr = integrate_canonical(self.system_, q0, p0, h, n_steps, scheme, self.newton)
             self.last_trajectory_ = tr
@@ -352,7 +353,7 @@ class HamiltonianROM(ReducedModel):
             info.update(stepping_seconds=tr.seconds, newton_iterations=int(tr.iterations.sum()))
         else:
             if scheme not in _LINEAR_SCHEMES:
-                raise ValueError(f"unknown Hamiltonian scheme {scheme!r}; valid: {_LINEAR_SCHEMES}")
+                raise FemromValueError(f"unknown Hamiltonian scheme {scheme!r}; valid: {_LINEAR_SCHEMES}")
             S = hamiltonian_step_matrix(ops, h, scheme)
             loop = {}
             X = run_linear(S, np.concatenate([q0, p0]), n_steps, None, timing=loop)
@@ -372,7 +373,7 @@ class HamiltonianROM(ReducedModel):
     def to_state_space(self, dt: float, scheme: str | None = None) -> DiscreteStateSpace:
         """``z+ = S z``, ``y = E^ z`` (``z = [q^; p^]``, no inputs) of a model without a potential."""
         if self.potential_ is not None:
-            raise ValueError("the model has a nonlinear potential: it has no linear state-space form")
+            raise FemromValueError("the model has a nonlinear potential: it has no linear state-space form")
         S = hamiltonian_step_matrix(self._ops(), dt, self.scheme if scheme is None else scheme)
         n = S.shape[0]
         C = np.eye(n) if self.output_matrix_ is None else self.output_matrix_
@@ -393,7 +394,7 @@ class HamiltonianROM(ReducedModel):
 
         ops = self._ops()
         if self.potential is not None and not (include_basis and self.basis is not None):
-            raise ValueError("a model with a known potential evaluates it through the basis: "
+            raise FemromValueError("a model with a known potential evaluates it through the basis: "
                              "save it with include_basis=True")
         with h5py.File(path, "w") as f:
             f.attrs["format"] = "femrom.HamiltonianROM"
@@ -429,7 +430,7 @@ class HamiltonianROM(ReducedModel):
 
         with h5py.File(path, "r") as f:
             if f.attrs.get("format") != "femrom.HamiltonianROM":
-                raise ValueError(f"{path} is not a femrom HamiltonianROM file")
+                raise FemromValueError(f"{path} is not a femrom HamiltonianROM file")
             g = f["operators"]
             ops = HamiltonianOperators(position=g["position"][()], momentum=g["momentum"][()])
             E = g["output_matrix"][()] if "output_matrix" in g else None
@@ -439,15 +440,15 @@ class HamiltonianROM(ReducedModel):
             stored = json.loads(f.attrs["potential"])
             metadata = json.loads(f.attrs["metadata"])
         if stored is not None and potential is None:
-            raise ValueError(f"{path} holds a model with a known potential ({stored['repr']}), "
+            raise FemromValueError(f"{path} holds a model with a known potential ({stored['repr']}), "
                              "which cannot be stored: pass potential=...")
         if stored is None and potential is not None:
-            raise ValueError(f"{path} holds a model without a potential, but potential was given")
+            raise FemromValueError(f"{path} holds a model without a potential, but potential was given")
         if stored is not None:
             given = _describe_potential(potential)
             if given["class"] != stored["class"] or (
                     stored["parameters"] is not None and given["parameters"] != stored["parameters"]):
-                raise ValueError(f"potential {given['repr']} does not match the saved "
+                raise FemromValueError(f"potential {given['repr']} does not match the saved "
                                  f"{stored['repr']}")
         rom = cls(ops, basis, potential, saved_newton if newton is None else newton,
                   output_matrix=E, scheme=scheme)
@@ -482,16 +483,16 @@ def _plain(value):
         return [_plain(v) for v in value]
     if isinstance(value, (str, int, float, bool)) or value is None:
         return value
-    raise TypeError(f"{type(value).__name__} is not plain data")
+    raise FemromTypeError(f"{type(value).__name__} is not plain data")
 
 
 def _cotangent_lift(basis) -> np.ndarray:
     V = np.asarray(basis, dtype=float)
     if V.ndim != 2:
-        raise ValueError(f"basis must be (n, r), got shape {V.shape}")
+        raise FemromValueError(f"basis must be (n, r), got shape {V.shape}")
     error = float(np.max(np.abs(V.T @ V - np.eye(V.shape[1]))))
     if error > _ORTHONORMALITY:
-        raise ValueError(f"basis is not orthonormal (max |Phi^T Phi - I| = {error:.2g}): "
+        raise FemromValueError(f"basis is not orthonormal (max |Phi^T Phi - I| = {error:.2g}): "
                          "a cotangent lift needs Phi^T Phi = I")
     return V
 
@@ -508,7 +509,7 @@ class HamiltonianStepper:
         self.q, self.p, self.t = np.array(q0, dtype=float), np.array(p0, dtype=float), 0.0
         self._S = None if rom.potential_ is not None else hamiltonian_step_matrix(rom._ops(), dt, scheme)
         if rom.potential_ is not None and scheme not in CANONICAL_SCHEMES:
-            raise ValueError(f"scheme {scheme!r} needs a separable Hamiltonian; with a potential use one of "
+            raise FemromValueError(f"scheme {scheme!r} needs a separable Hamiltonian; with a potential use one of "
                              f"{CANONICAL_SCHEMES}")
 
     @property
@@ -520,7 +521,7 @@ class HamiltonianStepper:
     def step(self, u=None) -> np.ndarray:
         """Advance by ``dt``; return ``E^ [q; p]`` (``[q; p]`` without an output map)."""
         if u is not None and np.size(u):
-            raise ValueError("a canonical Hamiltonian ROM has no inputs")
+            raise FemromValueError("a canonical Hamiltonian ROM has no inputs")
         if self._S is not None:
             y = self._S @ np.concatenate([self.q, self.p])
             r = self.q.size

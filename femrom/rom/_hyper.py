@@ -35,6 +35,7 @@ import time
 
 import numpy as np
 
+from femrom._errors import FemromValueError
 from femrom.fem import DENSITIES
 from femrom.inference import ReducedTerm, register_term
 
@@ -74,9 +75,9 @@ class HyperReducedPotential(ReducedTerm):
         self.rows = np.ascontiguousarray(rows, dtype=float)
         self.weights = np.asarray(weights, dtype=float)
         if self.rows.ndim != 2 or self.weights.shape != (self.rows.shape[0],):
-            raise ValueError(f"rows {self.rows.shape} and weights {self.weights.shape} do not match")
+            raise FemromValueError(f"rows {self.rows.shape} and weights {self.weights.shape} do not match")
         if np.any(self.weights < 0):
-            raise ValueError("hyper-reduction weights must be non-negative")
+            raise FemromValueError("hyper-reduction weights must be non-negative")
         self.phi, self.dphi, self.ddphi = phi, dphi, ddphi
         self.nodes = None if nodes is None else np.asarray(nodes, dtype=np.int64)
         self.density = density
@@ -139,7 +140,7 @@ class HyperReducedPotential(ReducedTerm):
     # -- storage ----------------------------------------------------------------
     def save(self, group) -> None:
         if self.density is None:
-            raise ValueError("a hyper-reduced potential without a named density cannot be saved")
+            raise FemromValueError("a hyper-reduced potential without a named density cannot be saved")
         group.attrs["density"] = self.density
         for key, value in self.density_parameters.items():
             group.attrs[f"density.{key}"] = float(value)

@@ -48,6 +48,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
+from femrom._errors import FemromValueError
 from femrom.fem import JointForce, TransformedForce
 from femrom.rom._hyper import sparse_nnls
 from femrom.scene import SecondOrderSystem
@@ -55,7 +56,7 @@ from femrom.scene import SecondOrderSystem
 
 def _projected_joint(force) -> TransformedForce:
     if not (isinstance(force, TransformedForce) and isinstance(force.force_model, JointForce)):
-        raise ValueError("the system's nonlinear force must be a projected joint (a TransformedForce of a "
+        raise FemromValueError("the system's nonlinear force must be a projected joint (a TransformedForce of a "
                          f"JointForce, femrom.scene.project_system), got {type(force).__name__}")
     return force
 
@@ -147,7 +148,7 @@ def ecsw_joint(system: SecondOrderSystem, snapshots, rest_state, *, tolerance: f
     tic = time.perf_counter()
     force = _projected_joint(system.nonlinear)
     if not 0 < tolerance < 1:
-        raise ValueError(f"tolerance must lie in (0, 1), got {tolerance!r}")
+        raise FemromValueError(f"tolerance must lie in (0, 1), got {tolerance!r}")
     pairs = _PairContributions(force, rest_state)
     blocks = []
     scale = 0.0
@@ -158,7 +159,7 @@ def ecsw_joint(system: SecondOrderSystem, snapshots, rest_state, *, tolerance: f
         scale = max(scale, norm)
     kept = [rho / norm for rho, norm in blocks if norm > 1e-9 * scale and norm > 0]
     if not kept:
-        raise ValueError("no training state slips: the remainder is zero, nothing to sample (train on larger "
+        raise FemromValueError("no training state slips: the remainder is zero, nothing to sample (train on larger "
                          "amplitudes)")
     G = np.vstack(kept)
     weights, info = sparse_nnls(G, G.sum(axis=1), tolerance=tolerance, max_support=max_support)

@@ -27,6 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
+from femrom._errors import FemromTypeError, FemromValueError
 from femrom._json import dumps
 from femrom.inference import StateSpaceOperators
 from femrom.rom._base import uniform_step
@@ -50,10 +51,10 @@ class StateSpaceROM:
 
     def __init__(self, operators: StateSpaceOperators | None = None, *, learner=None):
         if learner is not None and getattr(learner, "model", None) != "state_space":
-            raise ValueError(f"learner {type(learner).__name__} fits {getattr(learner, 'model', None)!r} models, "
+            raise FemromValueError(f"learner {type(learner).__name__} fits {getattr(learner, 'model', None)!r} models, "
                              "not 'state_space' ones")
         if operators is not None and not isinstance(operators, StateSpaceOperators):
-            raise TypeError(f"operators must be StateSpaceOperators, got {type(operators).__name__}")
+            raise FemromTypeError(f"operators must be StateSpaceOperators, got {type(operators).__name__}")
         self.operators_ = operators
         self.learner = learner
         self._state_space = None
@@ -61,14 +62,14 @@ class StateSpaceROM:
     def fit(self, data, *, validation=None) -> "StateSpaceROM":
         """Fit the learner on ``data`` (InputOutputData, or MarkovParameters for ERA) and keep its operators."""
         if self.learner is None:
-            raise ValueError("this ROM has no learner; pass learner=DMDc(...), ERA(...) or OKID(...)")
+            raise FemromValueError("this ROM has no learner; pass learner=DMDc(...), ERA(...) or OKID(...)")
         self.operators_ = self.learner.fit(data, validation=validation).operators_
         self._state_space = None
         return self
 
     def _ops(self) -> StateSpaceOperators:
         if self.operators_ is None:
-            raise ValueError("this ROM is not fitted: call fit(data) or pass operators")
+            raise FemromValueError("this ROM is not fitted: call fit(data) or pass operators")
         return self.operators_
 
     @property
@@ -100,14 +101,14 @@ class StateSpaceROM:
         """
         ops = self._ops()
         if z0 is not None and x0 is not None:
-            raise ValueError("give z0 (the model's state) or x0 (the data's state), not both")
+            raise FemromValueError("give z0 (the model's state) or x0 (the data's state), not both")
         if x0 is not None:
             if ops.state_basis is None:
-                raise ValueError(f"this model's state is abstract ({ops.metadata.get('method', 'identified')}): "
+                raise FemromValueError(f"this model's state is abstract ({ops.metadata.get('method', 'identified')}): "
                                  "give z0, not x0")
             x0 = np.asarray(x0, dtype=float).ravel()
             if x0.size != ops.state_basis.shape[0]:
-                raise ValueError(f"x0 has {x0.size} entries, the data's state has {ops.state_basis.shape[0]}")
+                raise FemromValueError(f"x0 has {x0.size} entries, the data's state has {ops.state_basis.shape[0]}")
             z0 = ops.state_basis.T @ x0
             if ops.input_offset is not None:
                 z0 = z0 - ops.input_offset @ input_sample(u0, ops.n_inputs)
@@ -115,9 +116,9 @@ class StateSpaceROM:
             return np.zeros(ops.n_states)
         z0 = np.asarray(z0, dtype=float).ravel()
         if z0.size != ops.n_states:
-            raise ValueError(f"z0 has {z0.size} entries, the model has {ops.n_states} states")
+            raise FemromValueError(f"z0 has {z0.size} entries, the model has {ops.n_states} states")
         if not np.all(np.isfinite(z0)):
-            raise ValueError("z0 is not finite")
+            raise FemromValueError("z0 is not finite")
         return z0
 
     def _samples(self, inputs, times: np.ndarray) -> np.ndarray:
@@ -127,9 +128,9 @@ class StateSpaceROM:
         else:
             U = np.atleast_2d(np.asarray(inputs, dtype=float))
         if U.shape != (m, times.size):
-            raise ValueError(f"inputs have shape {U.shape}, expected ({m}, {times.size})")
+            raise FemromValueError(f"inputs have shape {U.shape}, expected ({m}, {times.size})")
         if not np.all(np.isfinite(U)):
-            raise ValueError("inputs are not finite")
+            raise FemromValueError("inputs are not finite")
         return U
 
     def predict(self, times, inputs=None, *, initial=None) -> StateSpaceSolution:
@@ -148,7 +149,7 @@ class StateSpaceROM:
         ops = self._ops()
         times, h = uniform_step(times)
         if not np.isclose(h, ops.dt, rtol=1e-9, atol=0.0):
-            raise ValueError(f"times have step {h:g}, the model was identified at dt = {ops.dt:g}")
+            raise FemromValueError(f"times have step {h:g}, the model was identified at dt = {ops.dt:g}")
         U = self._samples(inputs, times)
         z = self.initial_state(initial, None, U[:, 0])
         tic = time.perf_counter()
@@ -183,15 +184,15 @@ class StateSpaceROM:
         """
         ops = self._ops()
         if ops.observer_gain is None:
-            raise ValueError(f"this model ({ops.metadata.get('method', 'identified')}) has no observer gain: "
+            raise FemromValueError(f"this model ({ops.metadata.get('method', 'identified')}) has no observer gain: "
                              "OKID identifies one")
         U = np.atleast_2d(np.asarray(inputs, dtype=float))
         Y = np.atleast_2d(np.asarray(outputs, dtype=float))
         if U.shape[0] != ops.n_inputs or Y.shape != (ops.n_outputs, U.shape[1]):
-            raise ValueError(f"inputs {U.shape} and outputs {Y.shape} do not match the model's "
+            raise FemromValueError(f"inputs {U.shape} and outputs {Y.shape} do not match the model's "
                              f"({ops.n_inputs}, K) and ({ops.n_outputs}, K)")
         if not (np.all(np.isfinite(U)) and np.all(np.isfinite(Y))):
-            raise ValueError("inputs or outputs are not finite")
+            raise FemromValueError("inputs or outputs are not finite")
         A, B, C, D, L = ops.A, ops.B, ops.C, ops.D, ops.observer_gain
         Z = np.empty((ops.n_states, U.shape[1] + 1))
         Z[:, 0] = self.initial_state(z0)
@@ -203,7 +204,7 @@ class StateSpaceROM:
     def to_state_space(self, dt: float | None = None) -> DiscreteStateSpace:
         """The model's :class:`~femrom.rom.DiscreteStateSpace` (``dt`` must be the identified one)."""
         if dt is not None and not np.isclose(float(dt), self.dt, rtol=1e-9, atol=0.0):
-            raise ValueError(f"an identified model exists at its step dt = {self.dt:g} only, asked for {dt:g}")
+            raise FemromValueError(f"an identified model exists at its step dt = {self.dt:g} only, asked for {dt:g}")
         return self.state_space
 
     # -- storage -----------------------------------------------------------------------

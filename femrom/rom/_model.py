@@ -89,7 +89,7 @@ class SecondOrderROM(ReducedModel):
         self.product = product
         self.learner = learner
         if operators is not None and self.basis is not None and self.basis.shape[1] != operators.r:
-            raise ValueError(f"basis has {self.basis.shape[1]} columns, operators have r = {operators.r}")
+            raise FemromValueError(f"basis has {self.basis.shape[1]} columns, operators have r = {operators.r}")
 
     @classmethod
     def galerkin(cls, system, basis: np.ndarray, *, product=None,
@@ -113,7 +113,7 @@ class SecondOrderROM(ReducedModel):
 
     def _ops(self) -> ReducedOperators:
         if self.operators_ is None:
-            raise ValueError("this ROM is not fitted: call fit(data) or pass operators")
+            raise FemromValueError("this ROM is not fitted: call fit(data) or pass operators")
         return self.operators_
 
     def energy(self, q: np.ndarray, v: np.ndarray) -> np.ndarray:
@@ -259,10 +259,10 @@ class SecondOrderROM(ReducedModel):
 
         with h5py.File(path, "r") as f:
             if f.attrs.get("format") != "femrom.SecondOrderROM":
-                raise ValueError(f"{path} is not a femrom SecondOrderROM file")
+                raise FemromValueError(f"{path} is not a femrom SecondOrderROM file")
             version = int(f.attrs.get("version", 1))
             if version != FILE_VERSION:
-                raise ValueError(f"{path} has layout version {version}; this femrom reads {FILE_VERSION}")
+                raise FemromValueError(f"{path} has layout version {version}; this femrom reads {FILE_VERSION}")
             metadata = json.loads(f.attrs["metadata"])
             basis = f["basis"][()] if "basis" in f else None
             terms = [term_class(name).load(group, basis=basis, nonlinear=nonlinear, **context)

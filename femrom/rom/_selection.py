@@ -17,6 +17,7 @@ from typing import Callable
 
 import numpy as np
 
+from femrom._errors import FemromRuntimeError, FemromValueError
 from femrom.rom._model import SecondOrderROM
 
 
@@ -68,7 +69,7 @@ def select_regularization(make_learner: Callable[[float], object], data, times, 
     long_times = times[0] + h * np.arange(n_ext + 1)
     sampled = inputs if inputs is None or callable(inputs) else None
     if inputs is not None and sampled is None:
-        raise ValueError("select_regularization needs inputs as a callable u(t)")
+        raise FemromValueError("select_regularization needs inputs as a callable u(t)")
     scores, best = [], (np.inf, None, None)
     reference = np.linalg.norm(data.states)
     for value in grid:
@@ -90,6 +91,6 @@ def select_regularization(make_learner: Callable[[float], object], data, times, 
         if stable and error < best[0]:
             best = (error, float(value), learner)
     if best[2] is None:
-        raise RuntimeError("no regularization on the grid gave a stable ROM: "
+        raise FemromRuntimeError("no regularization on the grid gave a stable ROM: "
                            + ", ".join(f"{s.value:g} (growth {s.energy_growth:.3g})" for s in scores))
     return best[1], best[2], scores

@@ -82,9 +82,9 @@ class DiscreteStateSpace:
         C = np.asarray(self.C, dtype=float).reshape(-1, n)
         D = np.asarray(self.D, dtype=float).reshape(C.shape[0], B.shape[1])
         if A.shape != (n, n):
-            raise ValueError(f"A has shape {A.shape}, expected square")
+            raise FemromValueError(f"A has shape {A.shape}, expected square")
         if not self.dt > 0:
-            raise ValueError(f"dt must be positive, got {self.dt}")
+            raise FemromValueError(f"dt must be positive, got {self.dt}")
         for name, value in (("A", A), ("B", B), ("C", C), ("D", D)):
             object.__setattr__(self, name, value)
         if self.input_offset is not None:
@@ -112,7 +112,7 @@ class DiscreteStateSpace:
         """``z_0 = x_0 - E u_0`` from a model state ``x_0`` and the first input sample."""
         x0 = np.asarray(x0, dtype=float).ravel()
         if x0.size != self.n_states:
-            raise ValueError(f"x0 has {x0.size} entries, expected {self.n_states}")
+            raise FemromValueError(f"x0 has {x0.size} entries, expected {self.n_states}")
         if self.input_offset is None or self.n_inputs == 0:
             return x0
         return x0 - self.input_offset @ self._input(u0)
@@ -129,12 +129,12 @@ class DiscreteStateSpace:
         m = self.n_inputs
         if inputs is None:
             if n_steps is None:
-                raise ValueError("without inputs, give n_steps")
+                raise FemromValueError("without inputs, give n_steps")
             U = np.zeros((m, n_steps + 1))
         else:
             U = np.atleast_2d(np.asarray(inputs, dtype=float))
             if U.shape[0] != m:
-                raise ValueError(f"inputs have {U.shape[0]} rows, expected m = {m}")
+                raise FemromValueError(f"inputs have {U.shape[0]} rows, expected m = {m}")
         K = U.shape[1]
         Z = np.empty((self.n_states, K))
         Z[:, 0] = np.asarray(z0, dtype=float).ravel()
@@ -197,7 +197,7 @@ class DiscreteStateSpace:
 
         with h5py.File(path, "r") as f:
             if f.attrs.get("format") != "femrom.DiscreteStateSpace":
-                raise ValueError(f"{path} is not a femrom DiscreteStateSpace file")
+                raise FemromValueError(f"{path} is not a femrom DiscreteStateSpace file")
             arrays = {name: f[name][()] for name in ("A", "B", "C", "D")}
             offset = f["input_offset"][()] if "input_offset" in f else None
             return cls(**arrays, dt=float(f.attrs["dt"]), input_offset=offset,

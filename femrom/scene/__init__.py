@@ -13,34 +13,22 @@ raised-cosine onset, :func:`onset`).
 """
 
 from femrom.scene._build import FullOrderModel, build
-from femrom.scene._config import (
-    MAX_STEPS,
-    BoundaryConfig,
-    EffectConfig,
-    InitialConfig,
-    InputConfig,
-    LineConfig,
-    LoadConfig,
-    MaterialConfig,
-    OutputConfig,
-    ProbeConfig,
-    RegionMaterialConfig,
-    Scene,
-    StructureConfig,
-    TimeConfig,
-)
+from femrom.scene._conditions import BoundaryConfig, InitialConfig, InputConfig, LoadConfig
+from femrom.scene._config import EffectConfig, Scene, StructureConfig
 from femrom.scene._craig_bampton import CraigBampton, boundary_dofs_of, craig_bampton
 from femrom.scene._effects import EFFECTS, Assembly, Effect, effect_class, register_effect, registered_effects
 from femrom.scene._errors import SceneError
 from femrom.scene._excitation import band_limited_noise, chirp, multisine, onset, sample_times, sampled_signal
-from femrom.scene._materials import element_materials
+from femrom.scene._materials import MaterialConfig, RegionMaterialConfig, element_materials
 from femrom.scene._modal import BeamModeShape, Modes, beam_mode_shape, linearized_modes, tangent_stiffness
+from femrom.scene._outputs import LineConfig, OutputConfig, ProbeConfig
 from femrom.scene._projection import project_system
 from femrom.scene._rom import BasisSpec, Derivatives, LearnerSpec, ReportSpec, RomConfig, RunSpec, TimingSpec
 from femrom.scene._signals import Signal, SignalVector, half_sine_spectrum
 from femrom.scene._static import Preload, StaticSolution, point_supports, preload, solve_static, with_friction_coefficient
 from femrom.scene._sweep import SweepConfig
 from femrom.scene._system import SecondOrderSystem
+from femrom.scene._time import MAX_STEPS, TimeConfig
 
 __all__ = [
     "MAX_STEPS",

@@ -54,6 +54,7 @@ import scipy.linalg as sl
 import scipy.sparse as sp
 from scipy.sparse.linalg import LinearOperator, eigsh
 
+from femrom._errors import FemromValueError
 from femrom.fem import transform_force
 from femrom.scene._system import SecondOrderSystem
 from femrom.solvers import LinearSolverError, make_solver
@@ -104,7 +105,7 @@ class CraigBampton:
         """The reduced coordinate of boundary dof ``dof`` (ValueError if it is interior)."""
         position = int(np.searchsorted(self.boundary_dofs, dof))
         if position >= self.n_boundary or self.boundary_dofs[position] != dof:
-            raise ValueError(f"dof {dof} is not a boundary dof of this Craig-Bampton model")
+            raise FemromValueError(f"dof {dof} is not a boundary dof of this Craig-Bampton model")
         return position
 
     def expand(self, q_hat: np.ndarray) -> np.ndarray:
@@ -129,7 +130,7 @@ def boundary_dofs_of(system: SecondOrderSystem, *, inputs: bool = True, outputs:
     if extra is not None:
         extra = np.asarray(extra, dtype=np.int64).ravel()
         if extra.size and (extra.min() < 0 or extra.max() >= n):
-            raise ValueError(f"boundary_dofs must lie in [0, {n}), got [{extra.min()}, {extra.max()}]")
+            raise FemromValueError(f"boundary_dofs must lie in [0, {n}), got [{extra.min()}, {extra.max()}]")
         parts.append(extra)
     return np.unique(np.concatenate(parts)) if parts else np.zeros(0, dtype=np.int64)
 
@@ -158,7 +159,7 @@ def craig_bampton(system: SecondOrderSystem, n_modes: int, *, boundary_dofs=None
 
     Raises
     ------
-    ValueError
+    FemromValueError
         ``n_modes`` out of range, no boundary dofs, or a boundary that leaves the interior
         free to move rigidly (``K_ii`` singular).
     """
@@ -168,10 +169,10 @@ def craig_bampton(system: SecondOrderSystem, n_modes: int, *, boundary_dofs=None
     n_b, n_i = b.size, interior.size
     n_modes = int(n_modes)
     if n_b == 0:
-        raise ValueError("craig_bampton needs boundary dofs: the system has no nonlinear force, inputs or "
-                         "outputs, and no boundary_dofs were given")
+        raise FemromValueError("craig_bampton needs boundary dofs: the system has no nonlinear force, inputs or "
+                               "outputs, and no boundary_dofs were given")
     if not 0 <= n_modes <= n_i:
-        raise ValueError(f"n_modes must lie in [0, {n_i}] (the interior dofs), got {n_modes}")
+        raise FemromValueError(f"n_modes must lie in [0, {n_i}] (the interior dofs), got {n_modes}")
     seconds = {}
     K = sp.csr_matrix(system.stiffness)
     M = sp.csr_matrix(system.mass)
@@ -183,7 +184,7 @@ def craig_bampton(system: SecondOrderSystem, n_modes: int, *, boundary_dofs=None
     try:
         factor = make_solver(K_ii, strategy=solver, spd=True) if n_i else None
     except LinearSolverError as err:
-        raise ValueError(_singular_interior(n_b, n_i, str(err))) from None
+        raise FemromValueError(_singular_interior(n_b, n_i, str(err))) from None
     seconds["factorization"] = time.perf_counter() - tic
 
     tic = time.perf_counter()
@@ -194,7 +195,7 @@ def craig_bampton(system: SecondOrderSystem, n_modes: int, *, boundary_dofs=None
         scale = max(float(np.linalg.norm(right)), np.finfo(float).tiny)
         residual = float(np.linalg.norm(K_ii @ psi + right)) / scale
         if not np.isfinite(residual) or residual > CONSTRAINT_RESIDUAL:
-            raise ValueError(_singular_interior(n_b, n_i, f"constraint-mode residual {residual:.3g}"))
+            raise FemromValueError(_singular_interior(n_b, n_i, f"constraint-mode residual {residual:.3g}"))
     seconds["constraint_modes"] = time.perf_counter() - tic
 
     tic = time.perf_counter()

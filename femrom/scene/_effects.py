@@ -19,6 +19,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from femrom._errors import FemromValueError
 from femrom._registry import Registry
 from femrom.scene._errors import SceneError
 
@@ -70,9 +71,9 @@ class Effect:
 def register_effect(cls: type[Effect]) -> type[Effect]:
     """Class decorator: a scene may list ``cls.name`` under ``[effects]``."""
     if not cls.name:
-        raise ValueError(f"effect class {cls.__name__} has no name")
+        raise FemromValueError(f"effect class {cls.__name__} has no name")
     if cls.provides not in PROVIDES:
-        raise ValueError(f"effect {cls.name!r} provides {cls.provides!r}; valid: {', '.join(PROVIDES)}")
+        raise FemromValueError(f"effect {cls.name!r} provides {cls.provides!r}; valid: {', '.join(PROVIDES)}")
     EFFECTS.add(cls.name, cls)
     return cls
 

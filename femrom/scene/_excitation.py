@@ -17,16 +17,17 @@ from __future__ import annotations
 
 import numpy as np
 
+from femrom._errors import FemromValueError
 from femrom.scene._signals import Signal
 
 
 def sample_times(t_end: float, dt: float) -> np.ndarray:
     """(K + 1,) ndarray ``k dt``, ``K = round(t_end / dt)`` (one error naming a bad value)."""
     if not (np.isfinite(t_end) and t_end > 0 and np.isfinite(dt) and dt > 0):
-        raise ValueError(f"t_end and dt must be positive and finite, got t_end = {t_end}, dt = {dt}")
+        raise FemromValueError(f"t_end and dt must be positive and finite, got t_end = {t_end}, dt = {dt}")
     n = int(round(t_end / dt))
     if n < 1:
-        raise ValueError(f"t_end = {t_end} is shorter than one step dt = {dt}")
+        raise FemromValueError(f"t_end = {t_end} is shorter than one step dt = {dt}")
     return dt * np.arange(n + 1)
 
 
@@ -34,7 +35,7 @@ def onset(times, ramp: float) -> np.ndarray:
     """(K,) ndarray of the raised-cosine onset ``w(t)`` (module doc); ones for ``ramp = 0``."""
     t = np.asarray(times, dtype=float)
     if ramp < 0:
-        raise ValueError(f"ramp must be >= 0, got {ramp}")
+        raise FemromValueError(f"ramp must be >= 0, got {ramp}")
     if ramp == 0:
         return np.ones_like(t)
     return np.where(t < ramp, 0.5 * (1.0 - np.cos(np.pi * np.clip(t, 0.0, ramp) / ramp)), 1.0)
@@ -61,7 +62,7 @@ def multisine(amplitudes, frequencies, phases, t_end: float, dt: float, *, ramp:
     a, f, phi = np.broadcast_arrays(*(np.atleast_1d(np.asarray(x, dtype=float)) for x in
                                       (amplitudes, frequencies, phases)))
     if not np.all(f > 0):
-        raise ValueError(f"frequencies must be positive, got {f.tolist()}")
+        raise FemromValueError(f"frequencies must be positive, got {f.tolist()}")
     t = sample_times(t_end, dt)
     u = np.sin(2 * np.pi * f[:, None] * t[None, :] + phi[:, None]).T @ a
     return sampled_signal(t, onset(t, ramp) * u)
@@ -75,7 +76,7 @@ def chirp(amplitude: float, f_start: float, f_end: float, t_end: float, dt: floa
     to ``f_end`` [Hz] over the window.
     """
     if not (f_start > 0 and f_end > 0):
-        raise ValueError(f"chirp frequencies must be positive, got {f_start}, {f_end}")
+        raise FemromValueError(f"chirp frequencies must be positive, got {f_start}, {f_end}")
     t = sample_times(t_end, dt)
     u = amplitude * np.sin(2 * np.pi * (f_start * t + (f_end - f_start) * t ** 2 / (2 * t_end)) + phase)
     return sampled_signal(t, onset(t, ramp) * u)
@@ -93,9 +94,10 @@ def band_limited_noise(rms: float, band, t_end: float, dt: float, *, seed: int =
     """
     f_low, f_high = (float(x) for x in band)
     if not 0 <= f_low < f_high:
-        raise ValueError(f"band must be (f_low, f_high) with 0 <= f_low < f_high, got {band}")
+        raise FemromValueError(f"band must be (f_low, f_high) with 0 <= f_low < f_high, got {band}")
     if f_high > 0.5 / dt:
-        raise ValueError(f"band's upper edge {f_high} Hz is above the Nyquist frequency {0.5 / dt:g} Hz of dt = {dt}")
+        raise FemromValueError(f"band's upper edge {f_high} Hz is above the Nyquist frequency "
+                               f"{0.5 / dt:g} Hz of dt = {dt}")
     t = sample_times(t_end, dt)
     spectrum = np.fft.rfft(np.random.default_rng(seed).standard_normal(t.size))
     f = np.fft.rfftfreq(t.size, dt)
@@ -103,6 +105,6 @@ def band_limited_noise(rms: float, band, t_end: float, dt: float, *, seed: int =
     u = np.fft.irfft(spectrum, n=t.size)
     size = np.sqrt(np.mean(u ** 2))
     if size == 0:
-        raise ValueError(f"band {band} Hz holds no frequency of a {t_end} s window "
-                         f"(resolution {1 / (t.size * dt):g} Hz)")
+        raise FemromValueError(f"band {band} Hz holds no frequency of a {t_end} s window "
+                               f"(resolution {1 / (t.size * dt):g} Hz)")
     return sampled_signal(t, onset(t, ramp) * u * (rms / size))

@@ -1,4 +1,5 @@
-"""``[materials]``: a material per region of the mesh, resolved to constants per element.
+"""``[material]``, one isotropic material, and ``[materials]``, a material per region of the mesh
+resolved to constants per element.
 
 A scene with several materials names them by the physical volumes of its
 geometry::
@@ -23,10 +24,86 @@ conditioning check).
 
 from __future__ import annotations
 
+import math
+from dataclasses import dataclass
+
 import numpy as np
 
 from femrom import fem
 from femrom.scene._errors import SceneError
+from femrom.scene._tables import as_names, take_table
+
+
+@dataclass(frozen=True)
+class MaterialConfig:
+    """Isotropic linear-elastic material (SI). Line structures use ``area`` and
+    ``second_moment``: bending rigidity ``E I``, axial rigidity ``E A``, mass
+    per length ``rho A``."""
+
+    youngs_modulus: float
+    density: float
+    poisson_ratio: float | None = None
+    area: float | None = None
+    second_moment: float | None = None
+
+    @classmethod
+    def from_dict(cls, data):
+        keys = {"youngs_modulus": None, "density": None, "poisson_ratio": None,
+                "area": None, "second_moment": None}
+        d = take_table(data, "material", keys, ("youngs_modulus", "density"))
+        return cls(**material_constants(d, "material"))
+
+
+def material_constants(d: dict, where: str) -> dict:
+    """The material numbers of table ``[where]`` as floats (None kept), or one SceneError naming the key."""
+    for k, v in d.items():
+        if v is None:
+            continue
+        number = isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+        if k == "poisson_ratio":     # the elasticity form is positive definite for -1 < nu < 1/2
+            if not (number and -1.0 < v < 0.5):
+                raise SceneError(f"[{where}] poisson_ratio must lie in (-1, 0.5), got {v!r}")
+        elif not (number and v > 0):
+            raise SceneError(f"[{where}] {k} must be a finite positive number, got {v!r}")
+    return {k: (None if v is None else float(v)) for k, v in d.items()}
+
+
+@dataclass(frozen=True)
+class RegionMaterialConfig:
+    """One entry of ``[materials]``: an isotropic solid material on named regions (SI).
+
+    ``[materials.<label>]`` gives ``youngs_modulus``, ``poisson_ratio``,
+    ``density`` and optionally ``regions``, the physical volumes of the mesh it
+    fills (default: the one region named ``label``). Every element of the
+    mesh must get exactly one material (checked when the scene is built,
+    :func:`femrom.scene.element_materials`).
+    """
+
+    label: str
+    regions: tuple[str, ...]
+    youngs_modulus: float
+    poisson_ratio: float
+    density: float
+
+
+def materials_from_dict(data) -> tuple[RegionMaterialConfig, ...]:
+    """``[materials]``: a table of material tables, each on its regions; a region listed twice is an error."""
+    if not isinstance(data, dict) or not data:
+        raise SceneError("[materials] must be a table of [materials.<region>] tables, e.g. "
+                         "[materials.body] youngs_modulus = 2e6, poisson_ratio = 0.45, density = 1100")
+    materials, owner = [], {}
+    for label, table in data.items():
+        where = f"materials.{label}"
+        d = take_table(table, where, {"youngs_modulus": None, "poisson_ratio": None, "density": None,
+                                 "regions": [label]}, ("youngs_modulus", "poisson_ratio", "density"))
+        regions = as_names(d.pop("regions"), f"{where}.regions")
+        for region in regions:
+            if region in owner:
+                raise SceneError(f"[materials] region {region!r} has two materials: "
+                                 f"[materials.{owner[region]}] and [{where}]")
+            owner[region] = label
+        materials.append(RegionMaterialConfig(label, regions, **material_constants(d, where)))
+    return tuple(materials)
 
 
 def element_materials(materials, mesh) -> fem.ElementMaterial:

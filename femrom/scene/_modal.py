@@ -21,6 +21,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.linalg import eigsh
 
+from femrom._errors import FemromValueError
 from femrom.scene._system import SecondOrderSystem
 
 #: ``||K_t - K_t^T||_1 / ||K_t||_1`` above which the tangent is refused (a slipping dry-friction
@@ -78,18 +79,19 @@ def linearized_modes(system: SecondOrderSystem, displacement: np.ndarray | None 
 
     Raises
     ------
-    ValueError
+    FemromValueError
         A bad ``n_modes``, or a tangent that is not symmetric (a slipping contact).
     """
     n = system.n_dofs
     if not (1 <= int(n_modes) < n):
-        raise ValueError(f"n_modes must lie in [1, {n}), got {n_modes!r}")
+        raise FemromValueError(f"n_modes must lie in [1, {n}), got {n_modes!r}")
     q = np.zeros(n) if displacement is None else np.asarray(displacement, dtype=float)
     Kt = tangent_stiffness(system, q, state)
     asymmetry = sp.linalg.norm(Kt - Kt.T, 1) / sp.linalg.norm(Kt, 1)
     if asymmetry > SYMMETRY_TOLERANCE:
-        raise ValueError(f"the tangent stiffness is not symmetric (relative {asymmetry:.2g}): a slipping contact; "
-                         "linearise about a stuck state (friction on from the committed preload)")
+        raise FemromValueError(f"the tangent stiffness is not symmetric (relative {asymmetry:.2g}): "
+                               "a slipping contact; linearise about a stuck state "
+                               "(friction on from the committed preload)")
     # a fixed start vector (ARPACK's default is random) and a sign convention (largest entry positive):
     # the same system gives the same modes, run after run
     values, vectors = eigsh(Kt.tocsc(), k=int(n_modes), M=sp.csc_matrix(system.mass), sigma=float(shift),

@@ -24,6 +24,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
+from femrom._errors import FemromValueError
 from femrom.fem import transform_force
 from femrom.scene._system import SecondOrderSystem
 
@@ -60,12 +61,12 @@ def project_system(system: SecondOrderSystem, basis: np.ndarray, *, reference: n
     V = np.asarray(basis, dtype=float)
     n = system.n_dofs
     if V.ndim != 2 or V.shape[0] != n or V.shape[1] < 1:
-        raise ValueError(f"basis must be (n, r) with n = {n}, got shape {V.shape}")
+        raise FemromValueError(f"basis must be (n, r) with n = {n}, got shape {V.shape}")
     if not np.all(np.isfinite(V)):
-        raise ValueError("basis has non-finite entries")
+        raise FemromValueError("basis has non-finite entries")
     q0 = None if reference is None else np.asarray(reference, dtype=float).reshape(-1)
     if q0 is not None and (q0.shape != (n,) or not np.all(np.isfinite(q0))):
-        raise ValueError(f"reference must be a finite ({n},) vector, got shape {q0.shape}")
+        raise FemromValueError(f"reference must be a finite ({n},) vector, got shape {q0.shape}")
     r = V.shape[1]
     M = _project(system.mass, V)
     K = _project(system.stiffness, V)
@@ -74,10 +75,10 @@ def project_system(system: SecondOrderSystem, basis: np.ndarray, *, reference: n
     C = None if system.damping is None else _project(system.damping, V)
     if damping_ratios is not None:
         if np.max(np.abs(M - np.eye(r))) > 1e-8:
-            raise ValueError("damping_ratios needs a mass-normalised basis (V^T M V = I)")
+            raise FemromValueError("damping_ratios needs a mass-normalised basis (V^T M V = I)")
         zeta = np.broadcast_to(np.asarray(damping_ratios, dtype=float), (r,))
         if not np.all(np.isfinite(zeta)) or np.any(zeta < 0):
-            raise ValueError(f"damping_ratios must be finite and >= 0, got {damping_ratios!r}")
+            raise FemromValueError(f"damping_ratios must be finite and >= 0, got {damping_ratios!r}")
         stiffness = K.copy()
         if force is not None:
             state = force.initial_state() if reference_state is None else reference_state

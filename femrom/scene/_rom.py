@@ -27,7 +27,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from femrom.scene._errors import SceneError
-from femrom.scene._errors import take_table as _table
+from femrom.scene._tables import take_table as _table
 from femrom.scene._signals import Signal
 
 PRODUCTS = ("mass", "euclidean")

@@ -33,6 +33,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from femrom import fem
+from femrom._errors import FemromValueError
 from femrom.scene._system import SecondOrderSystem
 from femrom.solvers import make_solver
 
@@ -103,21 +104,21 @@ def solve_static(system: SecondOrderSystem, load: np.ndarray | None = None, *, s
 
     Raises
     ------
-    ValueError
+    FemromValueError
         No load, a bad support index or tolerance, or no convergence (the message gives
         the residual and the number of pairs that changed contact status last).
     """
     n = system.n_dofs
     F = system.load if load is None else np.asarray(load, dtype=float)
     if F is None:
-        raise ValueError("load: the system has no constant load f_0 (list bolt_preload) and none was given")
+        raise FemromValueError("load: the system has no constant load f_0 (list bolt_preload) and none was given")
     if F.shape != (n,):
-        raise ValueError(f"load must have shape ({n},), got {F.shape}")
+        raise FemromValueError(f"load must have shape ({n},), got {F.shape}")
     supports = np.unique(np.asarray(supports, dtype=np.int64))
     if supports.size and (supports[0] < 0 or supports[-1] >= n):
-        raise ValueError(f"supports must be dof indices in [0, {n}), got [{supports[0]}, {supports[-1]}]")
+        raise FemromValueError(f"supports must be dof indices in [0, {n}), got [{supports[0]}, {supports[-1]}]")
     if not (rtol > 0 and max_iterations >= 1):
-        raise ValueError(f"rtol must be > 0 and max_iterations >= 1, got {rtol!r}, {max_iterations!r}")
+        raise FemromValueError(f"rtol must be > 0 and max_iterations >= 1, got {rtol!r}, {max_iterations!r}")
     active = np.setdiff1d(np.arange(n), supports)
     force = system.nonlinear
     if force is not None and state is None:
@@ -141,13 +142,13 @@ def solve_static(system: SecondOrderSystem, load: np.ndarray | None = None, *, s
         size = float(np.linalg.norm(r[active]))
         relative = size / scale if scale > 0 else 0.0
         if not np.isfinite(size):
-            raise ValueError(f"solve_static: the residual is not finite at iteration {iteration} (a singular "
-                             "tangent: supports that do not hold the structure, or every contact open)")
+            raise FemromValueError(f"solve_static: the residual is not finite at iteration {iteration} (a singular "
+                                   "tangent: supports that do not hold the structure, or every contact open)")
         if size <= rtol * scale:
             break
         if iteration == max_iterations:
-            raise ValueError(f"solve_static did not converge in max_iterations = {max_iterations}: relative "
-                             f"residual {relative:.3g} > rtol {rtol:g}")
+            raise FemromValueError(f"solve_static did not converge in max_iterations = {max_iterations}: relative "
+                                   f"residual {relative:.3g} > rtol {rtol:g}")
         J = K if force is None else K + _tangent(force, q, state, closed=closed_start and iteration == 0)
         J = sp.csr_matrix(J)[active][:, active]
         dq = make_solver(J.tocsc(), spd=False).solve(r[active])
@@ -186,7 +187,7 @@ def with_friction_coefficient(system: SecondOrderSystem, friction_coefficient: f
 
     Raises
     ------
-    ValueError
+    FemromValueError
         The system has no :class:`~femrom.fem.JointForce`, or one whose law has no
         ``friction_coefficient`` (Jenkins and Iwan: a bilateral normal spring, no
         unilateral contact to solve for).
@@ -194,15 +195,15 @@ def with_friction_coefficient(system: SecondOrderSystem, friction_coefficient: f
     forces = system.nonlinear_forces
     joints = [f for f in forces if isinstance(f, fem.JointForce)]
     if not joints:
-        raise ValueError("the system has no joint force (list the 'joint' effect)")
+        raise FemromValueError("the system has no joint force (list the 'joint' effect)")
     replaced = []
     for f in forces:
         if isinstance(f, fem.JointForce):
             law = f.law.parameters()
             if "friction_coefficient" not in law:
-                raise ValueError(f"joint law {law['name']!r} has no friction_coefficient: the preload sequence "
-                                 "(frictionless contact, then friction) needs unilateral contact, law "
-                                 "'dry_friction'")
+                raise FemromValueError(f"joint law {law['name']!r} has no friction_coefficient: the preload sequence "
+                                       "(frictionless contact, then friction) needs unilateral contact, law "
+                                       "'dry_friction'")
             parameters = {**f.parameters(), "law": {**law, "friction_coefficient": float(friction_coefficient)}}
             f = fem.JointForce.from_parameters(parameters)
         replaced.append(f)
@@ -278,19 +279,20 @@ def point_supports(space, condensation, supports) -> np.ndarray:
 
     Raises
     ------
-    ValueError
+    FemromValueError
         An unknown component, or a dof that ``condensation`` already fixes.
     """
     dofs = []
     for point, components in supports:
         for component in components:
             if component not in space.components:
-                raise ValueError(f"supports: unknown component {component!r}; valid: {', '.join(space.components)}")
+                raise FemromValueError(f"supports: unknown component {component!r}; "
+                                       f"valid: {', '.join(space.components)}")
             full, locations = space.coordinates(component)
             nearest = full[np.argmin(np.linalg.norm(locations.T - np.asarray(point, dtype=float), axis=1))]
             dofs.append(nearest)
     dofs = np.asarray(dofs, dtype=np.int64)
     position = np.minimum(np.searchsorted(condensation.free, dofs), condensation.n_free - 1)
     if np.any(condensation.free[position] != dofs):
-        raise ValueError("supports: a supported dof is already fixed by the condensation")
+        raise FemromValueError("supports: a supported dof is already fixed by the condensation")
     return position

@@ -21,7 +21,9 @@ import dataclasses
 import itertools
 from dataclasses import dataclass
 
+from femrom.scene._effects import effect_class
 from femrom.scene._errors import SceneError
+from femrom.scene._materials import material_constants
 from femrom.scene._signals import Signal
 
 MODES = ("grid", "zip")
@@ -99,8 +101,6 @@ def _check_path(path: str, scene: dict) -> None:
             raise SceneError(f"[sweep.parameters] {path!r}: a {signal.kind} signal has no number {parts[3]!r}")
         return
     if head == "effects" and len(parts) == 3:
-        from femrom.scene._effects import effect_class
-
         if parts[1] not in scene.get("effects", {}):
             raise SceneError(f"[sweep.parameters] {path!r}: the scene lists no effect {parts[1]!r}")
         options = {**effect_class(parts[1]).options, **(scene["effects"][parts[1]] or {})}
@@ -118,10 +118,8 @@ def _check_value(path: str, value: float, scene: dict) -> None:
     if parts[0] == "material" and not value > 0:
         raise SceneError(f"{where}: material constants must be positive")
     if parts[0] == "materials":
-        from femrom.scene._config import _material_constants
-
         try:
-            _material_constants({parts[2]: value}, f"materials.{parts[1]}")
+            material_constants({parts[2]: value}, f"materials.{parts[1]}")
         except SceneError as exc:
             raise SceneError(f"{where}: {exc}") from None
     if parts[0] == "inputs":
@@ -130,8 +128,6 @@ def _check_value(path: str, value: float, scene: dict) -> None:
         except SceneError as exc:
             raise SceneError(f"{where}: {exc}") from None
     if parts[0] == "effects":
-        from femrom.scene._effects import effect_class
-
         effect = effect_class(parts[1])
         try:
             effect.check({**effect.options, **(scene["effects"][parts[1]] or {}), parts[2]: value})

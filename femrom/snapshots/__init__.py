@@ -49,7 +49,9 @@ from femrom.snapshots._ingest import (
 )
 from femrom.snapshots._format import DEFAULT_UNITS, FORMAT_NAME, FORMAT_VERSION
 from femrom.snapshots._resume import model_solver, resume
-from femrom.snapshots._store import SnapshotStore, read_rows, recover
+from femrom.snapshots._reading import read_rows
+from femrom.snapshots._recovery import recover
+from femrom.snapshots._store import SnapshotStore
 from femrom.snapshots._writer import SnapshotWriter, default_chunk_steps
 
 __all__ = [

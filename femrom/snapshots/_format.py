@@ -255,3 +255,10 @@ def read_metadata(f: h5py.File) -> dict:
     meta["dofmap"] = {"n_total": int(f["dofmap"].attrs["n_total"]),
                       "free": f["dofmap/free"][()], "fixed": f["dofmap/fixed"][()]}
     return meta
+
+
+def trajectory_name(trajectory) -> str:
+    """Trajectories are named ``"000"``, ``"001"``, ...; an int ``i`` means ``f"{i:03d}"``."""
+    if isinstance(trajectory, (int, np.integer)):
+        return f"{int(trajectory):03d}"
+    return str(trajectory)

@@ -38,13 +38,14 @@ import numpy as np
 import scipy.sparse as sp
 
 from femrom import fem
+from femrom._errors import FemromValueError
 from femrom.integrators import StepResult
 from femrom.mesh import load_mesh
 from femrom.scene import SecondOrderSystem
 from femrom.snapshots._store import SnapshotStore
 
 
-class IngestError(ValueError):
+class IngestError(FemromValueError):
     """A series, mesh or table that cannot be ingested; the message names the file (and step)."""
 
 

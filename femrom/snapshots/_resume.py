@@ -6,10 +6,12 @@ import functools
 
 import numpy as np
 
+from femrom._errors import FemromValueError
 from femrom.solvers import make_solver
 from femrom.integrators import IntegrationSummary, integrate, scheme_for
 from femrom.snapshots._errors import SnapshotStoreError
-from femrom.snapshots._store import SnapshotStore, split_model, trajectory_name
+from femrom.snapshots._format import trajectory_name
+from femrom.snapshots._store import SnapshotStore, split_model
 from femrom.snapshots._writer import SnapshotWriter
 
 
@@ -72,7 +74,7 @@ def resume(store_path, model_or_system, scheme=None, *, trajectory=None, dt: flo
         attrs = store.attrs(name)
         if scheme is None:
             if model is None:
-                raise ValueError("pass the scheme (or a FullOrderModel whose scene names one)")
+                raise FemromValueError("pass the scheme (or a FullOrderModel whose scene names one)")
             scheme = scheme_for(model.scene.time)
         recorded = attrs.get("scheme")
         if recorded is not None and recorded != scheme.name:

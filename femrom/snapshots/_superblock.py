@@ -31,6 +31,8 @@ import os
 import struct
 from dataclasses import dataclass
 
+from femrom._errors import FemromValueError
+
 SIGNATURE = b"\x89HDF\r\n\x1a\n"
 #: Where the library looks for the superblock: 0, then 512, 1024, 2048, ... (user block sizes).
 _SEARCH_OFFSETS = (0, 512, 1024, 2048, 4096, 8192, 16384, 32768, 65536)
@@ -93,7 +95,7 @@ class Superblock:
         return bool(self.flags & _WRITE_FLAGS)
 
 
-class SuperblockError(ValueError):
+class SuperblockError(FemromValueError):
     """The file has no readable version-2/3 superblock."""
 
 

@@ -37,9 +37,10 @@ except ImportError:  # pragma: no cover - not on POSIX
 import numpy as np
 from h5py import h5s
 
+from femrom._errors import FemromValueError
 from femrom.snapshots import _format
 from femrom.snapshots._errors import SnapshotStoreError
-from femrom.snapshots._store import trajectory_name
+from femrom.snapshots._format import trajectory_name
 
 #: A chunk of about this many bytes per field by default (large enough for fast
 #: sequential reads, small enough to buffer).
@@ -162,14 +163,14 @@ class SnapshotWriter:
         system, n = self.system, self.system.n_dofs
         every = int(every)
         if every < 1:
-            raise ValueError(f"every must be >= 1, got {every}")
+            raise FemromValueError(f"every must be >= 1, got {every}")
         c = default_chunk_steps(n) if chunk_steps is None else int(chunk_steps)
         if c < 1:
-            raise ValueError(f"chunk_steps must be >= 1, got {c}")
+            raise FemromValueError(f"chunk_steps must be >= 1, got {c}")
         if 8 * c * n > MAX_CHUNK_BYTES:
-            raise ValueError(f"chunk_steps = {c} makes {8 * c * n / 2**30:.1f} GiB chunks of "
-                             f"{n} dofs; HDF5 needs < 2 GiB: use chunk_steps <= "
-                             f"{MAX_CHUNK_BYTES // (8 * n)}")
+            raise FemromValueError(f"chunk_steps = {c} makes {8 * c * n / 2**30:.1f} GiB chunks of "
+                                   f"{n} dofs; HDF5 needs < 2 GiB: use chunk_steps <= "
+                                   f"{MAX_CHUNK_BYTES // (8 * n)}")
         group = trajectories.create_group(name)
         group.attrs.update({
             "every": every, "chunk_steps": c,
@@ -200,8 +201,8 @@ class SnapshotWriter:
             template = system.nonlinear.checkpoint(system.nonlinear.initial_state())
             for key, value in template.items():
                 if "/" in key or not key:
-                    raise ValueError(f"checkpoint key {key!r} of {type(system.nonlinear).__name__} "
-                                     "cannot name a dataset")
+                    raise FemromValueError(f"checkpoint key {key!r} of {type(system.nonlinear).__name__} "
+                                           "cannot name a dataset")
                 value = np.asarray(value)
                 state.create_dataset(key, data=np.zeros((2,) + value.shape, dtype=value.dtype))
         self._length, self._slot, self._last_step = 0, -1, None
@@ -381,5 +382,5 @@ def _new_name(trajectories, trajectory, path) -> str:
     if name in trajectories:
         raise SnapshotStoreError(f"{path}: trajectory {name!r} exists (use resume to continue it)")
     if "/" in name or not name:
-        raise ValueError(f"invalid trajectory name {name!r}")
+        raise FemromValueError(f"invalid trajectory name {name!r}")
     return name

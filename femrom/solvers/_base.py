@@ -8,8 +8,10 @@ from typing import ClassVar
 import numpy as np
 import scipy.sparse as sp
 
+from femrom._errors import FemromRuntimeError, FemromValueError
 
-class LinearSolverError(RuntimeError):
+
+class LinearSolverError(FemromRuntimeError):
     """A linear solve failed (singular/indefinite matrix, CG did not converge)."""
 
 
@@ -66,7 +68,7 @@ class LinearSolver:
         """(n,) or (n, k) ndarray ``x`` with ``A x = b``; ``x0`` is a warm start (iterative only)."""
         b = np.asarray(b, dtype=float)
         if b.shape[0] != self.shape[0]:
-            raise ValueError(f"right-hand side has {b.shape[0]} rows, expected {self.shape[0]}")
+            raise FemromValueError(f"right-hand side has {b.shape[0]} rows, expected {self.shape[0]}")
         self.n_solves += 1
         return self._solve(b, x0)
 
@@ -85,7 +87,7 @@ STRATEGY_CLASSES: dict[str, type[LinearSolver]] = {}
 def register_strategy(cls: type[LinearSolver]) -> type[LinearSolver]:
     """Class decorator: make ``cls`` a strategy :func:`make_solver` knows by ``cls.name``."""
     if not cls.name or cls.name == "auto":
-        raise ValueError(f"strategy class {cls.__name__} needs a name other than 'auto'")
+        raise FemromValueError(f"strategy class {cls.__name__} needs a name other than 'auto'")
     STRATEGY_CLASSES[cls.name] = cls
     return cls
 

@@ -8,6 +8,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from femrom._errors import FemromValueError
 from femrom.solvers._base import LinearSolver, LinearSolverError, is_diagonal, register_strategy
 
 #: SuperLU refuses larger matrices. The project notes report 269 s and 15 GB at
@@ -26,7 +27,7 @@ class DiagonalSolver(LinearSolver):
     def __init__(self, A, *, spd: bool = True, **common):
         super().__init__(A)
         if not is_diagonal(A):
-            raise ValueError("strategy 'diagonal' needs a diagonal matrix")
+            raise FemromValueError("strategy 'diagonal' needs a diagonal matrix")
         d = np.asarray(A.diagonal(), dtype=float)
         if np.any(d == 0.0):
             raise LinearSolverError(f"diagonal matrix has {np.count_nonzero(d == 0)} zero entries")
@@ -45,8 +46,8 @@ class SuperLUSolver(LinearSolver):
     def __init__(self, A, *, spd: bool = True, max_dofs: int = SUPERLU_MAX_DOFS, **common):
         super().__init__(A)
         if A.shape[0] > max_dofs:
-            raise ValueError(f"superlu is limited to {max_dofs} dofs (got {A.shape[0]}); "
-                             "use 'pardiso', 'cholmod' or 'amg-cg'")
+            raise FemromValueError(f"superlu is limited to {max_dofs} dofs (got {A.shape[0]}); "
+                                   "use 'pardiso', 'cholmod' or 'amg-cg'")
         start = time.perf_counter()
         try:
             self._lu = spla.splu(sp.csc_matrix(A, dtype=float))

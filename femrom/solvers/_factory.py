@@ -72,6 +72,7 @@ from typing import Callable
 import numpy as np
 import scipy.sparse as sp
 
+from femrom._errors import FemromValueError
 from femrom.solvers._base import (
     STRATEGY_CLASSES,
     LinearSolver,
@@ -154,10 +155,10 @@ def make_solver(A, strategy: str = "auto", *, near_nullspace=None, rtol: float =
         Call ``.solve(b, x0=None)`` as often as needed; the setup is reused.
     """
     if strategy != "auto" and strategy not in STRATEGY_CLASSES:
-        raise ValueError(f"unknown linear-solver strategy {strategy!r}; "
-                         f"valid: {', '.join(strategies())}")
+        raise FemromValueError(f"unknown linear-solver strategy {strategy!r}; "
+                               f"valid: {', '.join(strategies())}")
     if A.shape[0] != A.shape[1]:
-        raise ValueError(f"matrix must be square, got shape {A.shape}")
+        raise FemromValueError(f"matrix must be square, got shape {A.shape}")
     if strategy == "auto":
         strategy = choose_strategy(A, spd=spd)
     cls = STRATEGY_CLASSES[strategy]
@@ -165,7 +166,7 @@ def make_solver(A, strategy: str = "auto", *, near_nullspace=None, rtol: float =
         raise ImportError(f"strategy {strategy!r} needs a package that is not installed "
                           f"({cls.install or cls.package})")
     if cls.spd_only and not spd:
-        raise ValueError(f"strategy {strategy!r} needs an SPD matrix (spd=True)")
+        raise FemromValueError(f"strategy {strategy!r} needs an SPD matrix (spd=True)")
     return cls(A, spd=spd, near_nullspace=near_nullspace, rtol=rtol, maxiter=maxiter,
                max_dofs=max_dofs)
 
@@ -217,7 +218,7 @@ class SolverCache:
 
     def __init__(self, strategy: str = "auto", *, size: int = 1, **options):
         if size < 1:
-            raise ValueError(f"size must be >= 1, got {size}")
+            raise FemromValueError(f"size must be >= 1, got {size}")
         self.strategy, self.size, self.options = strategy, int(size), options
         self._solvers: OrderedDict[tuple, LinearSolver] = OrderedDict()
         self.hits = self.misses = 0

@@ -8,6 +8,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from femrom._errors import FemromValueError
 from femrom.solvers._base import LinearSolver, LinearSolverError, register_strategy
 
 
@@ -96,7 +97,7 @@ class JacobiCGSolver(_PreconditionedKrylov):
 
     def __init__(self, A, *, rtol: float = 1e-10, maxiter: int = 500, spd: bool = True, **common):
         if not spd:
-            raise ValueError("strategy 'jacobi-cg' needs an SPD matrix (spd=True)")
+            raise FemromValueError("strategy 'jacobi-cg' needs an SPD matrix (spd=True)")
         super().__init__(A, rtol=rtol, maxiter=maxiter, spd=True)
         start = time.perf_counter()
         diagonal = self._A.diagonal()

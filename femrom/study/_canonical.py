@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from femrom._errors import FemromValueError
 from femrom.inference import ForcePotential, HamiltonianOperators, canonical_from_second_order, learner_class
 from femrom.rom import HamiltonianROM
 from femrom.scene import SceneError
@@ -96,7 +97,7 @@ class SceneHamiltonianROM:
     def predict(self, times, inputs=None, *, initial=None):
         """Integrate from the full ``initial = (q0, v0)`` (or ``q0``); ``inputs`` must be absent or zero."""
         if inputs is not None and np.any(np.asarray(inputs) != 0):
-            raise ValueError("a canonical Hamiltonian ROM has no inputs")
+            raise FemromValueError("a canonical Hamiltonian ROM has no inputs")
         q0, v0 = initial if isinstance(initial, (tuple, list)) else (initial, None)
         q0 = self.rom.reduce(q0)                 # V^T M q0: the ROM's basis is orthonormal in M
         p0 = np.zeros_like(q0) if v0 is None else self.rom.reduce(v0)

@@ -8,14 +8,14 @@ from dataclasses import replace
 from femrom.scene import BasisSpec, Derivatives, LearnerSpec, ReportSpec, RomConfig, RunSpec, Scene
 
 #: label -> registered learner: the intrusive reference, L-OpInf and plain OpInf
-LEARNERS = {"galerkin": "galerkin", "lopinf": "lopinf", "plain_opinf": "opinf"}
+EXTRAPOLATION_LEARNERS = {"galerkin": "galerkin", "lopinf": "lopinf", "plain_opinf": "opinf"}
 #: label -> the name plots and tables give them
-LEARNER_NAMES = {"galerkin": "intrusive Galerkin", "lopinf": "L-OpInf", "plain_opinf": "plain OpInf"}
+EXTRAPOLATION_LEARNER_NAMES = {"galerkin": "intrusive Galerkin", "lopinf": "L-OpInf", "plain_opinf": "plain OpInf"}
 
 
 def extrapolation_config(dt: float, train_window: float, t_end: float, ranks, *,
                          derivatives: Derivatives = Derivatives("finite_differences", 4), terms=(),
-                         learners: dict = LEARNERS) -> RomConfig:
+                         learners: dict = EXTRAPOLATION_LEARNERS) -> RomConfig:
     """The ``[rom]`` section of an extrapolation study at step ``dt``.
 
     Training run ``"train"`` on ``[0, T]``, ``T = round(train_window / dt) dt``; test run

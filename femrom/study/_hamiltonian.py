@@ -28,6 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from femrom._errors import FemromValueError
 from femrom.basis import CotangentLiftPSD
 from femrom.inference import CanonicalOpInf, HamiltonianOpInf, reduce_canonical_snapshots
 from femrom.integrators import integrate_canonical
@@ -58,7 +59,8 @@ class CanonicalSpec:
 
     def __post_init__(self):
         if self.learner not in CANONICAL_LEARNERS:
-            raise ValueError(f"unknown canonical learner {self.learner!r}; valid: {', '.join(CANONICAL_LEARNERS)}")
+            raise FemromValueError(f"unknown canonical learner {self.learner!r}; "
+                                   f"valid: {', '.join(CANONICAL_LEARNERS)}")
 
     @property
     def selects(self) -> bool:

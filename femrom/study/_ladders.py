@@ -6,6 +6,7 @@ import time
 
 import numpy as np
 
+from femrom._errors import FemromValueError
 from femrom.study._metrics import relative_error
 from femrom.study._runs import FOMRun, run_fom
 
@@ -38,7 +39,7 @@ def time_step_ladder(model, reference: FOMRun | None = None, factors=(10, 5, 2),
         given run at the scene's ``dt`` (error 0).
     """
     if error not in ERRORS:
-        raise ValueError(f"unknown error {error!r}; valid: {', '.join(ERRORS)}")
+        raise FemromValueError(f"unknown error {error!r}; valid: {', '.join(ERRORS)}")
     signals = None if reference is None else reference.inputs.signals
     dt0 = model.scene.time.dt if reference is None else reference.dt / reference.every
     t_end = model.scene.time.t_end if reference is None else float(reference.times[-1])
@@ -135,7 +136,7 @@ def final_state(model, dt: float, t_end: float) -> tuple[np.ndarray, dict]:
 
     steps = int(round(t_end / dt))
     if abs(steps * dt - t_end) > 1e-9 * t_end:
-        raise ValueError(f"time step {dt:g} does not divide the window {t_end:g}")
+        raise FemromValueError(f"time step {dt:g} does not divide the window {t_end:g}")
     last = Trajectory(every=steps, fields=("q",))
     summary = simulate(model, dt=dt, t_end=steps * dt, consumers=[last], progress=False).summary
     return last.q[:, -1], {"n": model.system.n_dofs, "dt": dt, "steps": steps,

@@ -24,6 +24,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from femrom._errors import FemromValueError
+
 
 def nonlinear_forces(operators, Q: np.ndarray, Vel: np.ndarray | None = None) -> np.ndarray:
     """(r, K) ``f^(q_k, v_k)`` of a model's nonlinear terms at columns (zeros for a linear model).
@@ -57,6 +59,6 @@ def force_error(operators, reference, Q: np.ndarray) -> float:
     (module docstring), normalised by the reference's nonlinear part."""
     scale = np.linalg.norm(np.linalg.solve(reference.mass_matrix, nonlinear_forces(reference, Q)))
     if scale == 0:
-        raise ValueError("the reference model has no nonlinear force at these states: nothing to compare with")
+        raise FemromValueError("the reference model has no nonlinear force at these states: nothing to compare with")
     return float(np.linalg.norm(conservative_acceleration(operators, Q) - conservative_acceleration(reference, Q))
                  / scale)

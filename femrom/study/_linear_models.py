@@ -29,6 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from femrom._errors import FemromValueError
 from femrom.inference import DMDc, ERA, OKID, InputOutputData
 from femrom.rom import StateSpaceROM
 from femrom.scene import Derivatives, LearnerSpec
@@ -62,8 +63,8 @@ class LinearModelSpec:
         from femrom.study._study import study_learners
 
         if self.learner not in study_learners():
-            raise ValueError(f"linear model {self.label!r}: unknown learner {self.learner!r}; valid: "
-                             f"{', '.join((*study_learners(), *IDENTIFIED))}")
+            raise FemromValueError(f"linear model {self.label!r}: unknown learner {self.learner!r}; valid: "
+                                   f"{', '.join((*study_learners(), *IDENTIFIED))}")
 
 
 def state_space_data(data: dict, r: int, states: str = "phase") -> InputOutputData:
@@ -82,7 +83,7 @@ def _okid(r, options, data, markov):
 
 def _era(r, options, data, markov):
     if markov is None:
-        raise ValueError("ERA needs Markov parameters: pass markov=")
+        raise FemromValueError("ERA needs Markov parameters: pass markov=")
     return ERA(order=2 * r, **options), markov
 
 
@@ -139,8 +140,8 @@ def linear_model_rows(specs, ranks, runs: dict, *, system, basis, product, data:
     dt = float(next(iter(runs.values())).dt)
     for name, run in runs.items():
         if np.any(run.q0) or np.any(run.v0) or np.any(run.U[:, 0]):
-            raise ValueError(f"run {name!r} does not start at rest with u_0 = 0: a model started from z_0 = 0 "
-                             "would not start where it does")
+            raise FemromValueError(f"run {name!r} does not start at rest with u_0 = 0: a model started from z_0 = 0 "
+                                   "would not start where it does")
     rows, models, fits = [], {}, {}
     for r in ranks:
         for spec in specs:

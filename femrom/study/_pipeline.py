@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
+from femrom._errors import FemromValueError
 from femrom.post import accuracy_cost_table, machine_description, write_metrics
 from femrom.post import plot_accuracy_cost as plot_points
 from femrom.scene import Scene, build
@@ -71,7 +72,7 @@ def run_study(scene: Scene, out_dir, *, model=None, store_path=None, extend=None
     """
     config = scene.rom
     if config is None:
-        raise ValueError(f"scene {scene.name!r} has no [rom] section")
+        raise FemromValueError(f"scene {scene.name!r} has no [rom] section")
     check_rom_config(config)
     say = progress or (lambda message: None)
     out_dir = Path(out_dir)

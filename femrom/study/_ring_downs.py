@@ -29,6 +29,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from femrom._errors import FemromValueError
 from femrom.inference import IwanLOpInf, LagrangianOpInf, SecondOrderData, SpML, SpMLConfig, concatenate, galerkin
 from femrom.integrators import Newmark, StepResult, Trajectory, integrate
 from femrom.post import Backbone, hilbert_backbone
@@ -152,7 +153,7 @@ def _learner(name: str, settings: "RingDownComparison"):
         return IwanLOpInf(["damping", "input"], **dict(variants[name]))
     if name == "lopinf":
         return LagrangianOpInf(["damping", "input"])
-    raise ValueError(f"unknown model {name!r}; valid: galerkin, lopinf, spml, {', '.join(variants)}")
+    raise FemromValueError(f"unknown model {name!r}; valid: galerkin, lopinf, spml, {', '.join(variants)}")
 
 
 def _stable(signal: np.ndarray) -> bool:

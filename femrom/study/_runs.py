@@ -7,6 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from femrom._errors import FemromValueError
 from femrom.integrators import StepClock, simulate
 from femrom.scene import Signal, SignalVector
 from femrom.solvers import SolverCache, make_solver
@@ -98,7 +99,7 @@ def run_fom(model, signals: tuple[Signal, ...] | None = None, *, name: str = "ru
     """
     signals = tuple(i.signal for i in model.scene.inputs) if signals is None else tuple(signals)
     if len(signals) != model.system.n_inputs:
-        raise ValueError(f"run {name!r}: {len(signals)} signal(s) for {model.system.n_inputs} input(s)")
+        raise FemromValueError(f"run {name!r}: {len(signals)} signal(s) for {model.system.n_inputs} input(s)")
     u = SignalVector(signals)
     system = dataclasses.replace(model.system, inputs=u) if signals else model.system
     outputs = dataclasses.replace(model.scene.outputs, fields=())
@@ -108,7 +109,7 @@ def run_fom(model, signals: tuple[Signal, ...] | None = None, *, name: str = "ru
                                                                                  else dt)))
     every = int(every)
     if every < 1 or n_steps % every:
-        raise ValueError(f"run {name!r}: every = {every} must be >= 1 and divide the {n_steps} steps")
+        raise FemromValueError(f"run {name!r}: every = {every} must be >= 1 and divide the {n_steps} steps")
     writers = [] if store is None else [store.writer(name, n_steps=n_steps, dt=dt, every=every, inputs=u)]  # closed by the driver
     result = simulate(model, dt=dt, t_end=t_end, consumers=writers, progress=None, solver=solver, clock=clock)
     keep = slice(None, None, every)

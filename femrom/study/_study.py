@@ -26,6 +26,7 @@ from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
+from femrom._errors import FemromValueError
 from femrom.basis import POD
 from femrom.inference import HamiltonianOperators, SecondOrderLearner, concatenate, learner_class, \
     reduce_snapshots, registered_learners
@@ -105,7 +106,7 @@ def pod_basis(store, trajectories, product, config: RomConfig) -> POD:
     if spec.method == "svd":
         Q = np.hstack([block for block in source.blocks()])
         if rank > min(Q.shape):
-            raise ValueError(f"[rom.basis] rank {rank} exceeds the {min(Q.shape)} snapshots' rank bound")
+            raise FemromValueError(f"[rom.basis] rank {rank} exceeds the {min(Q.shape)} snapshots' rank bound")
         return POD(rank=rank, product=product, method="svd").fit(Q)
     return POD(rank=rank, product=product, method="randomized", power_iterations=spec.power_iterations).fit(source)
 

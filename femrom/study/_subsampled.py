@@ -29,6 +29,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from femrom._errors import FemromValueError
 from femrom.inference import alternating_fill, learner_class, reduce_snapshots
 from femrom.linalg import as_block_source, store_source
 from femrom.rom import SecondOrderROM
@@ -85,7 +86,7 @@ def subsampled_rows(state, every=(1, 2, 5, 10), *, r: int | None = None, learner
                                derivatives="stored" if stored else "finite_difference")
         if system.nonlinear is not None:
             if system.nonlinear.stateful:
-                raise ValueError("learning every k-th step takes stateless nonlinear forces only")
+                raise FemromValueError("learning every k-th step takes stateless nonlinear forces only")
             raw = replace(raw, nonlinear_forces=projected_forces(system.nonlinear, V, q))
         data = {"integrator": raw.integrator_consistent(), "fd4": raw.with_finite_differences(4)}
         fine_inputs = None

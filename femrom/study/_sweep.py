@@ -24,6 +24,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+from femrom._errors import FemromValueError
 from femrom.post import write_metrics
 from femrom.snapshots import SnapshotStore, SnapshotStoreError
 from femrom.study._runs import run_fom
@@ -47,7 +48,7 @@ class SweepRun:
 def sweep_runs(scene) -> list[SweepRun]:
     """The runs of the scene's ``[sweep]``, named ``p000``, ``p001``, ..."""
     if scene.sweep is None:
-        raise ValueError(f"scene {scene.name!r} has no [sweep] section")
+        raise FemromValueError(f"scene {scene.name!r} has no [sweep] section")
     return [SweepRun(f"p{i:03d}", values) for i, values in enumerate(scene.sweep.points())]
 
 

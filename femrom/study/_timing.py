@@ -21,6 +21,8 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from femrom._errors import FemromValueError
+
 
 @dataclass(frozen=True)
 class Cost:
@@ -42,7 +44,7 @@ class Cost:
     def from_blocks(cls, per_step: np.ndarray, steps_per_block: float) -> "Cost":
         x = np.asarray(per_step, dtype=float)
         if x.size == 0:
-            raise ValueError("no timed blocks")
+            raise FemromValueError("no timed blocks")
         q25, median, q75 = np.percentile(x, [25, 50, 75])
         return cls(float(median), float(q25), float(q75), float(x.min()), float(x.max()), int(x.size),
                    float(steps_per_block))
@@ -73,7 +75,7 @@ def blocked_cost(step_seconds: np.ndarray, min_block_seconds: float = 0.1, *, mi
     """Per-step cost of consecutive step timings grouped into blocks of at least ``min_block_seconds``."""
     s = np.asarray(step_seconds, dtype=float)
     if s.size == 0:
-        raise ValueError("no steps were timed")
+        raise FemromValueError("no steps were timed")
     mean = max(float(np.mean(s)), 1e-12)
     per_block = max(1, math.ceil(min_block_seconds / mean - 1e-9))
     per_block = min(per_block, max(1, s.size // min_blocks))

@@ -11,7 +11,7 @@ cvxpy solves the same QP (the ``"condensed"`` formulation) but, on every solve,
 rebuilds the solver's data from its parameter map and compares the dense
 Hessian entry by entry with the previous one: at m N = 300 that is several
 milliseconds a step (``benchmarks/mpc_solve.py``), more than OSQP's own solve.
-Only OSQP (``solver="OSQP"``).
+Only OSQP (``solver=QPSolver("osqp")``).
 """
 
 from __future__ import annotations
@@ -19,6 +19,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
+from femrom._errors import FemromValueError
 from femrom.control._formulation import QPFormulation, QPSolution, register_formulation
 from femrom.control._problem import CondensedQP
 
@@ -36,8 +37,9 @@ class CondensedOSQPFormulation(QPFormulation):
 
     def __init__(self, problem, config):
         super().__init__(problem, config)
-        if config.solver != "OSQP":
-            raise ValueError(f"formulation 'condensed_osqp' solves with OSQP only, got solver={config.solver!r}")
+        if config.solver.name != "osqp":
+            raise FemromValueError(f"formulation 'condensed_osqp' solves with OSQP only, got solver "
+                                   f"{config.solver.name!r}")
         import osqp
 
         self.qp = CondensedQP.from_problem(problem)
@@ -47,13 +49,9 @@ class CondensedOSQPFormulation(QPFormulation):
         bounded = np.flatnonzero(np.isfinite(limits))
         P = sp.triu(sp.csc_matrix(2.0 * self.scale * self.qp.hessian), format="csc")
         A = sp.identity(m * N, format="csc")[bounded]
-        settings = dict(eps_abs=float(config.tolerance), eps_rel=float(config.tolerance),
-                        max_iter=int(config.max_iterations), polishing=False, warm_starting=True,
-                        verbose=False)
-        settings.update(config.solver_options)
         self.solver = osqp.OSQP()
         self.solver.setup(P=P, q=np.zeros(m * N), A=sp.csc_matrix(A), l=-limits[bounded], u=limits[bounded],
-                          **settings)
+                          **config.solver.osqp_settings())
         self._q = np.zeros(m * N)
 
     def set_parameters(self, state, reference, u_previous, state_offset, output_offset, terminal_state):

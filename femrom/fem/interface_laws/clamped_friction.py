@@ -37,6 +37,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from femrom._errors import FemromValueError
 from femrom.fem._interface_law import (
     InterfaceLaw,
     check_parameters,
@@ -120,9 +121,9 @@ def clamped_state(gap: np.ndarray, dry_state: np.ndarray, *, normal_stiffness: f
     gap = np.asarray(gap, dtype=float)
     dry_state = np.asarray(dry_state, dtype=float)
     if gap.ndim != 2 or gap.shape[1] != 3 or dry_state.shape != (gap.shape[0], 2):
-        raise ValueError(f"gap must be (s, 3) and dry_state (s, 2), got {gap.shape} and {dry_state.shape}")
+        raise FemromValueError(f"gap must be (s, 3) and dry_state (s, 2), got {gap.shape} and {dry_state.shape}")
     if not (normal_stiffness > 0 and friction_coefficient >= 0):
-        raise ValueError("normal_stiffness must be > 0 and friction_coefficient >= 0")
+        raise FemromValueError("normal_stiffness must be > 0 and friction_coefficient >= 0")
     closed = gap[:, 2] < 0.0
     state = np.zeros((gap.shape[0], 4))
     state[:, :2] = dry_state

@@ -50,6 +50,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from femrom._errors import FemromValueError
 from femrom.fem._interface_law import (
     InterfaceLaw,
     check_parameters,
@@ -99,7 +100,7 @@ class ClampedIwanLaw(InterfaceLaw):
         g_t, g_n = split_gap(gap)
         N = self.n_elements
         if state.ndim != 3 or state.shape[1:] != (N + 1, 2) or state.shape[0] != g_n.size:
-            raise ValueError(f"clamped_iwan state must be ({g_n.size}, {N + 1}, 2), got shape {state.shape}")
+            raise FemromValueError(f"clamped_iwan state must be ({g_n.size}, {N + 1}, 2), got shape {state.shape}")
         closed = state[:, N, 1] > 0.5
         k = self.slider_stiffness[None, :, None]
         trial = k * (g_t[:, None, :] - state[:, :N])
@@ -182,7 +183,7 @@ def clamped_iwan_state(law: ClampedIwanLaw, gap: np.ndarray, clamped: np.ndarray
     gap = np.asarray(gap, dtype=float)
     clamped = np.asarray(clamped, dtype=float)
     if gap.ndim != 2 or gap.shape[1] != 3 or clamped.shape != (gap.shape[0], 4):
-        raise ValueError(f"gap must be (s, 3) and clamped (s, 4), got {gap.shape} and {clamped.shape}")
+        raise FemromValueError(f"gap must be (s, 3) and clamped (s, 4), got {gap.shape} and {clamped.shape}")
     N = law.n_elements
     state = np.zeros((gap.shape[0], N + 1, 2))
     state[:, :N] = clamped[:, None, :2]

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from femrom._errors import FemromTypeError, FemromValueError
 from femrom.inference._hamiltonian import CanonicalData
 from femrom.inference._learner import Learner, register_learner
 
@@ -42,13 +43,13 @@ class CanonicalOpInf(Learner):
 
     def __init__(self, regularization: float = 0.0):
         if not regularization >= 0:
-            raise ValueError(f"regularization must be >= 0, got {regularization}")
+            raise FemromValueError(f"regularization must be >= 0, got {regularization}")
         self.regularization = float(regularization)
 
     @staticmethod
     def _regression(data):
         if not isinstance(data, CanonicalData):
-            raise TypeError(f"CanonicalOpInf.fit takes CanonicalData, got {type(data).__name__}")
+            raise FemromTypeError(f"CanonicalOpInf.fit takes CanonicalData, got {type(data).__name__}")
         Y = np.vstack([data.states_q, data.states_p])
         Fq = 0.0 if data.forces_q is None else data.forces_q
         Fp = 0.0 if data.forces_p is None else data.forces_p

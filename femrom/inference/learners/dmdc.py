@@ -6,7 +6,7 @@ import time
 
 import numpy as np
 
-from femrom._errors import FemromValueError
+from femrom._errors import FemromTypeError, FemromValueError
 
 from femrom.inference._io_data import InputOutputData
 from femrom.inference._learner import Learner, register_learner
@@ -21,7 +21,7 @@ def _check_rank(name: str, value, largest: int, why: str) -> int | None:
     if value is None:
         return None
     if int(value) != value or not 1 <= int(value) <= largest:
-        raise ValueError(f"{name} must be an integer between 1 and {largest} ({why}), got {value}")
+        raise FemromValueError(f"{name} must be an integer between 1 and {largest} ({why}), got {value}")
     return int(value)
 
 
@@ -92,11 +92,11 @@ class DMDc(Learner):
                  input_samples: str = "start"):
         for name, value in (("rank", rank), ("output_rank", output_rank)):
             if value is not None and (int(value) != value or value < 1):
-                raise ValueError(f"{name} must be a positive integer, got {value}")
+                raise FemromValueError(f"{name} must be a positive integer, got {value}")
         if rank is not None and output_rank is not None and output_rank > rank:
-            raise ValueError(f"output_rank {output_rank} exceeds rank {rank}: the model's order r must be <= p")
+            raise FemromValueError(f"output_rank {output_rank} exceeds rank {rank}: the model's order r must be <= p")
         if input_samples not in INPUT_SAMPLES:
-            raise ValueError(f"unknown input_samples {input_samples!r}; valid: {', '.join(INPUT_SAMPLES)}")
+            raise FemromValueError(f"unknown input_samples {input_samples!r}; valid: {', '.join(INPUT_SAMPLES)}")
         self.rank, self.output_rank, self.feedthrough = rank, output_rank, bool(feedthrough)
         self.input_samples = input_samples
         self.operators_ = None
@@ -113,10 +113,10 @@ class DMDc(Learner):
         """Fit ``A, B, C, D`` from the states, inputs and outputs of ``data``; ``validation``
         (InputOutputData with states): the one-step residual there is ``validation_residual_``."""
         if not isinstance(data, InputOutputData):
-            raise TypeError(f"DMDc.fit takes InputOutputData, got {type(data).__name__}")
+            raise FemromTypeError(f"DMDc.fit takes InputOutputData, got {type(data).__name__}")
         if data.states is None:
-            raise ValueError("DMDc learns from state samples: the data have no states "
-                             "(InputOutputData.from_second_order(..., states='phase'))")
+            raise FemromValueError("DMDc learns from state samples: the data have no states "
+                                   "(InputOutputData.from_second_order(..., states='phase'))")
         X, U = data.states, data.inputs
         n, m = X.shape[0], U.shape[0]
         k0 = data.step_pairs()
@@ -133,8 +133,8 @@ class DMDc(Learner):
         Ut, st, Vt = np.linalg.svd(np.vstack([X0, U0]), full_matrices=False)
         floor = st[0] * max(n + ms, N) * np.finfo(float).eps
         if not st[p - 1] > floor:
-            raise ValueError(f"rank {p} exceeds the numerical rank {int(np.sum(st > floor))} of {what}: "
-                             "lower the rank or give richer inputs")
+            raise FemromValueError(f"rank {p} exceeds the numerical rank {int(np.sum(st > floor))} of {what}: "
+                                   "lower the rank or give richer inputs")
         Ur = np.linalg.svd(X1, full_matrices=False)[0][:, :r]
         G = (X1 @ Vt[:p].T) / st[:p]                           # X_1 V~ S~^-1 (n, p)
         UrG = Ur.T @ G

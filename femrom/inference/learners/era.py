@@ -2,6 +2,7 @@ r"""The eigensystem realisation algorithm (ERA): a balanced first-order model fr
 
 from __future__ import annotations
 
+from femrom._errors import FemromTypeError, FemromValueError
 from femrom.inference._io_data import InputOutputData, MarkovParameters
 from femrom.inference._learner import Learner, refuse_validation, register_learner
 from femrom.inference._realization import era_realization
@@ -52,7 +53,7 @@ class ERA(Learner):
     def __init__(self, order: int, *, rows: int | None = None, columns: int | None = None,
                  output_directions: int | None = None, input_directions: int | None = None):
         if int(order) != order or order < 1:
-            raise ValueError(f"order must be a positive integer, got {order}")
+            raise FemromValueError(f"order must be a positive integer, got {order}")
         self.order, self.rows, self.columns = int(order), rows, columns
         self.output_directions, self.input_directions = output_directions, input_directions
         self.operators_ = None
@@ -61,10 +62,10 @@ class ERA(Learner):
         """Realise the Markov parameters ``data`` (:class:`~femrom.inference.MarkovParameters`; no validation data)."""
         refuse_validation(self, validation)
         if isinstance(data, InputOutputData):
-            raise TypeError("ERA realises Markov parameters; for input-output data use OKID, "
-                            "or ERA on okid_markov_parameters(data, observer_order, count)")
+            raise FemromTypeError("ERA realises Markov parameters; for input-output data use OKID, "
+                                  "or ERA on okid_markov_parameters(data, observer_order, count)")
         if not isinstance(data, MarkovParameters):
-            raise TypeError(f"ERA.fit takes MarkovParameters, got {type(data).__name__}")
+            raise FemromTypeError(f"ERA.fit takes MarkovParameters, got {type(data).__name__}")
         ops = era_realization(data, self.order, rows=self.rows, columns=self.columns,
                               output_directions=self.output_directions, input_directions=self.input_directions)
         used = ops.metadata["rows"] + ops.metadata["columns"] + 1

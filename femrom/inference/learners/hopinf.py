@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from femrom._errors import FemromTypeError, FemromValueError
 from femrom.inference._hamiltonian import (
     CanonicalData,
     HamiltonianErrorSplit,
@@ -54,9 +55,9 @@ class HamiltonianOpInf(Learner):
 
     def __init__(self, regularization: float = 0.0, shared: bool = False, outputs_of: str = "state"):
         if not regularization >= 0:
-            raise ValueError(f"regularization must be >= 0, got {regularization}")
+            raise FemromValueError(f"regularization must be >= 0, got {regularization}")
         if outputs_of not in self.OUTPUTS_OF:
-            raise ValueError(f"outputs_of must be one of {self.OUTPUTS_OF}, got {outputs_of!r}")
+            raise FemromValueError(f"outputs_of must be one of {self.OUTPUTS_OF}, got {outputs_of!r}")
         self.regularization = float(regularization)
         self.shared = bool(shared)
         self.outputs_of = outputs_of
@@ -73,7 +74,7 @@ class HamiltonianOpInf(Learner):
         """Fit from reduced data ``Q^, P^, Q^', P^'`` and the known ``F^_q, F^_p``; ``validation``
         (CanonicalData): the fitted operators' relative residual there is ``validation_residual_``."""
         if not isinstance(data, CanonicalData):
-            raise TypeError(f"HamiltonianOpInf.fit takes CanonicalData, got {type(data).__name__}")
+            raise FemromTypeError(f"HamiltonianOpInf.fit takes CanonicalData, got {type(data).__name__}")
         states_q, states_p = np.asarray(data.states_q, float), np.asarray(data.states_p, float)
         Rp = data.ddt_q - (0.0 if data.forces_q is None else data.forces_q)
         Rq = -data.ddt_p - (0.0 if data.forces_p is None else data.forces_p)
@@ -98,7 +99,7 @@ class HamiltonianOpInf(Learner):
         self.validation_residual_ = None
         if validation is not None:
             if not isinstance(validation, CanonicalData):
-                raise TypeError(f"validation must be CanonicalData, got {type(validation).__name__}")
+                raise FemromTypeError(f"validation must be CanonicalData, got {type(validation).__name__}")
             self.validation_residual_ = self._relative_residual(validation, Dq, Dp)
         self.output_matrix_ = None
         if data.outputs is not None:

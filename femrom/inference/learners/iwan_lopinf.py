@@ -7,9 +7,11 @@ import warnings
 
 import numpy as np
 
+from femrom._errors import FemromRuntimeError, FemromTypeError, FemromValueError
 from femrom.inference._data import SecondOrderData, concatenate, sampling_step
 from femrom.inference._learner import Learner, register_learner
 from femrom.inference._operators import ReducedOperators
+from femrom.inference._sdp import ConicSolver
 from femrom.inference._terms import term_class
 from femrom.inference.terms.learned_hysteresis import LearnedHysteresis, slider_stretches
 
@@ -68,8 +70,9 @@ class IwanLOpInf(Learner):
         norm, the target to norm 1).
     stiffness_margin : float
         ``eps = margin ||Q''|| / ||Q^||``.
-    solver : str
-        A cvxpy solver name.
+    solver : ConicSolver
+        The cvxpy solver of the second-order cone program, with its options (default
+        ``ConicSolver("clarabel")``).
 
     Attributes
     ----------
@@ -88,41 +91,44 @@ class IwanLOpInf(Learner):
 
     def __init__(self, terms=("damping",), *, thresholds=32, threshold_span=(1e-3, 1.0), direction=None,
                  monotone: bool = True, band=None, regularization: float = 1e-9, stiffness_margin: float = 1e-10,
-                 solver: str = "CLARABEL"):
+                 solver: ConicSolver = ConicSolver()):
         terms = (terms,) if isinstance(terms, str) else tuple(terms)
         unknown = [t for t in terms if t not in LINEAR_TERMS]
         if unknown:
-            raise ValueError(f"iwan_lopinf: unknown terms {unknown}; valid: {', '.join(LINEAR_TERMS)}")
+            raise FemromValueError(f"iwan_lopinf: unknown terms {unknown}; valid: {', '.join(LINEAR_TERMS)}")
         self.terms = terms
         if np.ndim(thresholds) == 0:
             if not (isinstance(thresholds, (int, np.integer)) and thresholds >= 1):
-                raise ValueError(f"thresholds must be a positive integer or an array of values > 0, got {thresholds!r}")
+                raise FemromValueError("thresholds must be a positive integer or an array of values > 0, "
+                                       f"got {thresholds!r}")
         else:
             values = np.asarray(thresholds, dtype=float)
             if values.ndim != 1 or values.size == 0 or not np.all(np.isfinite(values)) or np.any(values <= 0):
-                raise ValueError("thresholds must be a positive integer or a 1-d array of finite values > 0")
+                raise FemromValueError("thresholds must be a positive integer or a 1-d array of finite values > 0")
         self.thresholds = thresholds
         lo, hi = (float(x) for x in threshold_span)
         if not 0 < lo <= hi:
-            raise ValueError(f"threshold_span must be 0 < low <= high, got {threshold_span!r}")
+            raise FemromValueError(f"threshold_span must be 0 < low <= high, got {threshold_span!r}")
         self.threshold_span = (lo, hi)
         self.direction = None if direction is None else np.asarray(direction, dtype=float).ravel()
         if not float(regularization) >= 0:
-            raise ValueError(f"regularization must be >= 0, got {regularization!r}")
+            raise FemromValueError(f"regularization must be >= 0, got {regularization!r}")
         self.regularization = float(regularization)
         self.monotone = bool(monotone)
         self.band = None if band is None else tuple(float(b) for b in band)
         if self.band is not None and not (len(self.band) == 2 and 0 < self.band[0] < self.band[1]):
-            raise ValueError(f"band must be (low, high) in Hz with 0 < low < high, got {band!r}")
+            raise FemromValueError(f"band must be (low, high) in Hz with 0 < low < high, got {band!r}")
         self.stiffness_margin = float(stiffness_margin)
-        self.solver = str(solver)
+        if not isinstance(solver, ConicSolver):
+            raise FemromTypeError(f"iwan_lopinf: solver must be a ConicSolver, got {solver!r}")
+        self.solver = solver
 
     # -- the regression ----------------------------------------------------------------
     def _direction(self, r: int) -> np.ndarray:
         if self.direction is None:
             return np.eye(r)[0]
         if self.direction.size != r or not np.any(self.direction):
-            raise ValueError(f"direction must be a non-zero vector of length r = {r}")
+            raise FemromValueError(f"direction must be a non-zero vector of length r = {r}")
         return self.direction
 
     def _threshold_values(self, x: np.ndarray) -> np.ndarray:
@@ -130,19 +136,19 @@ class IwanLOpInf(Learner):
             return np.asarray(self.thresholds, dtype=float)
         top = float(np.max(np.abs(x)))
         if not top > 0:
-            raise ValueError("iwan_lopinf: the data never move along the hysteresis direction")
+            raise FemromValueError("iwan_lopinf: the data never move along the hysteresis direction")
         return top * np.geomspace(*self.threshold_span, int(self.thresholds))
 
     def _blocks(self, data: SecondOrderData, a: np.ndarray, phi: np.ndarray) -> dict:
         blocks = {"stiffness": data.states}
         if "damping" in self.terms:
             if data.velocities is None:
-                raise ValueError("iwan_lopinf: damping needs the data's velocities")
+                raise FemromValueError("iwan_lopinf: damping needs the data's velocities")
             blocks["damping"] = data.velocities
         if data.inputs is not None:
             blocks["input"] = -data.inputs
         elif "input" in self.terms:
-            raise ValueError("iwan_lopinf: the input term needs data with inputs")
+            raise FemromValueError("iwan_lopinf: the input term needs data with inputs")
         blocks["hysteresis"] = slider_stretches(a @ data.states, phi, data.starts)
         return blocks
 
@@ -231,9 +237,9 @@ class IwanLOpInf(Learner):
         problem = cp.Problem(cp.Minimize(objective), constraints)
         with warnings.catch_warnings():         # the status is kept; the chosen fit's is reported by fit
             warnings.filterwarnings("ignore", message="Solution may be inaccurate")
-            problem.solve(solver=self.solver)
+            problem.solve(**self.solver.keywords)
         if x.value is None:
-            raise RuntimeError(f"iwan_lopinf: the {self.solver} solve failed ({problem.status})")
+            raise FemromRuntimeError(f"iwan_lopinf: the {self.solver.name} solve failed ({problem.status})")
         values = np.asarray(x.value, dtype=float) * y_scale / scale
         out = {}
         for n, _ in layout:
@@ -260,7 +266,7 @@ class IwanLOpInf(Learner):
 
         dt = sampling_step(data)
         if dt is None:
-            raise ValueError("iwan_lopinf: band filtering needs data sampled at one uniform time step")
+            raise FemromValueError("iwan_lopinf: band filtering needs data sampled at one uniform time step")
         bounds = list(data.starts) + [Y.shape[1]]
         sos = butter(4, self.band, btype="bandpass", fs=1.0 / dt, output="sos")
 
@@ -280,10 +286,10 @@ class IwanLOpInf(Learner):
         tic = time.perf_counter()
         data = concatenate(data) if isinstance(data, (list, tuple)) else data
         if data.accelerations is None:
-            raise ValueError("iwan_lopinf: the data need accelerations")
+            raise FemromValueError("iwan_lopinf: the data need accelerations")
         for name, X in (("states", data.states), ("accelerations", data.accelerations)):
             if not np.all(np.isfinite(X)):
-                raise ValueError(f"iwan_lopinf: the data's {name} are not finite")
+                raise FemromValueError(f"iwan_lopinf: the data's {name} are not finite")
         a = self._direction(data.r)
         phi = self._threshold_values(a @ data.states)
         blocks = self._blocks(data, a, phi)
@@ -301,7 +307,7 @@ class IwanLOpInf(Learner):
             fit = self._solve(Y, blocks, a, prepared)
             self.top_threshold_ = None
         if fit["status"] != "optimal":
-            warnings.warn(f"iwan_lopinf: {self.solver} ended {fit['status']!r} (relative residual "
+            warnings.warn(f"iwan_lopinf: {self.solver.name} ended {fit['status']!r} (relative residual "
                           f"{fit['residual']:.3g}); another solver= may settle it", UserWarning, stacklevel=2)
         self.hysteresis_ = LearnedHysteresis(a, phi, fit["hysteresis"])
         terms = [term_class("stiffness")(fit["stiffness"])]
@@ -330,7 +336,7 @@ class IwanLOpInf(Learner):
         out = {"method": self.method, "terms": ["stiffness", *self.terms, "learned_hysteresis"],
                "threshold_span": list(self.threshold_span), "monotone": self.monotone,
                "band": None if self.band is None else list(self.band), "regularization": self.regularization,
-               "solver": self.solver}
+               "solver": self.solver.name}
         if getattr(self, "hysteresis_", None) is not None:
             out.update(hysteresis=self.hysteresis_.describe(), residual=self.residual_,
                        linear_residual=self.linear_residual_, validation_residual=self.validation_residual_)

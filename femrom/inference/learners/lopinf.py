@@ -16,9 +16,10 @@ class LagrangianOpInf(SecondOrderLearner):
 
     (Sharma & Kramer, Physica D 462, 134128, 2024), with ``C^`` only when the
     caller names ``"damping"`` (or the system has it: :meth:`for_system`). A
-    semidefinite program: ``solver="fast"`` (default,
-    :func:`~femrom.inference.solve_fast`) or the cvxpy reference ``"clarabel"`` /
-    ``"scs"``. Parameters and attributes: :class:`SecondOrderLearner`.
+    semidefinite program: ``solver=FastSolver()`` (default,
+    :class:`~femrom.inference.FastSolver`) or the cvxpy reference
+    ``ConicSolver("clarabel")`` / ``ConicSolver("scs")``. Parameters and attributes:
+    :class:`SecondOrderLearner`.
     """
 
     structured = True

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 import time
 
+from femrom._errors import FemromTypeError, FemromValueError
 from femrom.inference._io_data import InputOutputData
 from femrom.inference._learner import Learner, refuse_validation, register_learner
 from dataclasses import replace
@@ -82,7 +83,7 @@ class OKID(Learner):
                  feedthrough: bool = True, at_rest: bool = False, output_directions: int | None = None):
         for name, value in (("order", order), ("observer_order", observer_order)):
             if int(value) != value or value < 1:
-                raise ValueError(f"{name} must be a positive integer, got {value}")
+                raise FemromValueError(f"{name} must be a positive integer, got {value}")
         self.order, self.observer_order = int(order), int(observer_order)
         self.rows, self.columns = rows, columns
         self.feedthrough, self.at_rest, self.output_directions = bool(feedthrough), bool(at_rest), output_directions
@@ -99,9 +100,9 @@ class OKID(Learner):
         """Identify ``A, B, C, D`` from the inputs and outputs of ``data`` (no validation data)."""
         refuse_validation(self, validation)
         if not isinstance(data, InputOutputData):
-            raise TypeError(f"OKID.fit takes InputOutputData, got {type(data).__name__}")
+            raise FemromTypeError(f"OKID.fit takes InputOutputData, got {type(data).__name__}")
         if data.outputs is None:
-            raise ValueError("OKID needs outputs: the input-output data have none")
+            raise FemromValueError("OKID needs outputs: the input-output data have none")
         shortest = min(window.stop - window.start for window in data.trajectories())
         rows, columns = self.blocks(data.n_outputs, data.n_inputs, shortest)
         tic = time.perf_counter()

@@ -9,12 +9,14 @@ from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 
+from femrom._errors import FemromTypeError, FemromValueError
 from femrom._progress import Progress
 from femrom.inference._data import SecondOrderData, concatenate
 from femrom.inference._learner import Learner, register_learner
 from femrom.inference._networks import derivative_map, monomials, multi_indices
 from femrom.inference._operators import ReducedOperators
 from femrom.inference._second_order import system_terms
+from femrom.inference._structured_lstsq import FastSolver
 from femrom.inference._terms import term_class
 from femrom.inference.learners.lopinf import LagrangianOpInf
 from femrom.inference.terms.learned_dissipation import LearnedDissipation
@@ -128,19 +130,19 @@ class SpMLConfig:
         object.__setattr__(self, "dissipation_widths", tuple(int(w) for w in self.dissipation_widths))
         bad = [d for d in self.potential_degrees if d not in (3, 4)]
         if bad or len(set(self.potential_degrees)) != len(self.potential_degrees):
-            raise ValueError(f"SpMLConfig.potential_degrees must be distinct values of (3, 4), got "
-                             f"{self.potential_degrees}")
+            raise FemromValueError(f"SpMLConfig.potential_degrees must be distinct values of (3, 4), got "
+                                   f"{self.potential_degrees}")
         for name in ("potential_widths", "dissipation_widths"):
             if any(w < 1 for w in getattr(self, name)):
-                raise ValueError(f"SpMLConfig.{name} must be positive widths, got {getattr(self, name)}")
+                raise FemromValueError(f"SpMLConfig.{name} must be positive widths, got {getattr(self, name)}")
         if self.dissipation_directions is not None and int(self.dissipation_directions) < 0:
-            raise ValueError(f"SpMLConfig.dissipation_directions must be >= 0, got {self.dissipation_directions}")
+            raise FemromValueError(f"SpMLConfig.dissipation_directions must be >= 0, got {self.dissipation_directions}")
         for name in ("max_iterations", "check_every", "patience", "history_size", "threads"):
             if int(getattr(self, name)) < 1:
-                raise ValueError(f"SpMLConfig.{name} must be >= 1, got {getattr(self, name)}")
+                raise FemromValueError(f"SpMLConfig.{name} must be >= 1, got {getattr(self, name)}")
         if not (self.tolerance >= 0 and self.weight_decay >= 0 and self.polynomial_ridge >= 0):
-            raise ValueError(f"SpMLConfig.tolerance, weight_decay and polynomial_ridge must be >= 0, got "
-                             f"{self.tolerance}, {self.weight_decay}, {self.polynomial_ridge}")
+            raise FemromValueError(f"SpMLConfig.tolerance, weight_decay and polynomial_ridge must be >= 0, got "
+                                   f"{self.tolerance}, {self.weight_decay}, {self.polynomial_ridge}")
 
 
 @register_learner("spml")
@@ -187,7 +189,7 @@ class SpML(Learner):
 
     Parameters
     ----------
-    terms, regularization, solver, mass, mass_orthonormal, stiffness_margin, solver_options
+    terms, regularization, solver, mass, mass_orthonormal, stiffness_margin
         Step 1's (:class:`~femrom.inference.SecondOrderLearner`): e.g. ``terms=["damping"]``.
     config : SpMLConfig
     progress : bool or None
@@ -215,20 +217,18 @@ class SpML(Learner):
 
     method = "spml"
 
-    def __init__(self, terms=(), *, config: SpMLConfig = SpMLConfig(), regularization=0.0, solver: str = "fast",
+    def __init__(self, terms=(), *, config: SpMLConfig = SpMLConfig(), regularization=0.0, solver=FastSolver(),
                  mass: np.ndarray | None = None, mass_orthonormal: bool = True, stiffness_margin: float = 1e-10,
-                 solver_options: dict | None = None, progress: bool | None = None):
+                 progress: bool | None = None):
         if not torch_available():
             raise ImportError(TORCH_MISSING)
         if not isinstance(config, SpMLConfig):
-            raise TypeError(f"config must be an SpMLConfig, got {type(config).__name__}")
+            raise FemromTypeError(f"config must be an SpMLConfig, got {type(config).__name__}")
         self.config, self.progress = config, progress
         self.linear = LagrangianOpInf(terms, regularization=regularization, solver=solver, mass=mass,
-                                      mass_orthonormal=mass_orthonormal, stiffness_margin=stiffness_margin,
-                                      solver_options=solver_options)
+                                      mass_orthonormal=mass_orthonormal, stiffness_margin=stiffness_margin)
         self.linear_options = {"regularization": regularization, "solver": solver, "mass": mass,
-                               "mass_orthonormal": mass_orthonormal, "stiffness_margin": stiffness_margin,
-                               "solver_options": solver_options}
+                               "mass_orthonormal": mass_orthonormal, "stiffness_margin": stiffness_margin}
 
     @property
     def learned_terms(self):
@@ -307,7 +307,7 @@ class SpML(Learner):
         if validation is not None:
             validation = self._own(concatenate(validation) if isinstance(validation, (list, tuple)) else validation)
             if validation.r != data.r:
-                raise ValueError(f"validation data have r = {validation.r}, the training data r = {data.r}")
+                raise FemromValueError(f"validation data have r = {validation.r}, the training data r = {data.r}")
         self.linear_ = self.linear.fit(data)
         linear_ops = self.linear.operators_
         r, cfg = data.r, self.config

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from femrom._errors import FemromValueError
 from femrom.inference._networks import ConvexPowers, ScalarNetwork, ScalarSum
 from femrom.inference._terms import ReducedTerm, register_term
 from femrom.inference.terms.learned_potential import _PointCache
@@ -51,7 +52,7 @@ class LearnedDissipation(ReducedTerm):
             negative = [i for i, layer in enumerate(network.layers)
                         if layer.weight is not None and np.any(layer.weight < 0)]
             if negative or np.any(network.output < 0) or network.activation != "softplus":
-                raise ValueError("learned dissipation: the network is not input-convex (negative hidden or "
+                raise FemromValueError("learned dissipation: the network is not input-convex (negative hidden or "
                                  "output weights, or an activation other than softplus)")
         self.powers, self.network = powers, network
         self.function = ScalarSum((powers, network), self._r)
@@ -79,7 +80,7 @@ class LearnedDissipation(ReducedTerm):
     def forces(self, Q: np.ndarray, Vel=None, starts=(0,)) -> np.ndarray:
         """(r, K) ``dF^/dv`` at the columns of ``Vel``."""
         if Vel is None:
-            raise ValueError("learned dissipation: the forces need the velocities")
+            raise FemromValueError("learned dissipation: the forces need the velocities")
         return self.function.value_gradient(np.asarray(Vel, dtype=float))[1]
 
     def lhs(self, q, v=None, a=None, u=None, state=None):

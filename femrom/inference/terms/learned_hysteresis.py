@@ -6,6 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from femrom._errors import FemromValueError
 from femrom.inference._terms import ReducedTerm, register_term
 
 
@@ -83,11 +84,11 @@ class LearnedHysteresis(ReducedTerm):
         phi = np.asarray(thresholds, dtype=float).ravel()
         k = np.asarray(weights, dtype=float).ravel()
         if a.size == 0 or not np.all(np.isfinite(a)) or not np.any(a):
-            raise ValueError("learned hysteresis: direction must be a finite non-zero vector")
+            raise FemromValueError("learned hysteresis: direction must be a finite non-zero vector")
         if phi.size == 0 or not np.all(np.isfinite(phi)) or np.any(phi <= 0):
-            raise ValueError("learned hysteresis: thresholds must be finite and > 0")
+            raise FemromValueError("learned hysteresis: thresholds must be finite and > 0")
         if k.shape != phi.shape or not np.all(np.isfinite(k)) or np.any(k < 0):
-            raise ValueError(f"learned hysteresis: weights must be {phi.size} finite values >= 0, got shape {k.shape}")
+            raise FemromValueError(f"learned hysteresis: weights must be {phi.size} finite values >= 0, got shape {k.shape}")
         self.direction, self.thresholds, self.weights = a, phi, k
 
     @property

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from femrom._errors import FemromValueError
 from femrom.inference._networks import ScalarNetwork, ScalarSum, SymmetricPolynomial
 from femrom.inference._terms import ReducedTerm, register_term
 
@@ -63,7 +64,7 @@ class LearnedPotential(ReducedTerm):
         self.polynomial, self.network = polynomial, network
         for part in (polynomial, network):
             if part is not None and part.r != self._r:
-                raise ValueError(f"learned potential: a part has r = {part.r}, expected {self._r}")
+                raise FemromValueError(f"learned potential: a part has r = {part.r}, expected {self._r}")
         self.function = ScalarSum((polynomial, network), self._r)
         self._at = _PointCache(self.function)
 

@@ -2,6 +2,7 @@
 
 import numpy as np
 
+from femrom._errors import FemromTypeError
 from femrom.inference._terms import LinearTerm, register_term
 
 
@@ -41,4 +42,4 @@ class Output(LinearTerm):
         return 0.0
 
     def lhs(self, q, v=None, a=None, u=None, state=None):
-        raise TypeError("the output map is not a term of the balance")
+        raise FemromTypeError("the output map is not a term of the balance")

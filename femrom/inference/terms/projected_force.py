@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from femrom._errors import FemromValueError
 from femrom.fem import TransformedForce, dense_projection, force_from_parameters, transform_force
 from femrom.inference._terms import ReducedTerm, register_term
 
@@ -163,7 +164,7 @@ class ProjectedNonlinearForce(ReducedTerm):
 
     def target(self, data) -> np.ndarray:
         if self.stateful and data.diagnostics.get("trimmed_columns", 0):
-            raise ValueError(f"the stateful force {self.force_model.name!r} is evaluated along each trajectory "
+            raise FemromValueError(f"the stateful force {self.force_model.name!r} is evaluated along each trajectory "
                              f"from its initial state, but these data were trimmed by "
                              f"{data.diagnostics['trimmed_columns']} columns at the start; pass untrimmed data "
                              "or the forces themselves as nonlinear_forces")
@@ -184,14 +185,14 @@ class ProjectedNonlinearForce(ReducedTerm):
     def load(cls, group, *, basis=None, nonlinear=None, **context):
         stored = str(group.attrs["force_class"])
         if basis is None:
-            raise ValueError("a projected force is evaluated through the basis: the file holds none")
+            raise FemromValueError("a projected force is evaluated through the basis: the file holds none")
         if nonlinear is not None:
             given = f"{type(nonlinear).__module__}.{type(nonlinear).__qualname__}"
             if given != stored:
-                raise ValueError(f"nonlinear force {given} does not match the saved {stored}")
+                raise FemromValueError(f"nonlinear force {given} does not match the saved {stored}")
             return cls(nonlinear, basis)
         if "force" not in group:
-            raise ValueError(f"the model's projected force ({stored}) has no stored parameters: "
+            raise FemromValueError(f"the model's projected force ({stored}) has no stored parameters: "
                              "pass nonlinear=... to load")
         return cls(force_from_parameters(_read(group["force"])), basis)
 

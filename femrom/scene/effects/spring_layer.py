@@ -3,7 +3,7 @@
 import numpy as np
 
 from femrom import fem
-from femrom.scene._config import LoadConfig
+from femrom.scene._conditions import LoadConfig
 from femrom.scene._effects import Effect, register_effect
 from femrom.scene._errors import SceneError
 

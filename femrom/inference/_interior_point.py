@@ -1,7 +1,7 @@
 r"""A primal-dual interior-point method for the structured regression (dense Newton steps).
 
 The problem of :mod:`._problem` after the free blocks are eliminated
-(:func:`femrom.inference._fast._eliminate_free`) has square blocks only,
+(:func:`femrom.inference._structured_lstsq.eliminate_free`) has square blocks only,
 
 .. math::
 
@@ -14,12 +14,9 @@ data ``G`` is very ill-conditioned (``kappa(G) ~ 1e7 - 1e10``); first-order
 methods then crawl, while a Newton method whose linear systems are solved
 directly is insensitive to ``kappa(G)``. This module is such a method:
 
-- **Coordinates.** Every symmetric block is written in the orthonormal
-  basis ``E_ii = e_i e_i^T``, ``E_ik = (e_i e_k^T + e_k e_i^T) / sqrt 2``
-  (``svec``), so ``x`` has ``m = b r (r + 1) / 2`` entries and
-  ``f = x^T P x + 2 q^T x + c`` with the Hessian blocks
-  ``P_jl[a, b] = <E_a, G_jl E_b>``: sparse (``O(r)`` entries a row, a
-  Lyapunov operator), assembled once from ``kron(I, G_jl)``.
+- **Coordinates.** Every symmetric block in the orthonormal ``svec`` basis
+  (:mod:`._svec`): ``x`` has ``m = b r (r + 1) / 2`` entries and
+  ``f = x^T P x + 2 q^T x + c`` with a sparse Hessian ``2 P``.
 - **Primal-dual path following** with Nesterov-Todd scaling and Mehrotra's
   predictor-corrector, as in Todd, Toh & Tutuncu (SIAM J. Optim. 8, 1998)
   and Vandenberghe's notes on the cone QP solver of CVXOPT ("The CVXOPT
@@ -42,26 +39,16 @@ directly is insensitive to ``kappa(G)``. This module is such a method:
   ``2 P``; if it is feasible it is the optimum and nothing else runs), its slack
   eigenvalues floored at ``START_FLOOR`` times the largest, and
   ``Z_j = mu_0 S_j^{-1}`` (on the central path).
-- **Certificate.** For any feasible ``X`` and multipliers ``Lambda_j >= 0``
-  (zero on "symmetric" blocks), with ``N = Lambda - sym(grad f(X))``,
-
-  .. math::
-
-      f(X) - f^\star \le \sum_j \langle \Lambda_j, X_j - \varepsilon_j I\rangle
-                         + \frac{\|N\|_F^2}{4\, g_{\min}(G)}
-
-  (:func:`gap_bound`: the Lagrangian ``f(X + D) - <Lambda, X + D - eps I>`` is
-  bounded below over all symmetric ``D`` using ``<D G, D> >= g_min ||D||^2``; no
-  linear solve). With ``Lambda = Z`` it is evaluated at every iterate, which
-  is feasible, so the returned point carries a rigorous bound whatever the
-  conditioning; it is tight because the dual residual ``N`` of the iterates
-  falls to round-off (1e-15) while ``<S, Z>`` goes to zero.
+- **Certificate.** Every iterate is feasible, so :func:`~femrom.inference._duality_gap.gap_bound`
+  with ``Lambda = Z`` bounds its gap rigorously whatever the conditioning
+  (:mod:`._duality_gap`); near the end :func:`exact_gap_bound` evaluates the dual
+  function exactly with the Newton matrix.
 
 Cost: the dense Newton matrix has ``m^2`` entries and its factorisation
 ``m^3 / 3`` flops (two blocks: ``r = 30``: ``m = 930``, 10 ms; ``r = 60``: 3660,
 0.4 s; ``r = 100``: 10100, 0.8 GB and ~8 s on one core), about 10-15 iterations.
 :func:`femrom.inference.solve_fast` uses this method for ill-conditioned data
-up to ``FastOptions.ipm_max_unknowns``.
+up to ``FastSolver.ipm_max_unknowns``.
 """
 
 from __future__ import annotations
@@ -71,134 +58,10 @@ import os
 
 import numpy as np
 import scipy.linalg as sla
-import scipy.sparse as sp
 
+from femrom.inference._duality_gap import gap_bound, relative_gap, smallest_eigenvalue
 from femrom.inference._problem import GramProblem
-
-
-def _sym(A: np.ndarray) -> np.ndarray:
-    return 0.5 * (A + A.T)
-
-
-# -- svec coordinates --------------------------------------------------------
-def svec_index(k: int):
-    """``(i, l, c)``: the upper-triangle pairs of a (k, k) symmetric matrix and the
-    coefficients ``c`` of ``E = c (e_i e_l^T + e_l e_i^T)`` (1/2 on the diagonal,
-    ``1/sqrt 2`` off it), so that the ``E`` are orthonormal."""
-    i, l = np.triu_indices(k)
-    return i, l, np.where(i == l, 0.5, np.sqrt(0.5))
-
-
-def svec(A: np.ndarray, index) -> np.ndarray:
-    """``<E_a, A>`` for every basis matrix ``E_a`` (``A`` need not be symmetric)."""
-    i, l, c = index
-    return c * (A[i, l] + A[l, i])
-
-
-def smat(v: np.ndarray, index, k: int) -> np.ndarray:
-    """``sum_a v_a E_a``: exactly symmetric (k, k)."""
-    i, l, c = index
-    A = np.zeros((k, k))
-    A[i, l] = c * v
-    A[l, i] += c * v
-    return A
-
-
-def sym_kron(A: np.ndarray, index, out: np.ndarray | None = None) -> np.ndarray:
-    r"""Dense ``M[a, b] = <E_a, A E_b A>`` for symmetric ``A``: the symmetrised
-    Kronecker product ``A (x)_s A`` of Todd, Toh & Tutuncu (1998) in svec coordinates.
-
-    With ``E_a = c_a (e_i e_l^T + e_l e_i^T)`` and ``E_b = c_b (e_p e_q^T + e_q e_p^T)``,
-    ``M[a, b] = 2 c_a c_b (A_ip A_lq + A_iq A_lp)``; ``A[l, i]`` (all pairs) is the
-    transpose of ``A[i, l]``, so three gathers suffice. Written into ``out`` if given.
-    """
-    i, l, c = index
-    M = np.multiply(A[np.ix_(i, i)], A[np.ix_(l, l)], out=out)
-    T = A[np.ix_(i, l)]
-    T *= T.T.copy()
-    M += T
-    del T
-    M *= 2.0 * c[:, None]
-    M *= c[None, :]
-    return M
-
-
-def _svec_matrix(k: int) -> sp.csr_matrix:
-    """(k^2, k (k+1)/2) sparse ``vec(E_a)`` (column-major ``vec``)."""
-    i, l, c = svec_index(k)
-    a = np.arange(i.size)
-    rows = np.concatenate([i + l * k, l + i * k])
-    data = np.concatenate([c, c])
-    return sp.csr_matrix((data, (rows, np.concatenate([a, a]))), shape=(k * k, i.size))
-
-
-def lyapunov_block(A: np.ndarray, k: int) -> sp.csr_matrix:
-    """Sparse ``[<E_a, A E_b>]_{ab}`` for (k, k) ``A``: ``S^T kron(I, A) S``."""
-    S = _svec_matrix(k)
-    return (S.T @ sp.kron(sp.identity(k, format="csr"), sp.csr_matrix(A)) @ S).tocsr()
-
-
-def hessian(problem: GramProblem) -> sp.csr_matrix:
-    """(m, m) sparse Hessian ``2 P`` of ``f`` in svec coordinates (square blocks only)."""
-    r, nb = problem.r, len(problem.blocks)
-    slices = problem.slices()
-    rows = []
-    for j in range(nb):
-        rows.append([2.0 * lyapunov_block(problem.gram[slices[j], slices[l]], r)
-                     for l in range(nb)])
-    return sp.bmat(rows, format="csr")
-
-
-# -- the certificate -----------------------------------------------------------
-def relative_gap(bound: float, f: float, problem: GramProblem) -> float:
-    """``bound / |f|``, with ``|f|`` floored at ``eps * c``: the objective comes from the
-    expansion ``<X G, X> + 2 <X, H^T> + c``, which cannot resolve values below that
-    (data that a model fits to round-off give ``f = 0.0``)."""
-    floor = max(np.finfo(float).eps * abs(problem.target), np.finfo(float).tiny)
-    return float(bound / max(abs(f), floor))
-
-
-def smallest_eigenvalue(G: np.ndarray) -> float:
-    """A lower bound of ``lambda_min(G)``: the computed one minus the backward error
-    of ``eigvalsh`` (``p eps ||G||``, generous); ``0`` if that is not positive."""
-    g = np.linalg.eigvalsh(G)
-    value = float(g[0] - G.shape[0] * np.finfo(float).eps * max(abs(g[-1]), abs(g[0])))
-    return max(value, 0.0)
-
-
-def gap_bound(problem: GramProblem, X: np.ndarray, multipliers=None, g_min: float | None = None):
-    r"""Rigorous bound of ``f(X) - f*`` for a feasible ``X`` (module docstring), absolute.
-
-    ``multipliers``: per block ``Lambda_j`` (zero on "symmetric" blocks); by default
-    the minimiser of the bound over ``Lambda_j >= 0``,
-    ``Pi_PSD(sym grad f(X)_j - 2 g_min (X_j - eps_j I))`` (complete the square in
-    ``<Lambda, S> + ||Lambda - L0||^2 / (4 g_min)``). "free" blocks enter with
-    their whole gradient. ``inf`` when ``G`` is singular.
-    """
-    if g_min is None:
-        g_min = smallest_eigenvalue(problem.gram)
-    if not g_min > 0:
-        return np.inf
-    grad = problem.gradient(X)
-    eye = np.eye(problem.r)
-    slack = residual = 0.0
-    for j, (b, s) in enumerate(zip(problem.blocks, problem.slices())):
-        if b.structure == "free":       # unconstrained: its whole gradient is residual
-            residual += float(np.sum(grad[:, s] ** 2))
-            continue
-        L0 = _sym(grad[:, s])
-        if b.structure != "psd":
-            residual += float(np.sum(L0 * L0))
-            continue
-        S = X[:, s] - b.shift * eye
-        if multipliers is None:
-            g, P = np.linalg.eigh(L0 - 2.0 * g_min * _sym(S))
-            Lam = (P * np.maximum(g, 0.0)) @ P.T
-        else:
-            Lam = multipliers[j]
-        residual += float(np.sum((Lam - L0) ** 2))
-        slack += float(np.sum(Lam * S))
-    return max(slack, 0.0) + residual / (4.0 * g_min)
+from femrom.inference._svec import hessian, smat, svec, svec_index, sym, sym_kron
 
 
 # -- Nesterov-Todd scaling ---------------------------------------------------------
@@ -245,7 +108,7 @@ def _assemble(problem: GramProblem, blocks) -> np.ndarray:
 
 # -- Newton systems --------------------------------------------------------------
 #: Newton matrices with at least this many unknowns are factorised with every BLAS
-#: thread (the solver otherwise runs on one, see :mod:`._fast`): at m = 10 100
+#: thread (the solver otherwise runs on one, see :mod:`._structured_lstsq`): at m = 10 100
 #: (r = 100) a Cholesky took 6.6 s on one thread and 3.6 s on two with another
 #: process busy; at m = 3 660 two threads were slower under that load (1.5 s
 #: against 0.34 s), where the work per thread is too small to hide the contention.
@@ -373,7 +236,7 @@ def solve_ipm(problem: GramProblem, *, tol: float = 1e-8, max_iterations: int = 
     # the starting point
     newton.factor([None] * nb)
     grad0 = problem.gradient(np.zeros((r, problem.p)))
-    X_ls = newton.solve([-_sym(grad0[:, s]) for s in problem.slices()])
+    X_ls = newton.solve([-sym(grad0[:, s]) for s in problem.slices()])
     X = _assemble(problem, X_ls)
     if problem.is_feasible(X, tol=0.0):
         # the gap is round-off of the solve; bounded all the same when G > 0
@@ -414,7 +277,7 @@ def _path_following(problem, newton, X_ls, tol, max_iterations, g_min):
         X = _assemble(problem, Xb)
         grad = problem.gradient(X)
         S = [Xb[j] - shifts[j] * eye if cone[j] else None for j in range(nb)]
-        rdual = [_sym(grad[:, s]) - (Zb[j] if cone[j] else 0.0)
+        rdual = [sym(grad[:, s]) - (Zb[j] if cone[j] else 0.0)
                  for j, s in enumerate(problem.slices())]
         comp = sum(float(np.sum(S[j] * Zb[j])) for j in range(nb) if cone[j])
         mu = comp / nu
@@ -461,7 +324,7 @@ def _path_following(problem, newton, X_ls, tol, max_iterations, g_min):
             for j in range(nb):
                 if cone[j]:
                     Rinv, lam = scalings[j][1], scalings[j][2]
-                    ds[j] = _sym(Rinv @ dX[j] @ Rinv.T)
+                    ds[j] = sym(Rinv @ dX[j] @ Rinv.T)
                     dz[j] = Ys[j] - ds[j]
                     alpha = min(alpha, _max_step(lam, ds[j]), _max_step(lam, dz[j]))
             return dX, ds, dz, alpha
@@ -498,7 +361,7 @@ def _path_following(problem, newton, X_ls, tol, max_iterations, g_min):
             Xb[j] = Xb[j] + alpha * dX[j]
             if cone[j]:
                 Rinv = scalings[j][1]
-                Zb[j] = Zb[j] + alpha * _sym(Rinv.T @ dz[j] @ Rinv)
+                Zb[j] = Zb[j] + alpha * sym(Rinv.T @ dz[j] @ Rinv)
     rel, Xb, Zb = best
     if status != "optimal" and rel <= INACCURATE:
         status = "optimal_inaccurate"
@@ -535,14 +398,14 @@ def exact_gap_bound(problem: GramProblem, newton: DenseNewton, Xb, Zb, g_min: fl
     grad = problem.gradient(X)
     lam = [Zb[j] if Zb[j] is not None else np.zeros((r, r)) for j in range(len(Xb))]
     newton.factor([None] * len(Xb))
-    D = newton.solve([-(_sym(grad[:, s]) - lam[j]) for j, s in enumerate(slices)])
+    D = newton.solve([-(sym(grad[:, s]) - lam[j]) for j, s in enumerate(slices)])
     Xp = X + _assemble(problem, D)
     gradp = problem.gradient(Xp)
     Dm = X - Xp
     bound = float(np.sum((Dm @ problem.gram) * Dm))
     residual = 0.0
     for j, (b, s) in enumerate(zip(problem.blocks, slices)):
-        R = _sym(gradp[:, s]) - lam[j]
+        R = sym(gradp[:, s]) - lam[j]
         bound += float(np.sum(R * Dm[:, s]))
         residual += float(np.sum(R * R))
         if b.structure == "psd":

@@ -30,6 +30,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from femrom._errors import FemromRuntimeError, FemromValueError
 from femrom.inference._data import SecondOrderData
 
 
@@ -82,20 +83,20 @@ def fill_between_snapshots(operators, data: SecondOrderData, known) -> SecondOrd
     if not operators.is_linear:
         names = [t.name for t in operators.terms if t.name not in ("stiffness", "mass", "damping", "input",
                                                                   "output", "load")]
-        raise ValueError(f"filling between snapshots takes linear reduced models; this one has {names}")
+        raise FemromValueError(f"filling between snapshots takes linear reduced models; this one has {names}")
     if data.nonlinear_forces is not None:
-        raise ValueError("filling between snapshots takes data without known nonlinear forces "
-                         "(they would need evaluating at the new states)")
+        raise FemromValueError("filling between snapshots takes data without known nonlinear forces "
+                               "(they would need evaluating at the new states)")
     dt = data.diagnostics.get("dt")
     if dt is None or len(data.starts) > 1:
-        raise ValueError("filling between snapshots needs one trajectory with a known step dt")
+        raise FemromValueError("filling between snapshots needs one trajectory with a known step dt")
     X = data.states
     r, n_columns = X.shape
     if operators.r != r:
-        raise ValueError(f"the model has r = {operators.r}, the data r = {r}")
+        raise FemromValueError(f"the model has r = {operators.r}, the data r = {r}")
     known = np.unique(np.asarray(known, dtype=int))
     if known.size == 0 or known[0] < 0 or known[-1] >= n_columns:
-        raise ValueError(f"known columns must lie in 0..{n_columns - 1}")
+        raise FemromValueError(f"known columns must lie in 0..{n_columns - 1}")
     unknown = np.setdiff1d(np.arange(n_columns), known)
     if unknown.size == 0:
         return data
@@ -107,8 +108,8 @@ def fill_between_snapshots(operators, data: SecondOrderData, known) -> SecondOrd
     normal = (A_unknown.T @ A_unknown).tocsc()
     solution = spla.spsolve(normal, A_unknown.T @ rhs)
     if not np.all(np.isfinite(solution)):
-        raise np.linalg.LinAlgError("the states between the snapshots are not determined by this model "
-                                    "(singular normal equations)")
+        raise FemromRuntimeError("the states between the snapshots are not determined by this model "
+                                 "(singular normal equations)")
     states = X.copy()
     states[:, unknown] = solution.reshape(unknown.size, r).T
     return replace(data, states=states)
