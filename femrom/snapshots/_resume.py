@@ -77,9 +77,9 @@ def resume(store_path, model_or_system, scheme=None, *, trajectory=None, dt: flo
                 raise FemromValueError("pass the scheme (or a FullOrderModel whose scene names one)")
             scheme = scheme_for(model.scene.time)
         recorded = attrs.get("scheme")
-        if recorded is not None and recorded != scheme.name:
+        if recorded is not None and recorded != scheme.label:
             raise SnapshotStoreError(f"{store.path}: trajectory {name!r} was run with {recorded}, "
-                                     f"not {scheme.name}")
+                                     f"not {scheme.label}")
         dt = _recorded(store, name, attrs, "dt", dt)
         n_steps = int(_recorded(store, name, attrs, "n_steps", n_steps, must_match=False))
         if solver is None:

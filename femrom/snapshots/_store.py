@@ -153,7 +153,7 @@ class SnapshotStore(StoreReader):
             "checksums": bool(checksums),
         }
         if scheme is not None:
-            attrs["scheme"] = getattr(scheme, "name", str(scheme))
+            attrs["scheme"] = getattr(scheme, "label", str(scheme))
         if dt is not None:
             attrs["dt"] = float(dt)
         if n_steps is not None:

@@ -130,7 +130,7 @@ class SnapshotWriter:
                     n_steps=defaults.get("n_steps") if n_steps is None else n_steps,
                     dt=defaults.get("dt") if dt is None else dt,
                     scheme=defaults.get("scheme") if scheme is None else
-                    getattr(scheme, "name", str(scheme)))
+                    getattr(scheme, "label", str(scheme)))
 
         f = store._open_for_writing(self, change_layout, fsync=self.fsync)
         self._closed = False
