@@ -60,7 +60,7 @@ def comparison():
     validation = [reference_ring_down(runs[400.0], z0, 0.3, dt, label="400 N")]
     test = reference_ring_down(runs[300.0], z0, 1.0, dt, label="300 N")
     settings = RingDownComparison(ranks=(2,), models=("lopinf", "spml", "iwan"), band=(0.5 * f1, 1.6 * f1), window=0.1,
-                                  spml=SpMLConfig(max_iterations=200))
+                                  spml=SpMLConfig(max_iterations=1000))
     out = compare_ring_downs(reference, z0, training, validation, [(test, runs[300.0])], settings,
                              progress=lambda line: None)
     return {row["model"]: row for row in out["rows"]}, out
@@ -77,8 +77,9 @@ def test_spml_tracks_the_frequency_shift_that_lopinf_misses(comparison):
     # 80 % of the shift (a learner that picked up the shift would fail this)
     assert lopinf["frequency_shift_error"] > 0.8
     # SpML's learned potential softens with amplitude: its shift has the reference's sign and is within
-    # 50 % of it (measured 0.10; loose because 200 L-BFGS iterations on two trajectories are a short fit),
-    # and it beats L-OpInf's by a wide margin
+    # 50 % of it, and it beats L-OpInf's by a wide margin. The fit gets 1000 L-BFGS iterations (stopped
+    # on the validation run): with 200 its end point depended on the round-off of the machine's
+    # torch/BLAS (measured 0.10 on one machine, 0.58 on another); at 1000 it measured 0.05 here
     assert spml["frequency_shift_hz"] > 0
     assert spml["frequency_shift_error"] < 0.5
     assert spml["frequency_shift_error"] < 0.5 * lopinf["frequency_shift_error"]
