@@ -5,7 +5,7 @@
     (nor ``from femrom.x import _y``) from outside ``femrom.x``.
 (c) The modules of one subpackage import each other without cycles.
 
-The package helpers (``femrom._errors``, ``_progress``, ``_json``, ``_registry`` and the
+The package helpers (``femrom._errors``, ``_progress``, ``_json``, ``_registry``, ``_timing`` and the
 package root) sit below every layer; the command line is the top one (the case scripts,
 outside the package, sit on it).
 """
@@ -25,7 +25,7 @@ LAYERS = ("solvers", "mesh", "fem", "scene", "integrators", "snapshots", "linalg
           "rom", "control", "post", "study", "cli")
 
 #: Top-level modules usable from every layer.
-HELPERS = {"_errors", "_progress", "_json", "_registry"}
+HELPERS = {"_errors", "_progress", "_json", "_registry", "_timing"}
 
 #: Import cycles between modules of one subpackage that are known and not yet broken, each
 #: as a set of module names with the owner of its files. None now; the last two

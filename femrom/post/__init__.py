@@ -22,6 +22,7 @@ from femrom.post._impact import (
     measured_spectral_peaks,
     read_hammer_impact,
 )
+from femrom.post._metrics import relative_error
 from femrom.post._output import OutputFolderError, staged_output
 from femrom.post._plots import (
     plot_accuracy_cost,
@@ -43,6 +44,7 @@ from femrom.post._render import (
 from femrom.post._report import accuracy_cost_table, machine_description, table_section, write_metrics
 
 __all__ = [
+    "relative_error",
     "BandIntegrals", "band_limited_integrals", "band_weights", "ModalRecord", "modal_record",
            "accuracy_cost_table", "Backbone", "brb_data_dir", "default_trim", "export_prediction",
            "hilbert_backbone", "ImpactRecord", "jsonable", "machine_description", "masing_damping", "measured_backbone",

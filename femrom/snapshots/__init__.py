@@ -15,6 +15,9 @@
   mesh) streamed into a store, with femrom's own model of the data (P1 on the
   series' mesh, a mass matrix, Dirichlet dofs detected or named, tabulated inputs,
   probes); one :class:`IngestError` line naming the file and step for a bad series.
+- :func:`run_fom` -- a built model integrated under given input signals, its fields
+  streamed into a store and each step timed without the consumers (:class:`FOMRun`;
+  :func:`solver_factory`: one factorisation for all runs of one ``dt``);
 - :func:`read_rows` -- committed rows of one dataset by path, for readers
   elsewhere (Dask workers) that a store planned with
   :meth:`~SnapshotStore.column_blocks`.
@@ -49,6 +52,7 @@ from femrom.snapshots._ingest import (
 )
 from femrom.snapshots._format import DEFAULT_UNITS, FORMAT_NAME, FORMAT_VERSION
 from femrom.snapshots._resume import model_solver, resume
+from femrom.snapshots._runs import FOMRun, run_fom, solver_factory
 from femrom.snapshots._reading import read_rows
 from femrom.snapshots._recovery import recover
 from femrom.snapshots._store import SnapshotStore
@@ -60,8 +64,11 @@ __all__ = [
     "DEFAULT_UNITS",
     "FORMAT_NAME",
     "FORMAT_VERSION",
+    "FOMRun",
     "SnapshotStore",
     "recover",
+    "run_fom",
+    "solver_factory",
     "SnapshotStoreError",
     "SnapshotWriter",
     "default_chunk_steps",

@@ -124,7 +124,7 @@ from femrom.study._ring_downs import (
     reference_ring_down,
     ring_down_data,
 )
-from femrom.study._runs import FOMRun, run_fom, solver_factory
+from femrom.snapshots import FOMRun, run_fom, solver_factory
 from femrom.study._scene_run import SceneRun, scene_run
 from femrom.study._study import (
     Evaluation,
@@ -148,7 +148,7 @@ from femrom.study._study import (
 from femrom.study._canonical import SceneHamiltonianROM, check_canonical_learners, fit_canonical_rom
 from femrom.study._subsampled import every_kth, subsampled_rows, subsampled_section
 from femrom.study._sweep import SweepRun, run_sweep, run_sweep_point, sweep_runs
-from femrom.study._timing import Cost, blocked_cost, call_cost, repeated_cost, repeated_costs
+from femrom._timing import Cost, blocked_cost, call_cost, repeated_cost, repeated_costs
 
 #: The old name of :data:`EXTRAPOLATION_LEARNER_NAMES`, importable until the case scripts use the
 #: new one; not part of ``__all__``.

@@ -34,7 +34,7 @@ from femrom.inference import CanonicalOpInf, HamiltonianOpInf, reduce_canonical_
 from femrom.integrators import integrate_canonical
 from femrom.rom import FirstOrderROM, HamiltonianROM
 from femrom.study._metrics import invariant_drift
-from femrom.study._timing import Cost, repeated_cost, repeated_costs
+from femrom._timing import Cost, repeated_cost, repeated_costs
 
 #: The models a :class:`CanonicalSpec` can name.
 CANONICAL_LEARNERS = ("galerkin", "hopinf", "canonical_opinf")

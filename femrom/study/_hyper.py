@@ -17,7 +17,7 @@ from __future__ import annotations
 
 from femrom.rom import HyperReducedPotential, SecondOrderROM, ecsw_weights
 from femrom.study._histories import extra_rom_rows
-from femrom.study._timing import call_cost
+from femrom._timing import call_cost
 
 #: what a hyper-reduced row adds to a study's row: samples, the ECSW fit, seconds per call of
 #: the sampled force and tangent and of the unsampled (projected) ones, the learner's step

@@ -8,7 +8,7 @@ import numpy as np
 
 from femrom._errors import FemromValueError
 from femrom.study._metrics import relative_error
-from femrom.study._runs import FOMRun, run_fom
+from femrom.snapshots import FOMRun, run_fom
 
 ERRORS = ("frobenius", "max")
 

@@ -35,7 +35,7 @@ from femrom.rom import StateSpaceROM
 from femrom.scene import Derivatives, LearnerSpec
 from femrom.study._metrics import relative_error
 from femrom.study._study import fit_rom
-from femrom.study._timing import repeated_costs
+from femrom._timing import repeated_costs
 
 #: a free response may exceed the driven peak by this relative margin (round-off of a marginal mode)
 GROWTH_TOLERANCE = 1e-6

@@ -35,8 +35,8 @@ from femrom.rom import SecondOrderROM
 from femrom.scene import RomConfig, SceneError
 from femrom.study._canonical import canonical_operator_checks, fit_canonical_rom, is_canonical
 from femrom.study._metrics import Projection, energy_ratio, project_run, relative_error
-from femrom.study._runs import FOMRun, run_fom, solver_factory
-from femrom.study._timing import Cost, repeated_costs
+from femrom.snapshots import FOMRun, run_fom, solver_factory
+from femrom._timing import Cost, repeated_costs
 
 GALERKIN = "galerkin"
 #: a ROM has blown up once its energy exceeds this multiple of its initial energy

@@ -27,7 +27,7 @@ from pathlib import Path
 from femrom._errors import FemromValueError
 from femrom.post import write_metrics
 from femrom.snapshots import SnapshotStore, SnapshotStoreError
-from femrom.study._runs import run_fom
+from femrom.snapshots import run_fom
 
 #: paths that change only the input signals (the built model can be reused)
 _SIGNAL_PATHS = ("inputs.",)

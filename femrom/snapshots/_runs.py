@@ -1,4 +1,4 @@
-"""Full-order runs of a study: one built model, several input signals, fields streamed to one store."""
+"""Full-order runs: one built model, several input signals, fields streamed to one snapshot store."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ from femrom._errors import FemromValueError
 from femrom.integrators import StepClock, simulate
 from femrom.scene import Signal, SignalVector
 from femrom.solvers import SolverCache, make_solver
-from femrom.study._timing import Cost, blocked_cost
+from femrom._timing import Cost, blocked_cost
 
 
 @dataclass(frozen=True, eq=False)
