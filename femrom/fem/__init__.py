@@ -25,6 +25,7 @@ from femrom.fem._interface_law import (
     interface_law,
     interface_law_from_parameters,
     radial_return,
+    slider_return,
     register_interface_law,
 )
 from femrom.fem._joint import JointForce, interface_frames, relative_displacement_map
@@ -52,7 +53,7 @@ __all__ = [
     "DENSITIES", "FORCES", "INTERFACE_LAWS", "ClampedFrictionLaw", "ClampedIwanLaw", "clamped_iwan_state", "clamped_state", "Condensation", "DryFrictionLaw", "ElementMaterial", "ForceSum", "InterfaceLaw",
     "IwanLaw", "JenkinsForce", "JenkinsLaw", "JointForce", "LineSpace", "LocalPotential", "NonlinearForce",
     "ParallelSliderLaw", "QuarticPotential", "SolidSpace", "SpaceError", "TransformedForce", "dense_projection", "transform_force", "force_from_parameters",
-    "interface_frames", "interface_law", "interface_law_from_parameters", "radial_return",
+    "interface_frames", "interface_law", "interface_law_from_parameters", "radial_return", "slider_return",
     "register_force", "register_interface_law", "relative_displacement_map", "selection_map", "sum_of_forces",
     "average_rows", "axial_stiffness", "bending_stiffness", "dirichlet_dofs", "elasticity_stiffness",
     "hrz_lumped", "lame_parameters", "line_basis", "line_mass", "nearest_node_rows", "point_load", "probe_rows",

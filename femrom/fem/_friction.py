@@ -21,6 +21,7 @@ from __future__ import annotations
 import numpy as np
 
 from femrom._errors import FemromValueError
+from femrom.fem._interface_law import slider_return
 from femrom.fem._nonlinear import NonlinearForce, register_force
 
 
@@ -64,10 +65,10 @@ class JenkinsForce(NonlinearForce):
         return self.stiffness * (x - z)
 
     def local_force(self, x, xdot=None, state=None):
-        return np.clip(self._trial(x, state), -self.slip_force, self.slip_force)
+        return slider_return(self._trial(x, state), self.slip_force)[0]
 
     def local_tangent(self, x, xdot=None, state=None):
-        sticking = np.abs(self._trial(x, state)) < self.slip_force
+        sticking = slider_return(self._trial(x, state), self.slip_force)[1]
         return np.where(sticking, self.stiffness, 0.0), None
 
     def local_commit(self, x, xdot, state):

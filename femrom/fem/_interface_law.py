@@ -79,6 +79,19 @@ def check_parameters(law, rules) -> None:
         object.__setattr__(law, name, int(value) if kinds.get(name) in (int, "int") else value)
 
 
+def slider_return(trial, limit):
+    r"""Return map of 1-D Coulomb sliders: ``t = clip(t^tr, -tau, tau)``, and where they stick (``|t^tr| < tau``).
+
+    The one return map of a Jenkins element along one direction, whatever its units:
+    a spring force ``k (x - z)`` against a slip force (:class:`~femrom.fem.JenkinsForce`),
+    a spring stretch ``e + dx`` against a slip stretch (a learned slider). Its 2-D
+    (isotropic) form is :func:`radial_return`. ``trial`` and ``limit`` broadcast.
+    Returns ``(t, sticking)``: the returned values and a bool array.
+    """
+    trial = np.asarray(trial, dtype=float)
+    return np.clip(trial, -limit, limit), np.abs(trial) < limit
+
+
 def radial_return(trial: np.ndarray, limit: np.ndarray):
     r"""Return map of isotropic 2-D Coulomb sliders: the trial traction projected onto ``|t| <= limit``.
 

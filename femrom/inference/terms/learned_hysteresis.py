@@ -7,6 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from femrom._errors import FemromValueError
+from femrom.fem import slider_return
 from femrom.inference._terms import ReducedTerm, register_term
 
 
@@ -37,10 +38,10 @@ def slider_stretches(x: np.ndarray, thresholds: np.ndarray, starts=(0,), *, init
     E = np.empty((phi.size, x.size))
     bounds = list(starts) + [x.size]
     for begin, end in zip(bounds[:-1], bounds[1:]):
-        e = np.clip(x[begin], -phi, phi) if initial is None else np.clip(np.asarray(initial, float), -phi, phi)
+        e = slider_return(x[begin] if initial is None else np.asarray(initial, float), phi)[0]
         E[:, begin] = e
         for k in range(begin + 1, end):
-            e = np.clip(e + (x[k] - x[k - 1]), -phi, phi)
+            e = slider_return(e + (x[k] - x[k - 1]), phi)[0]
             E[:, k] = e
     return E
 
@@ -117,7 +118,7 @@ class LearnedHysteresis(ReducedTerm):
     def loaded_state(self, q) -> SliderState:
         """The state after a monotone loading from rest to ``q`` (r,)."""
         x = float(self.direction @ q)
-        return SliderState(np.clip(x, -self.thresholds, self.thresholds), x)
+        return SliderState(slider_return(x, self.thresholds)[0], x)
 
     def state_after(self, Q: np.ndarray) -> SliderState:
         """The state after the history ``Q`` (r, K) (loaded from rest to its first column)."""
@@ -127,7 +128,7 @@ class LearnedHysteresis(ReducedTerm):
     def _trial(self, q, state) -> np.ndarray:
         state = self.initial_state() if state is None else state
         x = float(self.direction @ q)
-        return np.clip(state.stretch + (x - state.coordinate), -self.thresholds, self.thresholds), state
+        return slider_return(state.stretch + (x - state.coordinate), self.thresholds)[0], state
 
     def commit(self, q, v, state) -> SliderState:
         stretch, _ = self._trial(q, state)
@@ -150,7 +151,7 @@ class LearnedHysteresis(ReducedTerm):
         """``((sum of the stuck sliders' k_i) a a^T, None)``."""
         state = self.initial_state() if state is None else state
         x = float(self.direction @ q)
-        stuck = np.abs(state.stretch + (x - state.coordinate)) < self.thresholds
+        stuck = slider_return(state.stretch + (x - state.coordinate), self.thresholds)[1]
         return float(self.weights[stuck].sum()) * np.outer(self.direction, self.direction), None
 
     def forces(self, Q: np.ndarray, Vel=None, starts=(0,)) -> np.ndarray:
