@@ -47,7 +47,6 @@ from femrom.integrators._driver import (
     iterate,
 )
 from femrom.integrators._hamiltonian import (
-    CANONICAL_SCHEMES,
     CanonicalSystem,
     CanonicalTrajectory,
     integrate_canonical,
@@ -89,7 +88,7 @@ __all__ = [
     "ConditioningError",
     "ConditioningWarning",
     "check_conditioning",
-    "CANONICAL_SCHEMES", "NEWTON_METHODS", "SCHEMES", "CanonicalSystem", "CanonicalTrajectory",
+    "NEWTON_METHODS", "SCHEMES", "CanonicalSystem", "CanonicalTrajectory",
     "CentralDifference", "ConvergenceError", "DiscreteGradient", "EnergyBalance", "EnergyRecorder", "GeneralizedAlpha", "ImplicitMidpoint",
     "ImplicitSolve", "Integration", "IntegrationError", "IntegrationSummary", "MaxFrequency", "Newmark",
     "NewmarkAverageAcceleration", "Newton", "OutputRecorder", "SimulationResult", "StepClock", "StepResult",

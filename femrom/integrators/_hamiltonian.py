@@ -45,9 +45,7 @@ from threadpoolctl import threadpool_limits
 
 from femrom._errors import FemromValueError
 from femrom.integrators._newton import ConvergenceError, Newton
-
-#: Schemes of :func:`integrate_canonical`.
-CANONICAL_SCHEMES = ("midpoint", "avf")
+from femrom.integrators._scheme import time_scheme
 
 
 def _block(h, m: int):
@@ -203,7 +201,9 @@ def integrate_canonical(system: CanonicalSystem, q0: np.ndarray, p0: np.ndarray,
     q0, p0 : (m,) ndarray
     dt : float
     n_steps : int
-    scheme : {"midpoint", "avf"}
+    scheme : str or Scheme
+        A registered canonical scheme with a quadrature of the gradient along the step
+        (``"midpoint"``: implicit midpoint; ``"avf"``: the discrete gradient).
     newton : Newton
         Tolerances and the iteration limit of each step.
     quadrature : int
@@ -213,15 +213,11 @@ def integrate_canonical(system: CanonicalSystem, q0: np.ndarray, p0: np.ndarray,
     -------
     CanonicalTrajectory
     """
-    if scheme not in CANONICAL_SCHEMES:
-        raise FemromValueError(f"unknown canonical scheme {scheme!r}; valid: {CANONICAL_SCHEMES}")
+    step = time_scheme(scheme)
+    step.check_kind("canonical")
+    nodes, weights = step.canonical_nodes(int(quadrature))
     h = float(dt)
     m = system.m
-    if scheme == "midpoint":
-        nodes, weights = np.array([0.5]), np.array([1.0])
-    else:
-        x, w = np.polynomial.legendre.leggauss(int(quadrature))
-        nodes, weights = 0.5 * (x + 1.0), 0.5 * w
     Y = np.empty((2 * m, n_steps + 1))
     Y[:, 0] = np.concatenate([np.asarray(q0, float), np.asarray(p0, float)])
     iterations = np.zeros(n_steps, dtype=int)

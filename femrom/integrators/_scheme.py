@@ -28,6 +28,13 @@ anywhere else decorated with :func:`register_scheme`. It declares
 - :meth:`Scheme.step_map`: for a linear model with dense operators, the
   precomputed map ``x_{k+1} = A x_k + G F_{k+theta}`` on ``x = [q; v; a]`` (or
   ``[q; v]``), which the reduced fast path and the discrete state space use.
+
+A scheme that also steps canonical Hamiltonian models (``H = q^T D_q q / 2 + p^T D_p p
+/ 2 + H_nl``, :class:`~femrom.integrators.CanonicalSystem`, the Hamiltonian ROMs) gives
+:meth:`Scheme.canonical_step_matrix` (the linear step of a separable quadratic ``H``) and,
+when it takes a non-separable ``H_nl``, :meth:`Scheme.canonical_nodes` (the quadrature of
+the gradient along the step: the midpoint rule, the average vector field); one that steps
+first-order models ``y' = f(y)`` gives :meth:`Scheme.first_order_step`.
 """
 
 from __future__ import annotations
@@ -43,8 +50,9 @@ import scipy.sparse as sp
 from femrom._errors import FemromValueError
 from femrom._registry import Registry
 
-#: The kinds of model a scheme can declare.
-MODEL_KINDS = ("second_order",)
+#: The kinds of model a scheme can declare: second-order ``M q'' + C q' + K q + f = F``, canonical
+#: Hamiltonian ``y' = J grad H(y)`` (``y = [q; p]``), first-order ``y' = A y + F(y)``.
+MODEL_KINDS = ("second_order", "canonical", "first_order")
 
 
 class _Schemes(Registry):
@@ -160,7 +168,8 @@ class Scheme:
         return None
 
     def check(self, system) -> None:
-        """Raise :class:`~femrom.FemromValueError` with :meth:`supports`'s reason."""
+        """Raise :class:`~femrom.FemromValueError` with :meth:`supports`'s reason (a second-order model)."""
+        self.check_kind("second_order")
         reason = self.supports(system)
         if reason is not None:
             raise FemromValueError(f"scheme {self.name!r} cannot step this model: {reason}")
@@ -223,6 +232,28 @@ class Scheme:
     def check_step(self, parts: LinearParts, dt: float) -> None:
         """Raise if ``dt`` is not allowed for these dense parts (an explicit scheme's bound)."""
 
+    # -- canonical and first-order models --------------------------------------------------
+    def check_kind(self, kind: str) -> None:
+        """Raise unless the scheme steps models of ``kind`` (:data:`MODEL_KINDS`)."""
+        if kind not in self.models:
+            valid = ", ".join(name for name, cls in registered_schemes().items() if kind in cls.models)
+            raise FemromValueError(f"scheme {self.name!r} does not step {kind.replace('_', '-')} models; "
+                                   f"valid: {valid}")
+
+    def canonical_step_matrix(self, position: np.ndarray, momentum: np.ndarray, dt: float) -> np.ndarray:
+        """(2r, 2r) ``S``: ``[q; p]_{k+1} = S [q; p]_k`` for ``H = q^T D_q q / 2 + p^T D_p p / 2``."""
+        raise FemromValueError(f"scheme {self.name!r} does not step canonical models")
+
+    def canonical_nodes(self, quadrature: int = 2) -> tuple[np.ndarray, np.ndarray]:
+        """``(nodes, weights)`` on [0, 1] of the gradient's quadrature along a step (an implicit
+        canonical scheme for a non-separable ``H``)."""
+        raise FemromValueError(f"scheme {self.name!r} needs a separable Hamiltonian; with a potential "
+                               f"coupling q and p use one of implicit_midpoint (midpoint), discrete_gradient (avf)")
+
+    def first_order_step(self, rhs, jacobian, y: np.ndarray, h: float, newton) -> np.ndarray:
+        """``y_{k+1}`` of ``y' = rhs(y)`` from ``y`` (``jacobian(y)`` (s, s) for an implicit scheme)."""
+        raise FemromValueError(f"scheme {self.name!r} does not step first-order models")
+
 
 def register_scheme(cls: type[Scheme]) -> type[Scheme]:
     """Class decorator: the scheme is known by ``cls.name`` (and its ``aliases``)."""
@@ -255,8 +286,9 @@ def time_scheme(name, **options) -> Scheme:
 
 
 def scheme_for(time_config) -> Scheme:
-    """The scheme a scene's ``[time]`` names; one clear error for an unknown name."""
+    """The scheme a scene's ``[time]`` names (one that steps second-order models); one clear error otherwise."""
     name = time_config.integrator
-    if name not in SCHEMES:
-        raise FemromValueError(f"unknown integrator {name!r} in [time]; valid: {', '.join(SCHEMES.items())}")
+    valid = [key for key, cls in SCHEMES.items().items() if "second_order" in cls.models]
+    if name not in SCHEMES or "second_order" not in SCHEMES.get(name).models:
+        raise FemromValueError(f"unknown integrator {name!r} in [time]; valid: {', '.join(valid)}")
     return SCHEMES.get(name).from_config(time_config)

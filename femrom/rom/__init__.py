@@ -40,13 +40,11 @@
 """
 
 from femrom.rom._base import LazyFields, ReducedModel, uniform_step
-from femrom.rom._first_order import FIRST_ORDER_SCHEMES, FirstOrderROM
+from femrom.rom._first_order import FirstOrderROM
 from femrom.rom._hamiltonian import (
-    HAMILTONIAN_SCHEMES,
     HamiltonianROM,
     HamiltonianSolution,
     HamiltonianStepper,
-    hamiltonian_step_matrix,
 )
 from femrom.rom._identified import StateSpaceROM, StateSpaceSolution
 from femrom.rom._hyper import HyperReducedPotential, ecsw_weights, sparse_nnls
@@ -56,10 +54,10 @@ from femrom.rom._selection import RegularizationScore, select_regularization
 from femrom.rom._statespace import DiscreteStateSpace, StateSpaceStepper
 
 __all__ = [
-    "FIRST_ORDER_SCHEMES", "HAMILTONIAN_SCHEMES", "DiscreteStateSpace", "FirstOrderROM", "HamiltonianROM", "HamiltonianSolution", "HamiltonianStepper",
+    "DiscreteStateSpace", "FirstOrderROM", "HamiltonianROM", "HamiltonianSolution", "HamiltonianStepper",
     "HyperReducedPotential", "JointSampling", "LazyFields", "ReducedModel",
     "ReducedSolution", "RegularizationScore", "SecondOrderROM", "StateSpaceROM",
     "StateSpaceSolution", "StateSpaceStepper",
-    "ecsw_joint", "ecsw_weights", "hamiltonian_step_matrix", "hyper_reduced_system",
+    "ecsw_joint", "ecsw_weights", "hyper_reduced_system",
     "select_regularization", "sparse_nnls", "uniform_step",
 ]

@@ -9,9 +9,9 @@ With ``y = [q^; p^]`` (2r,), a learned ``A^`` (2r, 2r) without structure
     \dot y = \hat A y + \begin{bmatrix} \Phi^\top \partial_p H_{nl} \\ -\Phi^\top \partial_q H_{nl}
              \end{bmatrix}(\Phi \hat q, \Phi \hat p),
 
-stepped by
+stepped by a registered first-order scheme:
 
-- ``"midpoint"``: ``y_1 = y_0 + h f((y_0 + y_1) / 2)``, Newton from the explicit Euler
+- ``"midpoint"`` (implicit midpoint): ``y_1 = y_0 + h f((y_0 + y_1) / 2)``, Newton from the explicit Euler
   predictor with the tolerance of :func:`femrom.integrators.integrate_canonical`, so
   that a baseline and a Hamiltonian ROM compared under it differ only in their
   operators (for ``A^ = [[0, D^_p], [-D^_q, 0]]`` it retraces the Hamiltonian ROM's
@@ -25,18 +25,15 @@ ends the run: the remaining columns are NaN (a blow-up, reported, not raised).
 from __future__ import annotations
 
 import time
-import types
 
 import numpy as np
 
 from femrom._errors import FemromValueError
 from femrom.inference import ProjectedPotential
-from femrom.integrators import ConvergenceError, Newton, solve_newton
+from femrom.integrators import ConvergenceError, Newton, time_scheme
 from femrom.rom._base import ReducedModel, uniform_step
 from femrom.rom._hamiltonian import HamiltonianSolution
 
-#: The schemes of :class:`FirstOrderROM`.
-FIRST_ORDER_SCHEMES = ("midpoint", "rk4")
 
 #: A state beyond this multiple of ``max(||y_0||, 1)`` has blown up.
 BLOWUP_FACTOR = 1e3
@@ -55,15 +52,15 @@ class FirstOrderROM(ReducedModel):
         The known ``H_nl`` (``gradient``, ``hessian`` on full states).
     learner : CanonicalOpInf, optional
         What :meth:`fit` uses.
-    scheme : {"midpoint", "rk4"}
+    scheme : str
+        A registered scheme of first-order models (``"midpoint"``, ``"rk4"``).
     newton : Newton
         Tolerances of the midpoint rule's Newton iteration.
     """
 
     def __init__(self, operator: np.ndarray | None = None, basis: np.ndarray | None = None, potential=None, *,
                  learner=None, scheme: str = "midpoint", newton: Newton = Newton(rtol=1e-12)):
-        if scheme not in FIRST_ORDER_SCHEMES:
-            raise FemromValueError(f"unknown scheme {scheme!r}; valid: {FIRST_ORDER_SCHEMES}")
+        time_scheme(scheme).check_kind("first_order")
         if potential is not None and basis is None:
             raise FemromValueError("a known potential is evaluated through the basis: give basis")
         self.operators_ = None if operator is None else np.asarray(operator, dtype=float)
@@ -112,8 +109,8 @@ class FirstOrderROM(ReducedModel):
         ``blowup_step`` (``None``: finite throughout).
         """
         scheme = self.scheme if scheme is None else scheme
-        if scheme not in FIRST_ORDER_SCHEMES:
-            raise FemromValueError(f"unknown scheme {scheme!r}; valid: {FIRST_ORDER_SCHEMES}")
+        stepper = time_scheme(scheme)
+        stepper.check_kind("first_order")
         times, h = uniform_step(times)
         q0, p0 = self.canonical_initial(initial, inputs)
         y0 = np.concatenate([q0, p0])
@@ -121,7 +118,8 @@ class FirstOrderROM(ReducedModel):
         Y = np.full((y0.size, n_steps + 1), np.nan)
         Y[:, 0] = y0
         limit = BLOWUP_FACTOR * max(np.linalg.norm(y0), 1.0)
-        step = self._midpoint_step if scheme == "midpoint" else self._rk4_step
+        def step(y, h):
+            return stepper.first_order_step(self.rhs, self.jacobian, y, h, self.newton)
         tic = time.perf_counter()
         last = n_steps
         y = y0.copy()
@@ -142,24 +140,3 @@ class FirstOrderROM(ReducedModel):
         info = {"scheme": scheme, "dt": h, "n_steps": n_steps, "stepping_seconds": seconds,
                 "seconds_per_step": seconds / max(last, 1), "blowup_step": None if last == n_steps else last + 1}
         return HamiltonianSolution(t=times, q=Y[:r], p=Y[r:], hamiltonian=None, basis=self.basis, info=info)
-
-    def _midpoint_step(self, y: np.ndarray, h: float) -> np.ndarray:
-        identity = np.eye(y.size)
-
-        def residual(y1):
-            fm = self.rhs(0.5 * (y + y1))
-            return y1 - y - h * fm, np.linalg.norm(y) + h * np.linalg.norm(fm)
-
-        def dense_solver(J, spd=False):
-            return types.SimpleNamespace(solve=lambda b: np.linalg.solve(J, b))
-
-        y1, _ = solve_newton(residual, lambda y1: identity - 0.5 * h * self.jacobian(0.5 * (y + y1)),
-                             y + h * self.rhs(y), dense_solver, self.newton)
-        return y1
-
-    def _rk4_step(self, y: np.ndarray, h: float) -> np.ndarray:
-        k1 = self.rhs(y)
-        k2 = self.rhs(y + 0.5 * h * k1)
-        k3 = self.rhs(y + 0.5 * h * k2)
-        k4 = self.rhs(y + h * k3)
-        return y + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)

@@ -47,15 +47,9 @@ import scipy.linalg as sl
 from femrom._errors import FemromTypeError, FemromValueError
 from femrom._json import dumps
 from femrom.inference import CanonicalData, HamiltonianOperators, HamiltonianOpInf, ProjectedPotential
-from femrom.integrators import CANONICAL_SCHEMES, CanonicalSystem, Newton, integrate_canonical, run_linear
+from femrom.integrators import CanonicalSystem, Newton, integrate_canonical, run_linear, time_scheme
 from femrom.rom._base import LazyFields, ReducedModel, uniform_step
 from femrom.rom._statespace import DiscreteStateSpace
-
-#: Symplectic schemes for Hamiltonian ROMs.
-HAMILTONIAN_SCHEMES = ("symplectic_euler_a", "symplectic_euler_b", "verlet", "midpoint")
-
-#: What :meth:`HamiltonianROM.predict` accepts without a potential (``"avf"`` = midpoint there).
-_LINEAR_SCHEMES = HAMILTONIAN_SCHEMES + ("avf",)
 
 #: Largest ``max |Phi^T Phi - I|`` accepted for a cotangent lift: SVD bases are
 #: orthonormal to ~1e-15 sqrt(n), randomized ones to ~1e-12; beyond 1e-8 the
@@ -63,39 +57,19 @@ _LINEAR_SCHEMES = HAMILTONIAN_SCHEMES + ("avf",)
 _ORTHONORMALITY = 1e-8
 
 
-def _kick(ops, h, c):
-    """``p -= c h D_q q``."""
-    r = ops.r
-    return np.block([[np.eye(r), np.zeros((r, r))], [-c * h * ops.position, np.eye(r)]])
+def canonical_scheme(name, potential: bool):
+    """The registered scheme ``name`` for a canonical model (with a non-separable potential: one
+    with a quadrature of the gradient along the step); one clear error otherwise."""
+    scheme = time_scheme(name)
+    scheme.check_kind("canonical")
+    if potential:
+        scheme.canonical_nodes()            # raises for a scheme that needs a separable H
+    return scheme
 
 
-def _drift(ops, h, c):
-    """``q += c h D_p p``."""
-    r = ops.r
-    return np.block([[np.eye(r), c * h * ops.momentum], [np.zeros((r, r)), np.eye(r)]])
-
-
-def _midpoint(ops, h):
-    r = ops.r
-    A = np.block([[np.zeros((r, r)), ops.momentum], [-ops.position, np.zeros((r, r))]])
-    return sl.solve(np.eye(2 * r) - 0.5 * h * A, np.eye(2 * r) + 0.5 * h * A)
-
-
-#: The (2r, 2r) step matrix of each linear symplectic scheme, by name.
-_STEP_MATRICES = {
-    "symplectic_euler_a": lambda ops, h: _kick(ops, h, 1.0) @ _drift(ops, h, 1.0),
-    "symplectic_euler_b": lambda ops, h: _drift(ops, h, 1.0) @ _kick(ops, h, 1.0),
-    "verlet": lambda ops, h: _kick(ops, h, 0.5) @ _drift(ops, h, 1.0) @ _kick(ops, h, 0.5),
-    "midpoint": _midpoint,
-    "avf": _midpoint,     # the average of a linear gradient is its midpoint value
-}
-
-
-def hamiltonian_step_matrix(ops: HamiltonianOperators, dt: float, scheme: str) -> np.ndarray:
-    """(2r, 2r) ndarray ``S`` with ``[q; p]_{k+1} = S [q; p]_k`` (``"avf"``: the midpoint rule)."""
-    if scheme not in _STEP_MATRICES:
-        raise FemromValueError(f"unknown Hamiltonian scheme {scheme!r}; valid: {_LINEAR_SCHEMES}")
-    return _STEP_MATRICES[scheme](ops, float(dt))
+def hamiltonian_step_matrix(ops: HamiltonianOperators, dt: float, scheme) -> np.ndarray:
+    """(2r, 2r) ndarray ``S`` with ``[q; p]_{k+1} = S [q; p]_k`` of a registered canonical scheme."""
+    return canonical_scheme(scheme, False).canonical_step_matrix(ops.position, ops.momentum, float(dt))
 
 
 @dataclass(frozen=True, eq=False)
@@ -188,9 +162,7 @@ class HamiltonianROM(ReducedModel):
                  output_matrix: np.ndarray | None = None, scheme: str = "midpoint"):
         if potential is not None and basis is None:
             raise FemromValueError("a known potential is evaluated through the basis: give basis")
-        valid = CANONICAL_SCHEMES if potential is not None else _LINEAR_SCHEMES
-        if scheme not in valid:
-            raise FemromValueError(f"unknown scheme {scheme!r} for this model; valid: {valid}")
+        canonical_scheme(scheme, potential is not None)
         self.basis = None if basis is None else np.asarray(basis, dtype=float)
         if operators is not None and self.basis is not None and self.basis.shape[1] != operators.r:
             raise FemromValueError(f"basis has {self.basis.shape[1]} columns, operators have r = {operators.r}")
@@ -329,7 +301,8 @@ class HamiltonianROM(ReducedModel):
         scheme : str, optional
             Default: the model's ``scheme``. Without a potential one precomputed
             (2r, 2r) step matrix (:func:`hamiltonian_step_matrix`); with one,
-            :func:`femrom.integrators.integrate_canonical` (``"midpoint"``, ``"avf"``).
+            :func:`femrom.integrators.integrate_canonical` (``"midpoint"``, ``"avf"``: the registered
+            schemes with a quadrature of the gradient).
 
         Returns
         -------
@@ -344,16 +317,12 @@ class HamiltonianROM(ReducedModel):
         info = {"scheme": scheme, "dt": h, "n_steps": n_steps}
         tic = time.perf_counter()
         if self.potential_ is not None:
-            if scheme not in CANONICAL_SCHEMES:
-                raise FemromValueError(f"scheme {scheme!r} needs a separable Hamiltonian; with a potential "
-                                 f"coupling q and p use one of {CANONICAL_SCHEMES}")
+            canonical_scheme(scheme, True)
             tr = integrate_canonical(self.system_, q0, p0, h, n_steps, scheme, self.newton)
             self.last_trajectory_ = tr
             Q, P, H = tr.q, tr.p, tr.hamiltonian
             info.update(stepping_seconds=tr.seconds, newton_iterations=int(tr.iterations.sum()))
         else:
-            if scheme not in _LINEAR_SCHEMES:
-                raise FemromValueError(f"unknown Hamiltonian scheme {scheme!r}; valid: {_LINEAR_SCHEMES}")
             S = hamiltonian_step_matrix(ops, h, scheme)
             loop = {}
             X = run_linear(S, np.concatenate([q0, p0]), n_steps, None, timing=loop)
@@ -508,9 +477,7 @@ class HamiltonianStepper:
         self.rom, self.dt, self.scheme = rom, dt, scheme
         self.q, self.p, self.t = np.array(q0, dtype=float), np.array(p0, dtype=float), 0.0
         self._S = None if rom.potential_ is not None else hamiltonian_step_matrix(rom._ops(), dt, scheme)
-        if rom.potential_ is not None and scheme not in CANONICAL_SCHEMES:
-            raise FemromValueError(f"scheme {scheme!r} needs a separable Hamiltonian; with a potential use one of "
-                             f"{CANONICAL_SCHEMES}")
+        canonical_scheme(scheme, rom.potential_ is not None)
 
     @property
     def outputs(self) -> np.ndarray:

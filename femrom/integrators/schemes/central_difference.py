@@ -41,6 +41,7 @@ import scipy.sparse as sp
 from femrom._errors import FemromValueError
 from femrom.integrators._scheme import Scheme, dense_model, register_scheme
 from femrom.integrators._stability import bound_max_frequency, central_difference_bound
+from femrom.integrators.schemes._canonical import drift, kick
 from femrom.solvers import is_diagonal
 
 
@@ -81,6 +82,7 @@ class CentralDifference(Scheme):
     name = "central_difference"
     aliases = ("verlet",)
     order = 2
+    models = ("second_order", "canonical")
     input_time = 1.0
 
     @property
@@ -180,6 +182,11 @@ class CentralDifference(Scheme):
         v1 = v_half + (0.5 * h) * a1
         state1 = state if system.nonlinear is None else system.nonlinear.commit(q1, v1, state)
         return q1, v1, a1, state1, 0
+
+    def canonical_step_matrix(self, position, momentum, dt):
+        """Stoermer-Verlet of a separable ``H``: half kick, drift, half kick."""
+        h = float(dt)
+        return kick(position, h, 0.5) @ drift(momentum, h, 1.0) @ kick(position, h, 0.5)
 
     def step_map(self, parts, dt, forcing):
         """``x = [q; v; a]``: ``q_{n+1} = P_q x``, ``(M + h C / 2) a_{n+1} = F - K q_{n+1} - C v_{n+1/2}``."""

@@ -32,6 +32,7 @@ import scipy.sparse as sp
 
 from femrom.integrators._newton import Newton, newton_loop
 from femrom.integrators._scheme import Scheme, register_scheme
+from femrom.integrators.schemes._canonical import midpoint_step_matrix
 from femrom.integrators.schemes.implicit_midpoint import ImplicitMidpoint, end_acceleration
 from femrom.integrators.schemes.newmark import newmark_frequencies, trapezoidal_inverse
 
@@ -129,7 +130,9 @@ class DiscreteGradient(Scheme):
     newton: Newton = Newton()
 
     name = "discrete_gradient"
+    aliases = ("avf",)
     order = 2
+    models = ("second_order", "canonical")
     input_time = 0.5
     carries_acceleration = False
 
@@ -217,3 +220,14 @@ class DiscreteGradient(Scheme):
 
     def step_map(self, parts, dt, forcing):
         return ImplicitMidpoint().step_map(parts, dt, forcing)
+
+    def canonical_step_matrix(self, position, momentum, dt):
+        """The average of a linear gradient is its midpoint value: the midpoint rule."""
+        return midpoint_step_matrix(position, momentum, float(dt))
+
+    def canonical_nodes(self, quadrature=2):
+        r"""Gauss-Legendre nodes and weights on [0, 1]: the average vector field ``int_0^1 grad H(y_0 + s
+        (y_1 - y_0)) ds`` (Quispel & McLaren 2008), exact when ``grad H`` is a polynomial of degree
+        ``<= 2 quadrature - 1`` along the step (the cubic NLS gradient needs 2): ``H`` kept exactly."""
+        x, w = np.polynomial.legendre.leggauss(int(quadrature))
+        return 0.5 * (x + 1.0), 0.5 * w

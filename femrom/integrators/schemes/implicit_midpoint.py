@@ -30,8 +30,9 @@ import numpy as np
 import scipy.sparse as sp
 
 from femrom.integrators._implicit import ImplicitSolve
-from femrom.integrators._newton import Newton
+from femrom.integrators._newton import Newton, newton_loop
 from femrom.integrators._scheme import Scheme, register_scheme, solve_matrix
+from femrom.integrators.schemes._canonical import midpoint_step_matrix
 from femrom.integrators.schemes.newmark import newmark_frequencies, trapezoidal_inverse
 
 
@@ -80,6 +81,7 @@ class ImplicitMidpoint(Scheme):
     name = "implicit_midpoint"
     aliases = ("midpoint",)
     order = 2
+    models = ("second_order", "canonical", "first_order")
     input_time = 0.5
     carries_acceleration = False
 
@@ -133,6 +135,24 @@ class ImplicitMidpoint(Scheme):
         if self.accelerations:
             a1 = end_acceleration(system, cache.mass_solver, force_end, q1, v1, state1)
         return q1, v1, a1, state1, iterations
+
+    def canonical_step_matrix(self, position, momentum, dt):
+        return midpoint_step_matrix(position, momentum, float(dt))
+
+    def canonical_nodes(self, quadrature=2):
+        """The gradient at the step's midpoint (symplectic; every quadratic invariant kept)."""
+        return np.array([0.5]), np.array([1.0])
+
+    def first_order_step(self, rhs, jacobian, y, h, newton):
+        """Newton on ``y_1 - y - h f((y + y_1) / 2) = 0`` from the explicit Euler predictor."""
+        identity = np.eye(y.size)
+
+        def evaluate(y1):
+            fm = rhs(0.5 * (y + y1))
+            J = identity - 0.5 * h * jacobian(0.5 * (y + y1))
+            return y1 - y - h * fm, np.linalg.norm(y) + h * np.linalg.norm(fm), lambda r: np.linalg.solve(J, r)
+
+        return newton_loop(evaluate, y + h * rhs(y), newton)[0]
 
     def step_map(self, parts, dt, forcing):
         """``x = [q; v]``: ``S v_m = M v - h K q / 2 + h F_{k+1/2} / 2``, ``q_{k+1} = q + h v_m``,
