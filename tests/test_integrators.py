@@ -14,7 +14,6 @@ from femrom.integrators import (
     ImplicitMidpoint,
     IntegrationError,
     Newmark,
-    NewmarkAverageAcceleration,
     Newton,
     OutputRecorder,
     StepResult,
@@ -148,7 +147,7 @@ def test_central_difference_with_lagged_damping_is_first_order():
 
 
 def test_newmark_names_and_parameters():
-    assert NewmarkAverageAcceleration() == Newmark()
+    assert Newmark(beta=0.25, gamma=0.5) == Newmark()
     assert Newmark().label == "NewmarkAverageAcceleration" and Newmark().order == 2
     assert Newmark().name == "newmark" and GeneralizedAlpha(0.5).name == "generalized_alpha"
     assert Newmark(gamma=0.6, beta=0.3).order == 1  # gamma != 1/2 is first order

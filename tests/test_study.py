@@ -361,7 +361,7 @@ def test_a_disturbance_falls_on_every_entry_alike():
 
 def test_step_clock_excludes_the_consumers():
     """A 20 ms consumer per step must not appear in the steps' times."""
-    from femrom.integrators import NewmarkAverageAcceleration, integrate
+    from femrom.integrators import Newmark, integrate
     from femrom.scene import SecondOrderSystem
 
     n = 50
@@ -370,7 +370,7 @@ def test_step_clock_excludes_the_consumers():
     clock = StepClock()
     slow = lambda result: time.sleep(0.02)  # noqa: E731
     tic = time.perf_counter()
-    integrate(system, NewmarkAverageAcceleration(), np.ones(n), np.zeros(n), 1e-2, 10,
+    integrate(system, Newmark(), np.ones(n), np.zeros(n), 1e-2, 10,
               consumers=(clock.arrival, slow, clock.departure))
     wall = time.perf_counter() - tic
     steps = clock.step_seconds

@@ -31,7 +31,6 @@ coordinates when it acts on a few dofs (:class:`Newton`, ``method``).
 """
 
 from femrom.integrators._conditioning import (
-    Conditioning,
     ConditioningError,
     ConditioningWarning,
     check_conditioning,
@@ -52,10 +51,9 @@ from femrom.integrators._hamiltonian import (
     integrate_canonical,
 )
 from femrom.integrators._implicit import ImplicitSolve
-from femrom.integrators._march import Stepper, input_sample, march, run_linear, sampled_forcing, uniform_step
-from femrom.integrators._newton import NEWTON_METHODS, ConvergenceError, Newton, newton_loop, solve_newton
+from femrom.integrators._march import Stepper, input_sample, march, run_linear, uniform_step
+from femrom.integrators._newton import ConvergenceError, Newton, newton_loop
 from femrom.integrators._scheme import (
-    SCHEMES,
     LinearParts,
     Scheme,
     register_scheme,
@@ -63,16 +61,16 @@ from femrom.integrators._scheme import (
     scheme_for,
     time_scheme,
 )
-from femrom.integrators.schemes.central_difference import CentralDifference, verlet_bound
+from femrom.integrators.schemes.central_difference import CentralDifference
 from femrom.integrators.schemes.discrete_gradient import DiscreteGradient
 from femrom.integrators.schemes.generalized_alpha import GeneralizedAlpha
 from femrom.integrators.schemes.implicit_midpoint import ImplicitMidpoint
-from femrom.integrators.schemes.newmark import Newmark, NewmarkAverageAcceleration, newmark_frequencies
+from femrom.integrators.schemes.newmark import Newmark, newmark_frequencies
 from femrom.integrators._simulate import SimulationResult, simulate
 from femrom.integrators._shaker import Shaker
 from femrom.integrators._sine_plants import StepperPlant, SystemPlant
-from femrom.integrators._stability import MaxFrequency, bound_max_frequency, estimate_max_frequency
-from femrom.integrators._steady_state import SteadyStateCriterion, SteadyStateMonitor, first_harmonic
+from femrom.integrators._stability import bound_max_frequency, estimate_max_frequency
+from femrom.integrators._steady_state import SteadyStateCriterion, first_harmonic
 from femrom.integrators._stepped_sine import (
     FrequencyResponse,
     Peak,
@@ -84,19 +82,16 @@ from femrom.integrators._stepped_sine import (
 )
 
 __all__ = [
-    "Conditioning",
-    "ConditioningError",
+        "ConditioningError",
     "ConditioningWarning",
     "check_conditioning",
-    "NEWTON_METHODS", "SCHEMES", "CanonicalSystem", "CanonicalTrajectory",
+    "CanonicalSystem", "CanonicalTrajectory",
     "CentralDifference", "ConvergenceError", "DiscreteGradient", "EnergyBalance", "EnergyRecorder", "GeneralizedAlpha", "ImplicitMidpoint",
-    "ImplicitSolve", "Integration", "IntegrationError", "IntegrationSummary", "MaxFrequency", "Newmark",
-    "NewmarkAverageAcceleration", "Newton", "OutputRecorder", "SimulationResult", "StepClock", "StepResult",
+    "ImplicitSolve", "Integration", "IntegrationError", "IntegrationSummary", "Newmark",
+    "Newton", "OutputRecorder", "SimulationResult", "StepClock", "StepResult",
     "Trajectory", "bound_max_frequency", "estimate_max_frequency", "integrate", "integrate_canonical",
-    "iterate", "newmark_frequencies", "register_scheme", "scheme_for", "simulate", "solve_newton",
-    "LinearParts", "Scheme", "Stepper", "march", "newton_loop", "registered_schemes", "run_linear",
-    "Shaker", "input_sample", "sampled_forcing", "time_scheme", "uniform_step", "verlet_bound",
-    "FrequencyResponse", "Peak", "SteadyStateCriterion", "SteadyStateMonitor", "SteadyStateWarning",
+    "iterate", "newmark_frequencies", "register_scheme", "scheme_for", "simulate",     "LinearParts", "Scheme", "Stepper", "march", "newton_loop", "registered_schemes", "run_linear",
+    "Shaker", "input_sample", "time_scheme", "uniform_step",     "FrequencyResponse", "Peak", "SteadyStateCriterion", "SteadyStateWarning",
     "SteppedSine", "SteppedSineResult", "StepperPlant", "SystemPlant", "first_harmonic", "parabolic_peak",
     "prewarped_frequency",
 ]

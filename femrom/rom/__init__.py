@@ -39,7 +39,7 @@
   slip remainder sampled by ECSW; each sampled pair stays an interface element).
 """
 
-from femrom.rom._base import LazyFields, ReducedModel, uniform_step
+from femrom.rom._base import LazyFields, ReducedModel, Solution
 from femrom.rom._first_order import FirstOrderROM
 from femrom.rom._hamiltonian import (
     HamiltonianROM,
@@ -59,5 +59,5 @@ __all__ = [
     "ReducedSolution", "RegularizationScore", "SecondOrderROM", "StateSpaceROM",
     "StateSpaceSolution", "StateSpaceStepper",
     "ecsw_joint", "ecsw_weights", "hyper_reduced_system",
-    "select_regularization", "sparse_nnls", "uniform_step",
+    "select_regularization", "sparse_nnls", "Solution",
 ]

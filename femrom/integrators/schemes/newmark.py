@@ -213,8 +213,3 @@ class Newmark(NewmarkFamily):
         if self.average_acceleration:
             return trapezoidal_inverse(Omega, dt)
         return super().continuous_frequency(Omega, dt)
-
-
-def NewmarkAverageAcceleration(newton: Newton = Newton()) -> Newmark:
-    """Newmark with ``beta = 1/4, gamma = 1/2`` (trapezoidal rule)."""
-    return Newmark(beta=0.25, gamma=0.5, newton=newton)
