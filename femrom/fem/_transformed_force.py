@@ -217,6 +217,8 @@ class TransformedForce(NonlinearForce):
                       "n_coordinates": self.n_dofs}
         if self.reference is not None:
             parameters["reference"] = self.reference
+        if getattr(self, "shift_only", False):
+            parameters["shift_only"] = 1
         return parameters
 
     @classmethod
@@ -228,7 +230,10 @@ class TransformedForce(NonlinearForce):
                              shape=(touched.size, k))
         T = sp.lil_matrix((force.n_dofs, k))
         T[touched] = rows
-        return cls(force, T.tocsr(), name=str(parameters["name"]), reference=parameters.get("reference"))
+        loaded = cls(force, T.tocsr(), name=str(parameters["name"]), reference=parameters.get("reference"))
+        if int(parameters.get("shift_only", 0)):
+            loaded.shift_only = True
+        return loaded
 
 
 def dense_projection(W: np.ndarray, force, q_hat, v_hat=None, state=None):

@@ -65,7 +65,11 @@ class EnergyBalance:
         self._rows: list[tuple] = []
 
     def _nonlinear(self, q, v, state):
+        """``(x, g)``: the force's local coordinates and law (its work ``g . dx``), or for a reduced
+        model's force without local coordinates ``(q, f(q, v; s))`` (the same work, ``f . dq``)."""
         force = self.system.nonlinear
+        if not hasattr(force, "localize"):
+            return q, force.force(q, v, state)
         x = force.localize(q)
         return x, force.local_force(x, force.localize(v), state)
 

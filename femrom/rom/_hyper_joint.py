@@ -49,15 +49,22 @@ import numpy as np
 import scipy.sparse as sp
 
 from femrom._errors import FemromValueError
-from femrom.fem import JointForce, TransformedForce
+from femrom.fem import JointForce, TransformedForce, transform_force
+from femrom.inference import ReducedOperators, registered_terms
 from femrom.rom._hyper import sparse_nnls
-from femrom.scene import SecondOrderSystem
 
 
-def _projected_joint(force) -> TransformedForce:
+def _projected_joint(model) -> TransformedForce:
+    """The joint on the reduced coordinates of a Galerkin model (its projected force's transformed force),
+    or of a projected system's force."""
+    if isinstance(model, ReducedOperators):
+        term = model.term("projected_force")
+        force = None if term is None else term.transformed
+    else:
+        force = getattr(model.nonlinear, "transformed", model.nonlinear)
     if not (isinstance(force, TransformedForce) and isinstance(force.force_model, JointForce)):
-        raise FemromValueError("the system's nonlinear force must be a projected joint (a TransformedForce of a "
-                         f"JointForce, femrom.scene.project_system), got {type(force).__name__}")
+        raise FemromValueError("the model's nonlinear force must be a projected joint (femrom.inference.galerkin "
+                               f"of a system with a JointForce), got {type(force).__name__}")
     return force
 
 
@@ -127,14 +134,14 @@ class JointSampling:
                 "seconds": float(self.seconds)}
 
 
-def ecsw_joint(system: SecondOrderSystem, snapshots, rest_state, *, tolerance: float = 1e-2,
+def ecsw_joint(system, snapshots, rest_state, *, tolerance: float = 1e-2,
                max_support: int | None = None) -> JointSampling:
     r"""Pairs and weights whose weighted slip remainder matches the joint's on training states.
 
     Parameters
     ----------
-    system : SecondOrderSystem
-        A projected system whose nonlinear force is a projected joint (``r`` coordinates).
+    system : ReducedOperators
+        A Galerkin model whose nonlinear force is a projected joint (``r`` coordinates).
     snapshots : iterable of ``(q^ (r,), state)``
         Training states (e.g. every few steps of a reduced ring-down with all pairs, and
         the states of a quasi-static loading path).
@@ -146,7 +153,7 @@ def ecsw_joint(system: SecondOrderSystem, snapshots, rest_state, *, tolerance: f
         At most this many pairs.
     """
     tic = time.perf_counter()
-    force = _projected_joint(system.nonlinear)
+    force = _projected_joint(system)
     if not 0 < tolerance < 1:
         raise FemromValueError(f"tolerance must lie in (0, 1), got {tolerance!r}")
     pairs = _PairContributions(force, rest_state)
@@ -168,16 +175,19 @@ def ecsw_joint(system: SecondOrderSystem, snapshots, rest_state, *, tolerance: f
                          time.perf_counter() - tic)
 
 
-def hyper_reduced_system(system: SecondOrderSystem, sampling: JointSampling, rest_state):
-    r"""The projected system with its joint sampled (module docstring): ``(system, rest state of the sample)``.
+def hyper_reduced_system(system, sampling: JointSampling, rest_state):
+    r"""The projected model with its joint sampled (module docstring): ``(model, rest state of the sample)``.
 
     The stuck joint's stiffness and the rest force stay exact (corrections to ``K^`` and
-    the load); the joint acts through the sampled pairs with weighted areas. The returned
-    state is ``rest_state[pairs]``.
+    the load); the joint acts through the sampled pairs with weighted areas. ``system`` is
+    a Galerkin model (:class:`~femrom.inference.ReducedOperators`, :func:`~femrom.inference.galerkin`
+    of the full model about its preloaded state) and so is the result; the returned state
+    is ``rest_state[pairs]``.
     """
-    force = _projected_joint(system.nonlinear)
+    force = _projected_joint(system)
     r = force.n_dofs
-    sampled = force.with_force(force.force_model.restricted(sampling.pairs, sampling.weights))
+    restricted = force.force_model.restricted(sampling.pairs, sampling.weights)
+    sampled = force.with_force(restricted)
     sampled_state = np.asarray(rest_state)[sampling.pairs]
     zero = np.zeros(r)
     K_all = _dense(force.tangent(zero, None, rest_state)[0])
@@ -185,8 +195,19 @@ def hyper_reduced_system(system: SecondOrderSystem, sampling: JointSampling, res
     f_all = force.force(zero, None, rest_state)
     f_sampled = sampled.force(zero, None, sampled_state)
     load = np.zeros(r) if system.load is None else np.asarray(system.load, dtype=float)
+    description = {"method": "ecsw_joint", **sampling.describe()}
+    if isinstance(system, ReducedOperators):
+        terms = registered_terms()
+        term = system.term("projected_force")
+        shifted = transform_force(restricted, None, reference=force.reference) if force.reference is not None \
+            else restricted
+        hyper = system.with_terms(terms["stiffness"](system.stiffness + K_all - K_sampled),
+                                  terms["constant_load"](load - f_all + f_sampled),
+                                  type(term)(shifted, term.basis))
+        hyper.metadata["hyper_reduction"] = description
+        return hyper, sampled_state
     stiffness = sp.csr_matrix(_dense(system.stiffness) + K_all - K_sampled)
-    metadata = {**system.metadata, "hyper_reduction": {"method": "ecsw_joint", **sampling.describe()}}
+    metadata = {**system.metadata, "hyper_reduction": description}
     hyper = dataclasses.replace(system, stiffness=stiffness, load=load - f_all + f_sampled, nonlinear=sampled,
                                 metadata=metadata)
     return hyper, sampled_state
