@@ -12,7 +12,7 @@ measured in the same run:
   0.15 s ring-down at 300 N, and the mean step time over that ring-down (medians of
   ``--repeats`` alternating blocks, the all-pair model's in the same blocks).
 
-Run ``PYTHONPATH=. python benchmarks/jointed_beam_accuracy.py`` (about 10 minutes); it prints
+Run ``python -m benchmarks.jointed_beam_accuracy`` (about 10 minutes); it prints
 two tables and writes ``benchmarks/results/jointed_beam_accuracy.json``.
 """
 
@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from femrom.cli import load_case
+from femrom.cases import jointed_beam as case
 from femrom.rom import ecsw_joint, hyper_reduced_system
 
 RESULTS = Path(__file__).resolve().parent / "results" / "jointed_beam_accuracy.json"
@@ -49,7 +49,6 @@ def main() -> None:
     parser.add_argument("--tolerances", type=float, nargs="+", default=[3e-2, 1e-2, 3e-3, 1e-3])
     parser.add_argument("--repeats", type=int, default=3)
     args = parser.parse_args()
-    case = load_case("jointed_beam")
     config = case.JointedBeamCase(n_modes=max(args.modes))
     setup = case.prestressed(config)
     beam, system = setup["beam"], setup["system"]

@@ -1,6 +1,6 @@
 """What a step of the jointed-beam case's reduced model costs: the joint in Newton against its tangent.
 
-The model is the one ``cases/jointed_beam.py`` rings down: the ``--modes`` lowest elastic
+The model is the one ``femrom/cases/jointed_beam.py`` rings down: the ``--modes`` lowest elastic
 modes of the prestressed, calibrated beam (default mesh, 24,522 dofs, 592 interface pairs),
 Galerkin about the preload, modal damping 0.139 %, the hammer (300 N, 0.3 ms half-sine), the
 ``clamped_iwan`` joint at the case's default chi and beta. Three versions of it step the same
@@ -16,7 +16,7 @@ Newmark average acceleration (dense Newton: 10 dofs), in one process:
 The blocks alternate ``--repeats`` times; the medians of their mean step times give the
 ratios against ``linear`` (the issue's target: a nonlinear step within 3x).
 
-Run ``PYTHONPATH=. python benchmarks/jointed_beam_step.py`` (about 5 minutes); it prints a
+Run ``python -m benchmarks.jointed_beam_step`` (about 5 minutes); it prints a
 table and writes ``benchmarks/results/jointed_beam_step.json``.
 """
 
@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 import scipy.sparse as sp
 
-from femrom.cli import load_case
+from femrom.cases import jointed_beam as case
 from femrom.integrators import Newmark, StepResult, integrate
 from femrom.rom import ecsw_joint, hyper_reduced_system
 
@@ -55,7 +55,6 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=2000)
     parser.add_argument("--repeats", type=int, default=5)
     args = parser.parse_args()
-    case = load_case("jointed_beam")
     config = case.JointedBeamCase(n_modes=args.modes)
     setup = case.prestressed(config)
     beam, system = setup["beam"], setup["system"]

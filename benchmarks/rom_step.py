@@ -27,7 +27,7 @@ and the ratios FOM step / ROM step (target: >= 1e4 at r = 20). The FOM and
 the ROMs run in the same process, right after each other, so they see the
 same machine load (recorded in the JSON as the load average).
 
-Run ``PYTHONPATH=. python benchmarks/rom_step.py [--sizes 5 10 20 40] [--fom-steps 40]``;
+Run ``python -m benchmarks.rom_step [--sizes 5 10 20 40] [--fom-steps 40]``;
 it prints a table and writes ``benchmarks/results/rom_step.json``.
 """
 
@@ -39,20 +39,17 @@ import json
 import os
 import platform
 import statistics
-import sys
 import time
 from datetime import datetime, timezone
 from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).parent))
-import fom_ladder  # noqa: E402  (the FOM problem and its constants)
-
-from femrom.integrators import Newmark, Trajectory, integrate  # noqa: E402
-from femrom.rom import SecondOrderROM  # noqa: E402
-from femrom.rom import LinearParts, reduced_scheme, run_linear  # noqa: E402
-from femrom.scene import SecondOrderSystem  # noqa: E402
+from benchmarks import fom_ladder  # the FOM problem and its constants
+from femrom.integrators import Newmark, Trajectory, integrate
+from femrom.rom import SecondOrderROM
+from femrom.rom import LinearParts, reduced_scheme, run_linear
+from femrom.scene import SecondOrderSystem
 
 SIZES = (5, 10, 20, 40)
 

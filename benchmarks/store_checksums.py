@@ -79,11 +79,11 @@ def measure(n: int, n_snapshots: int, repeats: int, folder: Path) -> dict:
 
 def measure_fom(n_steps: int, repeats: int, folder: Path) -> dict:
     """The small fishtail streamed into a store, with and without checksums, alternating."""
-    from femrom.cli import load_case
+    from femrom.cases import fishtail
     from femrom.integrators import simulate
     from femrom.scene import build
 
-    model = build(load_case("fishtail").load_scene("small"))
+    model = build(fishtail.load_scene("small"))
     t_end = n_steps * model.scene.time.dt
     seconds = {False: [], True: []}
     for _ in range(repeats):

@@ -2,14 +2,10 @@
 
 Small models with closed forms (two stacked blocks: uniform compression; a rigid block on a
 Winkler contact under an eccentric load), then the bolted half Brake-Reuss beam at a coarse
-mesh (cases/jointed_beam.toml): reactions, total normal force, the closed region around the
+mesh (femrom/cases/jointed_beam.toml): reactions, total normal force, the closed region around the
 bolts, the rigid-body modes, the tied beam against the bonded one; the calibration on the
 measured f1 behind ``slow``.
 """
-
-import importlib.util
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -19,6 +15,7 @@ from skfem import MeshTet
 
 import femrom.mesh as fm
 from femrom import fem
+from femrom.cases import jointed_beam_prestress
 from femrom.scene import (
     Scene,
     SceneError,
@@ -29,9 +26,6 @@ from femrom.scene import (
     solve_static,
     with_friction_coefficient,
 )
-
-CASES = Path(__file__).resolve().parents[1] / "cases"
-
 
 # --- two stacked blocks ----------------------------------------------------------------------
 
@@ -230,18 +224,9 @@ def test_frictionless_switch_needs_a_unilateral_law():
 
 # --- the bolted beam, coarse ------------------------------------------------------------------
 
-def load_case():
-    spec = importlib.util.spec_from_file_location("femrom_case_jointed_beam_prestress",
-                                                  CASES / "jointed_beam_prestress.py")
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module
-    spec.loader.exec_module(module)
-    return module
-
-
 @pytest.fixture(scope="module")
 def case():
-    return load_case()
+    return jointed_beam_prestress
 
 
 # The coarsest mesh that resolves the layers' bending (P2): 25.4 mm away from the joint, 12.7 mm

@@ -3,7 +3,7 @@
 The bolted half Brake-Reuss beam of ``jointed_beam.toml`` (free-free, three bolts at
 12 kN, dry-friction interface elements on the lap joint's node pairs), end to end:
 
-1. **Preload and calibration** (``jointed_beam_prestress.py``): frictionless preload,
+1. **Preload and calibration** (``femrom/cases/jointed_beam_prestress.py``): frictionless preload,
    friction on, and the one calibrated stiffness, the interface's tangential stiffness
    ``k_t``, set so that the first bending mode is the measured 80.5 Hz. The next
    modes are predictions against the measured 221.7 and 297.7 Hz.
@@ -34,7 +34,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import importlib.util
 import sys
 import time
 from dataclasses import dataclass
@@ -43,6 +42,7 @@ from pathlib import Path
 import numpy as np
 from scipy.optimize import minimize
 
+from femrom.cases import jointed_beam_prestress as prestress
 from femrom.fem import ClampedIwanLaw, JointForce, clamped_iwan_state, clamped_state
 from femrom.integrators import (
     Newmark,
@@ -75,16 +75,6 @@ from femrom.scene import (
 )
 
 
-def _prestress_module():
-    path = Path(__file__).with_name("jointed_beam_prestress.py")
-    spec = importlib.util.spec_from_file_location("femrom_case_jointed_beam_prestress", path)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module
-    spec.loader.exec_module(module)
-    return module
-
-
-prestress = _prestress_module()
 BAND, WINDOW = (60.0, 100.0), 0.2
 
 

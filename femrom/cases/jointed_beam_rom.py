@@ -1,7 +1,7 @@
 """Jointed beam ROMs from model data: SpML, L-OpInf and Galerkin against the hyper-reduced Iwan model.
 
 Issue 17, part 3. The reference ("FOM" of this study) is the jointed-beam case's 10-mode model with
-its ECSW-sampled ``clamped_iwan`` joint (``cases/jointed_beam.py``; it stands in for the 24,522-dof
+its ECSW-sampled ``clamped_iwan`` joint (``femrom/cases/jointed_beam.py``; it stands in for the 24,522-dof
 model, against which it is validated in ``docs/cases/jointed_beam.md``). Its ring-downs after hammer
 blows at two levels train the models; a third level is the (interpolation) test, predicted from rest
 over ten times the training window. Per r: POD of the 10 modal coordinates, SpML and L-OpInf fitted
@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from femrom.cli import load_case
+from femrom.cases import jointed_beam as jb
 from femrom.inference import Output, SpMLConfig
 from femrom.integrators import (
     Newmark,
@@ -46,8 +46,6 @@ from femrom.study import (
     compare_stepped_sines,
     reference_ring_down,
 )
-
-jb = load_case("jointed_beam")
 
 
 @dataclass(frozen=True)
