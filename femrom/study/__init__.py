@@ -33,7 +33,20 @@ What the case scripts share, for any scene (``femrom run scene.toml`` with a
 - linear models in one form (:mod:`femrom.study._linear_models`): :class:`LinearModelSpec`,
   :func:`fit_linear_model`, :func:`linear_model_rows` (second-order ROMs and identified DMDc, ERA,
   OKID models as discrete state spaces on every run: output errors, spectral radii, long-window
-  stability, fit and step costs), :func:`state_space_data`;
+  stability, fit and step costs), :func:`state_space_data`, their table and figure
+  (:func:`linear_model_table`, :func:`plot_linear_model_errors`);
+- backbones against each other (:mod:`femrom.study._backbone_metrics`): :func:`compare_backbones`
+  (both at common amplitudes, :class:`BackboneComparison`), :func:`backbone_errors` (shift and damping
+  errors), :func:`backbone_shift` (one backbone between two amplitudes);
+- hammer blows on a small stateful model: :func:`with_impulse`, :func:`output_ring_down` (the outputs'
+  accelerations and ECSW snapshots, :class:`OutputRingDown`), :func:`ecsw_training`
+  (:class:`ImpactTraining`); learned models against such a reference: :func:`reference_ring_down`,
+  :func:`compare_ring_downs`;
+- the jointed beam's facts and model chain, shared by its cases: :data:`JOINTED_BEAM`
+  (:class:`BrakeReussBeam`), :class:`JointedBeamModel` (scene, calibration, Iwan joint, modal
+  model, ECSW; :class:`CalibratedBeam`);
+- MPC closed loops on a FOM, each controller model on each reference: :func:`closed_loop_rows`
+  (:data:`CLOSED_LOOP_COLUMNS`), :func:`open_loop_error`;
 - hyper-reduction: :func:`hyper_reduced_rows` (a learned ROM's known conservative force
   replaced by its ECSW-sampled potential, :data:`HYPER_COLUMNS`);
 - costs: :class:`Cost` (the fastest of several timed blocks, and their quartiles),
@@ -112,12 +125,16 @@ from femrom.study._ring_downs import (
     RING_DOWN_COLUMNS,
     RingDown,
     RingDownComparison,
-    backbone_errors,
     compare_ring_downs,
     mass_pod,
     reference_ring_down,
     ring_down_data,
 )
+from femrom.study._backbone_metrics import BackboneComparison, backbone_errors, backbone_shift, compare_backbones
+from femrom.study._impacts import ImpactTraining, OutputRingDown, ecsw_training, output_ring_down, with_impulse
+from femrom.study._jointed_beam import JOINTED_BEAM, BrakeReussBeam, CalibratedBeam, JointedBeamModel
+from femrom.study._closed_loops import CLOSED_LOOP_COLUMNS, closed_loop_rows, open_loop_error
+from femrom.study._linear_model_figures import linear_model_table, plot_linear_model_errors
 from femrom.study._runs import FOMRun, run_fom, solver_factory
 from femrom.study._scene_run import SceneRun, scene_run
 from femrom.study._study import (
@@ -163,4 +180,8 @@ __all__ = [
     "scored_columns", "solver_factory", "state_energy", "every_kth", "subsampled_rows", "subsampled_section",
     "state_error", "study_costs", "study_learners", "study_rows",
     "sweep_runs", "time_step_ladder", "time_step_section", "training_data", "write_report",
+    "BackboneComparison", "backbone_shift", "compare_backbones",
+    "ImpactTraining", "OutputRingDown", "ecsw_training", "output_ring_down", "with_impulse",
+    "JOINTED_BEAM", "BrakeReussBeam", "CalibratedBeam", "JointedBeamModel",
+    "CLOSED_LOOP_COLUMNS", "closed_loop_rows", "open_loop_error", "linear_model_table", "plot_linear_model_errors",
 ]
