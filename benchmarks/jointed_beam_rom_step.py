@@ -29,7 +29,7 @@ from femrom.cases import jointed_beam_rom as rom_case
 from femrom.inference import IwanLOpInf, LagrangianOpInf, SpML, SpMLConfig
 from femrom.integrators import Newmark, StepResult, integrate
 from femrom.rom import SecondOrderROM
-from femrom.study import mass_pod, ring_down_data
+from femrom.study import mass_pod, ring_down_data, with_impulse
 
 RESULTS = Path(__file__).resolve().parent / "results" / "jointed_beam_rom_step.json"
 
@@ -40,7 +40,6 @@ def main() -> None:
     parser.add_argument("--full-steps", type=int, default=12)
     parser.add_argument("--repeats", type=int, default=3)
     args = parser.parse_args()
-    jb = rom_case.jb
     config = rom_case.JointedBeamRomCase(test_blows=())
     say = lambda line: print(line, file=sys.stderr, flush=True)   # noqa: E731
     models = rom_case.reference_models(config, say)
@@ -48,7 +47,7 @@ def main() -> None:
     hyper, z_hyper, dt, case = models["hyper"], models["z_hyper"], models["dt"], models["case"]
     M = hyper.mass
     V, _ = mass_pod(M, training, 3)
-    blow = jb.with_blow(hyper, 300.0, case.impact_width)
+    blow = with_impulse(hyper, 300.0, case.impact_width)
     times = dt * np.arange(args.steps + 1)
 
     say("fitting the ROMs ...")

@@ -301,3 +301,48 @@ def test_beam_rom_costs_hold_on_a_loaded_machine(tmp_path):
         # the costs measure work: a 100-dof Newmark step (27 us) against a (3r x 3r) product (about 1 us)
         for m in (quiet, loaded):
             assert all(row["speedup"] > 5 for row in m[study]["rows"]), study
+
+
+def _imports(path):
+    """Every module a file imports (``from x import y`` gives ``x`` and ``x.y``)."""
+    import ast
+
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.ImportFrom) and node.module:
+            yield node.module
+            yield from (f"{node.module}.{alias.name}" for alias in node.names)
+        elif isinstance(node, ast.Import):
+            yield from (alias.name for alias in node.names)
+
+
+def test_no_case_imports_another_and_cases_use_public_names():
+    from pathlib import Path
+
+    import femrom.cases
+
+    package = Path(femrom.cases.__file__).parent
+    cases = set(available_cases())
+    for path in package.glob("*.py"):
+        for module in _imports(path):
+            parts = module.split(".")
+            if parts[0] != "femrom":
+                continue
+            assert not (len(parts) >= 3 and parts[1] == "cases" and parts[2] in cases), f"{path.name} imports {module}"
+            # public names of the library only: femrom.<package>, never femrom.<package>._<module>
+            assert not any(part.startswith("_") for part in parts[1:-1]), f"{path.name} imports {module}"
+    # and the library below imports no case
+    for path in package.parent.rglob("*.py"):
+        if package in path.parents:
+            continue
+        assert not any(m.startswith("femrom.cases") for m in _imports(path)), path
+
+
+def test_nothing_edits_the_import_path_or_loads_a_module_from_a_file():
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    for folder in ("femrom", "tests", "benchmarks"):
+        for path in (root / folder).rglob("*.py"):
+            text = path.read_text()
+            for forbidden in ("sys.path.insert", "sys.path.append", "spec_from_file_location", "SourceFileLoader"):
+                assert forbidden not in text or path == Path(__file__), f"{path.relative_to(root)}: {forbidden}"

@@ -153,7 +153,8 @@ class JointedBeamModel:
         return Scene.from_dict(data)
 
     def calibrated(self, scene: Scene) -> CalibratedBeam:
-        """Build, preload, calibrate ``k_t`` on the measured ``f_1``, and the ``6 + n_modes`` modes about the preload."""
+        """Build, preload, calibrate ``k_t`` on the measured ``f_1``, and the ``6 + n_modes`` modes about
+        the preload."""
         tic = time.perf_counter()
         beam = prestressed_model(scene, JOINTED_BEAM.supports)
         k_t, evaluations = calibrate_law_parameter(beam, "tangential_stiffness", JOINTED_BEAM.measured_f1,
