@@ -9,7 +9,8 @@ from scipy.integrate import solve_ivp
 from femrom.fem import JenkinsForce
 from femrom.post import linear_accelerance, masing_damping, static_qsma
 from femrom.scene import SecondOrderSystem, Signal, SignalVector
-from femrom.study import ecsw_training, output_ring_down, reference_ring_down, with_impulse
+from femrom.study import ecsw_training, output_ring_down, reference_ring_down, step_cost, stepped_sine_response, \
+    with_impulse
 
 M = np.diag([1.0, 2.0])
 K = np.array([[3.0, -1.0], [-1.0, 1.0]])
@@ -127,3 +128,28 @@ def test_the_stuck_accelerance_is_the_modal_sum():
                  for j in range(2)]
         expected.append(np.abs(sum(terms)))
     np.testing.assert_allclose(H, np.column_stack(expected), rtol=1e-10)
+
+
+def test_a_stuck_joints_stepped_sine_is_its_linear_response():
+    # at 1e-3 N the Jenkins element never slips (k_t |q_1| << F_s): the steady state is the stuck
+    # model's, F |H(f)|, to the steady-state tolerance; at 3 N it slips and the response departs
+    system = two_dofs(damping=0.1)
+    z0 = system.nonlinear.initial_state()
+    frequencies = (0.15, 0.25)
+    result, rows = stepped_sine_response(system, z0, 1, frequencies, (1e-3, 3.0), steps_per_period=32,
+                                         tolerance=1e-3, linear_key="linear")
+    small, large = rows
+    for name in ("q1", "q2"):
+        for point in small["outputs"][name]:
+            assert point["amplitude_m_s2"] == pytest.approx(point["linear"], rel=1e-2)
+    assert small["outputs"]["q1"][0]["linear"] * 3e3 == pytest.approx(large["outputs"]["q1"][0]["linear"], rel=1e-12)
+    assert max(abs(p["amplitude_m_s2"] / p["linear"] - 1) for p in large["outputs"]["q1"]) > 0.05
+    assert len(result.levels) == 2
+
+
+def test_the_step_cost_leaves_the_first_step_out():
+    system = with_impulse(two_dofs(damping=0.02), 20.0, 0.05)
+    cost = step_cost(system, np.zeros(2), system.nonlinear.initial_state(), 0.01, 50)
+    assert (cost["n_dofs"], cost["steps"]) == (2, 50)
+    assert 0 < 49 * cost["seconds_per_step"] <= cost["seconds_total"]
+    assert cost["newton_iterations"] >= 50

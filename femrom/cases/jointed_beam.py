@@ -26,7 +26,7 @@ The bolted half Brake-Reuss beam of ``jointed_beam.toml`` (free-free, three bolt
 7. The stepped-sine forced response of the hyper-reduced model at the shaker (``shaker1``):
    by default 0.2 and 1.5 N at 79.6-80.6 Hz in 0.1 Hz steps; ``--full-sweep`` the
    issue's 0.2, 0.5, 1 and 1.5 N at 79-81.5 Hz in 0.05 Hz steps; beside each point the stuck
-   joint's linear response at that force (:func:`femrom.post.linear_accelerance`).
+   joint's linear response at that force (:func:`femrom.study.stepped_sine_response`).
 
 Run ``python -m femrom run jointed_beam [-o results/jointed_beam] [--full-sweep] [--quick] [--no-fit]``.
 """
@@ -44,11 +44,9 @@ from pathlib import Path
 import numpy as np
 from scipy.optimize import minimize
 
-from femrom.integrators import SteadyStateCriterion, SteppedSine, StepResult, SystemPlant
 from femrom.post import (
     Backbone,
     hilbert_backbone,
-    linear_accelerance,
     measured_backbone,
     period_corrected,
     plot_backbones,
@@ -65,6 +63,7 @@ from femrom.study import (
     backbone_shift,
     compare_backbones,
     output_ring_down,
+    stepped_sine_response,
     with_impulse,
 )
 
@@ -248,14 +247,13 @@ def run(config: JointedBeamCase, out: Path, progress=print, data_dir=None) -> di
     if config.forced:
         progress(f"jointed beam: stepped sine, {len(config.forced_levels)} levels x "
                  f"{len(config.forced_frequencies)} frequencies ...")
-        shaker = np.asarray(hyper.input_matrix[:, 1]).ravel()
-        r = hyper.n_dofs
-        plant = SystemPlant(hyper, shaker, rest=StepResult(step=0, t=0.0, q=np.zeros(r), v=np.zeros(r),
-                                                            a=np.zeros(r), state=z_hyper))
-        sweep = SteppedSine(np.asarray(config.forced_frequencies), steps_per_period=config.forced_steps_per_period,
-                            steady_state=SteadyStateCriterion(tolerance=config.forced_tolerance))
         tic_forced = time.perf_counter()
-        forced = sweep.run(plant, list(config.forced_levels), progress=lambda line: progress(f"  {line}"))
+        # beside each point the stuck joint's (linear) response at that force: the nonlinearity is their
+        # difference; at small forces they agree to the steady-state tolerance
+        _, forced = stepped_sine_response(hyper, z_hyper, 1, config.forced_frequencies, config.forced_levels,
+                                          steps_per_period=config.forced_steps_per_period,
+                                          tolerance=config.forced_tolerance, linear_key="linear_amplitude_m_s2",
+                                          progress=lambda line: progress(f"  {line}"))
         seconds["stepped_sine"] = time.perf_counter() - tic_forced
 
     out.mkdir(parents=True, exist_ok=True)
@@ -290,15 +288,7 @@ def run(config: JointedBeamCase, out: Path, progress=print, data_dir=None) -> di
         "notes": notes,
     }
     if forced is not None:
-        # next to each measured point, the stuck joint's (linear) response at that force: the nonlinearity
-        # is their difference; at small forces they agree to the steady-state tolerance
-        per_newton = linear_accelerance(hyper, z_hyper, shaker, config.forced_frequencies)
-        levels = forced.rows()
-        for level in levels:
-            for i, name in enumerate(hyper.output_names):
-                for j, point in enumerate(level["outputs"][name]):
-                    point["linear_amplitude_m_s2"] = float(level["force_n"] * per_newton[i, j])
-        metrics["forced_response"] = levels
+        metrics["forced_response"] = forced
     write_metrics(out / "metrics.json", metrics)
     return metrics
 

@@ -40,7 +40,8 @@ from femrom.study import JOINTED_BEAM, JointedBeamModel
 SCENE = Path(__file__).with_name("jointed_beam.toml")
 
 
-def prestressed_beam(parameters: dict | None = None, *, scene_path: Path = SCENE, **joint_parameters) -> PrestressedModel:
+def prestressed_beam(parameters: dict | None = None, *, scene_path: Path = SCENE,
+                     **joint_parameters) -> PrestressedModel:
     """Build the scene (mesh ``parameters`` and the joint law's parameters overridden) and preload it on
     the beam's statically determinate supports (:data:`femrom.study.JOINTED_BEAM`)."""
     scene = JointedBeamModel(mesh=tuple((parameters or {}).items())).scene(scene_path, **joint_parameters)

@@ -34,7 +34,6 @@ from femrom.integrators import (
     StepperPlant,
     StepResult,
     SystemPlant,
-    integrate,
 )
 from femrom.post import period_corrected, plot_backbones, staged_output, write_metrics
 from femrom.rom import SecondOrderROM
@@ -46,6 +45,7 @@ from femrom.study import (
     compare_ring_downs,
     compare_stepped_sines,
     reference_ring_down,
+    step_cost,
     with_impulse,
 )
 
@@ -81,20 +81,11 @@ class JointedBeamRomCase:
 def full_model_step_cost(model, q0, z0, dt: float, steps: int, progress=print) -> dict:
     """Seconds per step of the full model with the joint (Newmark, condensed Newton) after a 300 N blow,
     from the step times after the first (the factorisation and the first step excluded)."""
-    hammer = Signal.from_dict({"kind": "impulse", "amplitude": 300.0, "start": 0.0, "duration": 3e-4})
-    shaker = Signal.from_dict({"kind": "sine", "amplitude": 0.0, "frequency": 80.5})
-    full = dataclasses.replace(model, inputs=SignalVector([hammer, shaker]))
-    n = full.n_dofs
-    stamps = []
-    start = StepResult(step=0, t=0.0, q=q0.copy(), v=np.zeros(n), a=np.zeros(n), state=z0)
-    tic = time.perf_counter()
-    summary = integrate(full, Newmark(newton=Newton(method="condensed")), None, None, dt, steps,
-                        consumers=[lambda result: stamps.append(time.perf_counter())], start=start, progress=None)
-    total = time.perf_counter() - tic
-    per_step = (stamps[-1] - stamps[0]) / max(len(stamps) - 1, 1)
-    progress(f"  full model: {n} dofs, {steps} steps in {total:.1f} s, {per_step:.3g} s/step after the first")
-    return {"n_dofs": n, "steps": steps, "seconds_total": total, "seconds_per_step": per_step,
-            "newton_iterations": getattr(summary, "newton_iterations", None)}
+    cost = step_cost(with_impulse(model, 300.0, 3e-4), q0, z0, dt, steps,
+                     scheme=Newmark(newton=Newton(method="condensed")))
+    progress(f"  full model: {cost['n_dofs']} dofs, {steps} steps in {cost['seconds_total']:.1f} s, "
+             f"{cost['seconds_per_step']:.3g} s/step after the first")
+    return cost
 
 
 def stepped_sines(hyper, rest_state, comparison: dict, config: JointedBeamRomCase, progress=print) -> dict:

@@ -6,7 +6,8 @@ what a long run needs: the outputs' accelerations ``E q''`` and, every ``keep_ev
 the state ``(q, z)`` (ECSW's training snapshots of a stateful force); :func:`reference_ring_down`
 keeps ``q, q', q''``, the inputs and the outputs instead (training data of learned models).
 :func:`ecsw_training` runs one ring-down per blow and gathers those snapshots
-(:func:`femrom.rom.ecsw_joint` samples the joint on them).
+(:func:`femrom.rom.ecsw_joint` samples the joint on them). :func:`step_cost` times a (large)
+model's steps after a blow, the first step (and the factorisation in it) left out.
 """
 
 from __future__ import annotations
@@ -99,3 +100,22 @@ def ecsw_training(system, rest_state, peaks, *, width: float, window: float, dt:
         snapshots += run.snapshots
         runs[peak] = run
     return ImpactTraining(snapshots, runs)
+
+
+def step_cost(system, displacement, state, dt: float, n_steps: int, *, scheme=None) -> dict:
+    """Seconds per step of ``system`` stepped ``n_steps`` times from ``displacement`` at rest (``q' = q'' = 0``,
+    committed force ``state``) under its own inputs (``scheme``: default Newmark), from the steps' end
+    times after the first: ``(t_n - t_1) / (n - 1)``.
+
+    Returns ``{"n_dofs", "steps", "seconds_total", "seconds_per_step", "newton_iterations"}``."""
+    n = system.n_dofs
+    stamps = []
+    start = StepResult(step=0, t=0.0, q=np.array(displacement, dtype=float), v=np.zeros(n), a=np.zeros(n),
+                       state=state)
+    tic = time.perf_counter()
+    summary = integrate(system, scheme or Newmark(), None, None, dt, n_steps,
+                        consumers=[lambda result: stamps.append(time.perf_counter())], start=start, progress=None)
+    total = time.perf_counter() - tic
+    per_step = (stamps[-1] - stamps[0]) / max(len(stamps) - 1, 1)
+    return {"n_dofs": n, "steps": n_steps, "seconds_total": total, "seconds_per_step": per_step,
+            "newton_iterations": getattr(summary, "newton_iterations", None)}
