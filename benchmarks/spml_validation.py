@@ -23,7 +23,7 @@ all with the discrete-gradient scheme at the FOM's dt; errors are ``||Q^ - Q^_FO
 ||Q^_FOM||_F`` of the reduced coordinates inside and outside the training window. Costs:
 SpML's training time, seconds per ROM step (fastest of ``--repeats`` runs) and per FOM step.
 
-Run ``PYTHONPATH=. python benchmarks/spml_validation.py [--fom sine_gordon cubic_beam]``;
+Run ``python -m benchmarks.spml_validation [--fom sine_gordon cubic_beam]``;
 it prints a table and writes ``benchmarks/results/spml_validation.json``.
 """
 

@@ -11,8 +11,8 @@ and ``benchmarks/results/store_checksums.json``.
 
 Usage::
 
-    python benchmarks/store_checksums.py            # n = 2e4 and 2e5, K = 400, 5 rounds
-    python benchmarks/store_checksums.py --quick    # n = 2e4, K = 200, 3 rounds
+    python -m benchmarks.store_checksums            # n = 2e4 and 2e5, K = 400, 5 rounds
+    python -m benchmarks.store_checksums --quick    # n = 2e4, K = 200, 3 rounds
 """
 
 from __future__ import annotations
