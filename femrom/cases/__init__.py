@@ -24,7 +24,7 @@ functions its tests and benchmarks import (``run`` and the case's own settings):
   closed loops on the FOM (docs/cases/soft_robot.md).
 
 No case imports another: what two cases share lives in the library (the jointed beam's
-facts and model settings: :data:`femrom.scene.JOINTED_BEAM`, :class:`femrom.study.JointedBeamModel`).
+facts and model settings: :data:`femrom.study.JOINTED_BEAM`, :class:`femrom.study.JointedBeamModel`).
 The command line lists them (:func:`femrom.cli.available_cases`) and imports one by name
 (:func:`femrom.cli.load_case`); :func:`scene_file` is a case's scene file.
 """
