@@ -10,8 +10,8 @@ keys joined by ``/``, list positions as numbers) and compared:
 - strings, booleans and ``None``: equal when identical;
 - a path in one file only: reported as missing or added.
 
-Paths naming a timing or a machine fact (wall times, costs per step, speed-ups, memory, the
-machine's description; :data:`TIMING` and ``--timing``) differ from run to run and are not numbers
+Paths naming a timing or a machine fact (wall times, costs per step, speed-ups, real-time
+factors, memory, the machine's description; :data:`TIMING` and ``--timing``) differ from run to run and are not numbers
 of the model: they are counted, not compared. The report lists the differing paths (at most
 ``--show``), the largest relative difference of the compared numbers, and exits 1 when anything
 differs (0 otherwise).
@@ -29,7 +29,7 @@ from pathlib import Path
 #: Path components (regular expressions, matched in full) of timings and machine facts.
 TIMING = (
     r".*seconds.*", r"(.*_)?ms_.*", r"steps_per_(second|block)", r".*speedup.*", r".*timings?", r"(.*_)?costs?",
-    r"wall.*", r".*rss.*", r".*memory.*", r"machine.*", r"platform", r"processor", r"python", r"date",
+    r"wall.*", r"realtime.*", r".*rss.*", r".*memory.*", r"machine.*", r"platform", r"processor", r"python", r"date",
     r"load_average", r"threads", r"cpu_count",
 )
 

@@ -15,6 +15,7 @@ def test_paths_and_timings():
     assert flat["rows/0/test_error"] == 0.125 and flat["rows/0/cost/q75"] == 2e-6
     assert is_timing("rows/0/fit_seconds") and is_timing("rows/0/cost/minimum") and is_timing("seconds/total")
     assert is_timing("machine/platform") and is_timing("reduced_model/all_pairs_ms_per_step")
+    assert is_timing("control/0/realtime_factor")
     assert not is_timing("rows/0/test_error") and not is_timing("time_domain_error") and not is_timing("n_steps")
 
 
