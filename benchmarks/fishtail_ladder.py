@@ -1,6 +1,6 @@
 """Fishtail mesh ladder: what the FOM and its ROMs cost from 2e4 to the papers' 7.8e5 dofs.
 
-Each mesh level of ``cases/fishtail.py`` (small ~2e4, medium ~1e5, large ~7.6e5
+Each mesh level of ``femrom/cases/fishtail.py`` (small ~2e4, medium ~1e5, large ~7.6e5
 free P2 dofs; the MORwiki "Artificial Fishtail" of Siebelts, Kater & Meurer 2018
 has n = 779,232) runs the case's own pipeline, :func:`fishtail.run`, in a
 subprocess of its own (so that its peak memory is its own):
@@ -22,8 +22,8 @@ subprocess of its own (so that its peak memory is its own):
 
 Run from the repository root::
 
-    python benchmarks/fishtail_ladder.py --levels small                  # ~20 s
-    python benchmarks/fishtail_ladder.py --levels small medium large     # ~13 min (large: 11 min, 12.4 GB)
+    python -m benchmarks.fishtail_ladder --levels small                  # ~20 s
+    python -m benchmarks.fishtail_ladder --levels small medium large     # ~13 min (large: 11 min, 12.4 GB)
 
 Results: ``benchmarks/results/fishtail_ladder.json`` (levels merged into the
 existing file) and a table on stdout; the discussion is in docs/cases/fishtail.md.
@@ -41,8 +41,6 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "cases"))
-sys.path.insert(0, str(ROOT))
 
 RESULTS = ROOT / "benchmarks" / "results" / "fishtail_ladder.json"
 LEARNERS = ("galerkin", "lopinf", "opinf")
@@ -50,7 +48,7 @@ LEARNERS = ("galerkin", "lopinf", "opinf")
 
 def run_level(level: str, *, steps: int, ranks, store_dir: Path, out_dir: Path, svd_power: int) -> dict:
     """One level through the case's pipeline; the numbers the ladder table needs."""
-    import fishtail
+    from femrom.cases import fishtail
     from femrom.post import machine_description
 
     load_before = os.getloadavg()
@@ -90,10 +88,11 @@ def _child(level, args) -> dict:
 
     out = Path(args.store_dir) / f"fishtail_ladder_{level}.json"
     out.unlink(missing_ok=True)
-    cmd = [sys.executable, __file__, "--worker", level, "--steps", str(args.steps),
+    # python -m from the checkout's root: this checkout's femrom, not another installed one
+    cmd = [sys.executable, "-m", "benchmarks.fishtail_ladder", "--worker", level, "--steps", str(args.steps),
            "--ranks", *map(str, args.ranks), "--store-dir", str(args.store_dir),
            "--svd-power", str(args.svd_power), "--worker-out", str(out)]
-    proc = subprocess.Popen(cmd)
+    proc = subprocess.Popen(cmd, cwd=ROOT)
     peak = 0.0
     while proc.poll() is None:
         try:

@@ -25,7 +25,7 @@ unconstrained problem, so its objective is a lower bound, shown for scale).
 ``--problem random`` runs the same ladder on random data with many active
 constraints (``random_data``) instead.
 
-Run ``PYTHONPATH=. python benchmarks/fit_ladder.py [--sizes 10 30 60] [--problem string|random]
+Run ``python -m benchmarks.fit_ladder [--sizes 10 30 60] [--problem string|random]
 [--out benchmarks/results]``; it prints a table and writes ``fit_ladder.json``
 (``fit_ladder_random.json``).
 """

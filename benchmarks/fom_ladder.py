@@ -21,7 +21,7 @@ meshed by Gmsh at mesh sizes chosen so that P1 and P2 each reach about 2e4,
 
 Usage::
 
-    python benchmarks/fom_ladder.py [--sizes small,medium,large] [--elements p1,p2]
+    python -m benchmarks.fom_ladder [--sizes small,medium,large] [--elements p1,p2]
                                     [--out benchmarks/results/fom_ladder.json]
 
 prints Markdown tables and writes them with the raw numbers, the machine, the
@@ -736,7 +736,7 @@ def main(argv=None) -> int:
         import femrom  # noqa: F401
     except ImportError:
         raise SystemExit("femrom is not importable: run `pip install -e .` in the repository, "
-                         "or `PYTHONPATH=. python benchmarks/fom_ladder.py`")
+                         "or `python -m benchmarks.fom_ladder`")
 
     if args.single:
         print("RESULT " + json.dumps(run_single(args.single)), flush=True)

@@ -22,7 +22,7 @@ reported, and the ratio to the baseline's median at the same r). The output
 error of each model on the unseen run (``||Y - Y^|| / ||Y||``) and its spectral
 radius are reported too, so a time is never quoted for a model that does not work.
 
-Run ``PYTHONPATH=. python benchmarks/identification_fit.py [--sizes 2 4 8 12 16 20]
+Run ``python -m benchmarks.identification_fit [--sizes 2 4 8 12 16 20]
 [--repeats 3] [--out benchmarks/results]``; it prints a table and writes
 ``identification_fit.json``.
 """

@@ -22,7 +22,7 @@ within 3x). Then, once each, the full FE model's linear and nonlinear steps
 (``--full-steps``, 0 to skip), and with ``--ring-down SECONDS`` a ring-down of the reduced
 model with its energy balance (:class:`femrom.integrators.EnergyBalance`).
 
-Run ``PYTHONPATH=. python benchmarks/joint_step.py`` (about 2-3 minutes; ``--ring-down 1``
+Run ``python -m benchmarks.joint_step`` (about 2-3 minutes; ``--ring-down 1``
 adds about 8 minutes); it prints a table and writes ``benchmarks/results/joint_step.json``.
 """
 

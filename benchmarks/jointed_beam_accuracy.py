@@ -12,7 +12,7 @@ measured in the same run:
   0.15 s ring-down at 300 N, and the mean step time over that ring-down (medians of
   ``--repeats`` alternating blocks, the all-pair model's in the same blocks).
 
-Run ``PYTHONPATH=. python benchmarks/jointed_beam_accuracy.py`` (about 10 minutes); it prints
+Run ``python -m benchmarks.jointed_beam_accuracy`` (about 10 minutes); it prints
 two tables and writes ``benchmarks/results/jointed_beam_accuracy.json``.
 """
 
@@ -28,8 +28,10 @@ from pathlib import Path
 
 import numpy as np
 
-from femrom.cli import load_case
+from femrom.cases import jointed_beam as case
+from femrom.post import static_qsma, with_linear_damping
 from femrom.rom import ecsw_joint, hyper_reduced_system
+from femrom.study import ecsw_training, output_ring_down, with_impulse
 
 RESULTS = Path(__file__).resolve().parent / "results" / "jointed_beam_accuracy.json"
 
@@ -49,50 +51,46 @@ def main() -> None:
     parser.add_argument("--tolerances", type=float, nargs="+", default=[3e-2, 1e-2, 3e-3, 1e-3])
     parser.add_argument("--repeats", type=int, default=3)
     args = parser.parse_args()
-    case = load_case("jointed_beam")
     config = case.JointedBeamCase(n_modes=max(args.modes))
-    setup = case.prestressed(config)
-    beam, system = setup["beam"], setup["system"]
-    supports = case.point_supports(beam.fom.space, system.condensation, case.prestress.SUPPORTS[:3])
-    model, q0, z0 = case.iwan_joint(setup, supports, mu=config.friction_coefficient, chi=config.iwan_chi,
-                                    beta=config.iwan_beta)
+    setup = config.calibrated(config.scene(case.SCENE))
+    model, q0, z0 = config.iwan_joint(setup)
     damping = 0.00139
-    modes = setup["modes"]
+    modes = setup.modes
     tic = time.perf_counter()
-    full, _ = case.qsma(model, config.qsma_amplitudes, reference=q0, state=z0, phi=modes.shapes[:, 6],
-                        supports=supports, rigid_modes=modes.shapes[:, :6], progress=lambda line: None)
+    full = static_qsma(model, config.qsma_amplitudes, reference=q0, state=z0, mode=modes.shapes[:, 6],
+                       supports=setup.left_face, rigid_modes=modes.shapes[:, :6])
     full_seconds = time.perf_counter() - tic
-    reference = full.backbone(0)
-    reference = dataclasses.replace(reference, damping_ratio=reference.damping_ratio + damping)  # linear + joint
+    reference = with_linear_damping(full.backbone(0), damping)  # linear + joint
     rows_modes = []
     for n in args.modes:
-        reduced = case.reduced_model(setup, case.JointedBeamCase(n_modes=n), model, q0, z0, damping)
-        curve, seconds = case.reduced_qsma(reduced, z0, config.qsma_amplitudes, damping)
-        rows_modes.append({"modes": n, **differences(curve, reference), "qsma_seconds": seconds})
+        reduced = dataclasses.replace(config, n_modes=n).reduced(setup, model, q0, z0, damping)
+        tic = time.perf_counter()
+        curve = case.reduced_qsma(reduced, z0, config.qsma_amplitudes, damping)
+        rows_modes.append({"modes": n, **differences(curve, reference), "qsma_seconds": time.perf_counter() - tic})
     rows_modes.append({"modes": "full", **differences(reference, reference), "qsma_seconds": full_seconds})
 
-    reduced = case.reduced_model(setup, case.JointedBeamCase(), model, q0, z0, damping)
-    f1 = float(modes.frequencies[6])
-    dt = 1.0 / (config.steps_per_period * f1)
-    snapshots = case.ecsw_training(reduced, z0, config, dt)[0]
-    all_curve, _ = case.reduced_qsma(reduced, z0, config.qsma_amplitudes, damping)
-    blow = case.with_blow(reduced, 300.0, config.impact_width)
+    reduced = case.JointedBeamCase().reduced(setup, model, q0, z0, damping)
+    dt = config.dt(setup)
+    snapshots = ecsw_training(reduced, z0, config.training_impacts, width=config.impact_width,
+                              window=config.training_window, dt=dt).snapshots
+    all_curve = case.reduced_qsma(reduced, z0, config.qsma_amplitudes, damping)
+    blow = with_impulse(reduced, 300.0, config.impact_width)
     models = {"all": (blow, z0)}
     samples = {}
     for tolerance in args.tolerances:
         sampling = ecsw_joint(reduced, snapshots, z0, tolerance=tolerance)
         hyper, z_hyper = hyper_reduced_system(reduced, sampling, z0)
-        curve, _ = case.reduced_qsma(hyper, z_hyper, config.qsma_amplitudes, damping)
-        models[tolerance] = (case.with_blow(hyper, 300.0, config.impact_width), z_hyper)
+        curve = case.reduced_qsma(hyper, z_hyper, config.qsma_amplitudes, damping)
+        models[tolerance] = (with_impulse(hyper, 300.0, config.impact_width), z_hyper)
         samples[tolerance] = {"tolerance": tolerance, "pairs": int(sampling.pairs.size),
                               "training_residual": sampling.residual, **differences(curve, all_curve)}
     seconds = {key: [] for key in models}
     accelerations = {}
     for _ in range(args.repeats):
         for key, (system_, state) in models.items():
-            acc, sec, _, _ = case.ring_down(system_, state, config.training_window, dt)
-            seconds[key].append(sec / (acc.shape[1] - 1))
-            accelerations[key] = acc[0]
+            run = output_ring_down(system_, state, config.training_window, dt)
+            seconds[key].append(run.seconds / (run.accelerations.shape[1] - 1))
+            accelerations[key] = run.accelerations[0]
     base = statistics.median(seconds["all"])
     for tolerance, row in samples.items():
         step = statistics.median(seconds[tolerance])

@@ -1,6 +1,6 @@
 """What a step of the jointed-beam ROMs costs against the full model's: the issue's 1e3x target.
 
-The models are those of ``cases/jointed_beam_rom.py`` (its defaults): the full model (24,522 dofs,
+The models are those of ``femrom/cases/jointed_beam_rom.py`` (its defaults): the full model (24,522 dofs,
 the ``clamped_iwan`` joint on all 592 pairs, Newmark with condensed Newton), the 10-mode reference
 with the ECSW-sampled joint, and ROMs fitted on the case's training runs (the 150 and 600 N blows and
 the 5 N shaker run): Iwan-L-OpInf at r = 1 and 3, SpML and L-OpInf at r = 3. In one process, blocks
@@ -9,7 +9,7 @@ full model (the factorisation and its first step excluded), ``--steps`` of every
 table gives the median over the repeats of each block's mean seconds per step and the ratio of the
 full model's median to it.
 
-Run ``PYTHONPATH=. python benchmarks/jointed_beam_rom_step.py`` (about 8 minutes); it prints a table and
+Run ``python -m benchmarks.jointed_beam_rom_step`` (about 8 minutes); it prints a table and
 writes ``benchmarks/results/jointed_beam_rom_step.json``.
 """
 
@@ -25,11 +25,11 @@ from pathlib import Path
 
 import numpy as np
 
-from femrom.cli import load_case
+from femrom.cases import jointed_beam_rom as rom_case
 from femrom.inference import IwanLOpInf, LagrangianOpInf, SpML, SpMLConfig
 from femrom.integrators import Newmark, StepResult, integrate
 from femrom.rom import SecondOrderROM
-from femrom.study import mass_pod, ring_down_data
+from femrom.study import mass_pod, ring_down_data, with_impulse
 
 RESULTS = Path(__file__).resolve().parent / "results" / "jointed_beam_rom_step.json"
 
@@ -40,8 +40,6 @@ def main() -> None:
     parser.add_argument("--full-steps", type=int, default=12)
     parser.add_argument("--repeats", type=int, default=3)
     args = parser.parse_args()
-    rom_case = load_case("jointed_beam_rom")
-    jb = rom_case.jb
     config = rom_case.JointedBeamRomCase(test_blows=())
     say = lambda line: print(line, file=sys.stderr, flush=True)   # noqa: E731
     models = rom_case.reference_models(config, say)
@@ -49,7 +47,7 @@ def main() -> None:
     hyper, z_hyper, dt, case = models["hyper"], models["z_hyper"], models["dt"], models["case"]
     M = hyper.mass
     V, _ = mass_pod(M, training, 3)
-    blow = jb.with_blow(hyper, 300.0, case.impact_width)
+    blow = with_impulse(hyper, 300.0, case.impact_width)
     times = dt * np.arange(args.steps + 1)
 
     say("fitting the ROMs ...")
@@ -66,7 +64,7 @@ def main() -> None:
         rom = roms[name]
         ops = rom.operators_
         scheme = "newmark" if ops.stateful or ops.is_linear else "discrete_gradient"
-        solution = rom.predict(np.zeros(rom.operators_.r), times, inputs=blow.inputs, scheme=scheme)
+        solution = rom.predict(times, blow.inputs, scheme=scheme)
         return solution.info["stepping_seconds"] / args.steps
 
     def reference():

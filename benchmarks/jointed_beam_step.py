@@ -1,6 +1,6 @@
 """What a step of the jointed-beam case's reduced model costs: the joint in Newton against its tangent.
 
-The model is the one ``cases/jointed_beam.py`` rings down: the ``--modes`` lowest elastic
+The model is the one ``femrom/cases/jointed_beam.py`` rings down: the ``--modes`` lowest elastic
 modes of the prestressed, calibrated beam (default mesh, 24,522 dofs, 592 interface pairs),
 Galerkin about the preload, modal damping 0.139 %, the hammer (300 N, 0.3 ms half-sine), the
 ``clamped_iwan`` joint at the case's default chi and beta. Three versions of it step the same
@@ -16,7 +16,7 @@ Newmark average acceleration (dense Newton: 10 dofs), in one process:
 The blocks alternate ``--repeats`` times; the medians of their mean step times give the
 ratios against ``linear`` (the issue's target: a nonlinear step within 3x).
 
-Run ``PYTHONPATH=. python benchmarks/jointed_beam_step.py`` (about 5 minutes); it prints a
+Run ``python -m benchmarks.jointed_beam_step`` (about 5 minutes); it prints a
 table and writes ``benchmarks/results/jointed_beam_step.json``.
 """
 
@@ -33,9 +33,9 @@ from pathlib import Path
 import numpy as np
 import scipy.sparse as sp
 
-from femrom.cli import load_case
+from femrom.cases.jointed_beam import SCENE
 from femrom.integrators import Newmark, StepResult, integrate
-from femrom.rom import ecsw_joint, hyper_reduced_system
+from femrom.study import JointedBeamModel
 
 RESULTS = Path(__file__).resolve().parent / "results" / "jointed_beam_step.json"
 
@@ -55,20 +55,13 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=2000)
     parser.add_argument("--repeats", type=int, default=5)
     args = parser.parse_args()
-    case = load_case("jointed_beam")
-    config = case.JointedBeamCase(n_modes=args.modes)
-    setup = case.prestressed(config)
-    beam, system = setup["beam"], setup["system"]
-    supports = case.point_supports(beam.fom.space, system.condensation, case.prestress.SUPPORTS[:3])
-    model, q0, z0 = case.iwan_joint(setup, supports, mu=config.friction_coefficient, chi=config.iwan_chi,
-                                    beta=config.iwan_beta)
+    config = JointedBeamModel(n_modes=args.modes)
+    setup = config.calibrated(config.scene(SCENE))
+    model, q0, z0 = config.iwan_joint(setup)
     damping = 0.00139
-    all_pairs = case.reduced_model(setup, config, model, q0, z0, damping)
-    f1 = float(setup["modes"].frequencies[6])
-    dt = 1.0 / (128 * f1)
-    snapshots = case.ecsw_training(all_pairs, z0, config, dt)[0]
-    sampling = ecsw_joint(all_pairs, snapshots, z0, tolerance=config.ecsw_tolerance)
-    hyper, z_hyper = hyper_reduced_system(all_pairs, sampling, z0)
+    all_pairs = config.reduced(setup, model, q0, z0, damping)
+    dt = config.dt(setup)
+    _, sampling, hyper, z_hyper = config.hyper_reduced(all_pairs, z0, dt)
     D0 = all_pairs.nonlinear.tangent(np.zeros(all_pairs.n_dofs), None, z0)[0]
     linear = dataclasses.replace(all_pairs, stiffness=sp.csr_matrix(all_pairs.stiffness + D0), nonlinear=None,
                                  load=None)

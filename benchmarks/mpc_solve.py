@@ -24,7 +24,7 @@ BLAS runs on one thread (``OMP_NUM_THREADS`` etc. set to 1 unless already set): 
 process on a core of its own; on two shared cores, threaded BLAS made the same small products
 several times slower.
 
-Run ``PYTHONPATH=. python benchmarks/mpc_solve.py [--sizes 2 6 10 20] [--repeats 3]``; it
+Run ``python -m benchmarks.mpc_solve [--sizes 2 6 10 20] [--repeats 3]``; it
 prints a table and writes ``benchmarks/results/mpc_solve.json``.
 """
 

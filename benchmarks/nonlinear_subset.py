@@ -30,7 +30,7 @@ over the full run's steps. Reported: ``full iteration / condensed iteration``
 (target >= 20), ``condensed step / linear step`` (target <= 2), the largest
 relative trajectory difference (target <= 1e-10).
 
-Run ``PYTHONPATH=. python benchmarks/nonlinear_subset.py [--mesh-size 0.03]``;
+Run ``python -m benchmarks.nonlinear_subset [--mesh-size 0.03]``;
 it prints a table and writes ``benchmarks/results/nonlinear_subset.json``.
 """
 

@@ -20,14 +20,14 @@ Newmark over ``--rom-steps`` steps in three ways:
 - ``predict``: ``SecondOrderROM.predict`` (precomputed one-step map
   ``x_{k+1} = A x_k + F u_{k+1}``, preallocated C-ordered output, one
   ``dot(out=)`` per step; the "after"), ``info["seconds_per_step"]``;
-- ``kernel``: the bare loop of that path (``femrom.rom._steppers.run_linear``).
+- ``kernel``: the bare loop of that path (``femrom.integrators.run_linear``).
 
 Reported per r: median over ``--repeats`` repeats of the seconds per step,
 and the ratios FOM step / ROM step (target: >= 1e4 at r = 20). The FOM and
 the ROMs run in the same process, right after each other, so they see the
 same machine load (recorded in the JSON as the load average).
 
-Run ``PYTHONPATH=. python benchmarks/rom_step.py [--sizes 5 10 20 40] [--fom-steps 40]``;
+Run ``python -m benchmarks.rom_step [--sizes 5 10 20 40] [--fom-steps 40]``;
 it prints a table and writes ``benchmarks/results/rom_step.json``.
 """
 
@@ -39,20 +39,17 @@ import json
 import os
 import platform
 import statistics
-import sys
 import time
 from datetime import datetime, timezone
 from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).parent))
-import fom_ladder  # noqa: E402  (the FOM problem and its constants)
-
-from femrom.integrators import Newmark, Trajectory, integrate  # noqa: E402
-from femrom.rom import SecondOrderROM  # noqa: E402
-from femrom.rom import LinearParts, reduced_scheme, run_linear  # noqa: E402
-from femrom.scene import SecondOrderSystem  # noqa: E402
+from benchmarks import fom_ladder  # the FOM problem and its constants
+from femrom.integrators import Newmark, Trajectory, integrate
+from femrom.rom import SecondOrderROM
+from femrom.integrators import LinearParts, run_linear, time_scheme
+from femrom.scene import SecondOrderSystem
 
 SIZES = (5, 10, 20, 40)
 
@@ -111,9 +108,9 @@ def _time_rom(rom: SecondOrderROM, n_steps: int, repeats: int, generic_steps: in
     out = {"predict": [], "kernel": [], "generic": []}
     for _ in range(repeats):
         gc.collect()
-        sol = rom.predict(np.zeros(r), times, inputs=inputs, scheme="newmark")
+        sol = rom.predict(times, inputs, scheme="newmark")
         out["predict"].append(sol.info["seconds_per_step"])
-        A, F = reduced_scheme("newmark").step_map(LinearParts(ops.mass_matrix, ops.damping, ops.stiffness),
+        A, F = time_scheme("newmark").step_map(LinearParts(ops.mass_matrix, ops.damping, ops.stiffness),
                                                   fom_ladder.DT, ops.input_matrix)
         forcing = F @ inputs[:, 1:]
         tic = time.perf_counter()
@@ -132,7 +129,7 @@ def _time_rom(rom: SecondOrderROM, n_steps: int, repeats: int, generic_steps: in
     check = Trajectory(fields=("q",))
     integrate(reduced, Newmark(), np.zeros(r), np.zeros(r), fom_ladder.DT, 50,
               consumers=[check], progress=False)
-    lean = rom.predict(np.zeros(r), times[:51], inputs=inputs[:, :51], scheme="newmark").q
+    lean = rom.predict(times[:51], inputs[:, :51], scheme="newmark").q
     generic_q = np.asarray(check.q)
     agreement = float(np.max(np.abs(lean - generic_q)) / max(np.max(np.abs(generic_q)), 1e-300))
     return {k: statistics.median(v) for k, v in out.items()}, out, agreement

@@ -38,8 +38,8 @@ child's RSS and kills it above ``--memory-limit-gb``.
 
 Usage::
 
-    python benchmarks/snapshot_ladder.py --quick       # small sizes, 1-3 min
-    python benchmarks/snapshot_ladder.py               # full: 16 GB file, 40-60 min
+    python -m benchmarks.snapshot_ladder --quick       # small sizes, 1-3 min
+    python -m benchmarks.snapshot_ladder               # full: 16 GB file, 40-60 min
 
 See ``benchmarks/README.md`` and ``docs/benchmarks_snapshots.md``.
 """
@@ -65,10 +65,6 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
-try:
-    import femrom  # noqa: F401
-except ImportError:  # run from a checkout without ``pip install -e .``
-    sys.path.insert(0, str(ROOT))
 
 # -- sizes ----------------------------------------------------------------------
 FULL = {
@@ -289,8 +285,7 @@ def _relative_errors(s, reference) -> list[float]:
 
 def task_fom(size, steps, rank, workdir) -> dict:
     """Newmark runs of the clamped beam: plain, + sketch, + store + sketch; accuracy of the bases."""
-    sys.path.insert(0, str(HERE))
-    from fom_ladder import DT, _cantilever  # the same beam as the FOM benchmark
+    from benchmarks.fom_ladder import DT, _cantilever  # the same beam as the FOM benchmark
 
     from femrom.integrators import Newmark, integrate
     from femrom.linalg import StreamingSketch, randomized_svd

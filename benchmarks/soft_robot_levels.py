@@ -1,6 +1,6 @@
 r"""The soft robot's mesh levels: what each costs, from the mesh to a Newmark step.
 
-``cases/soft_robot.toml`` (meshes/soft_robot.geo, P2, materials by region, Rayleigh
+``femrom/cases/soft_robot.toml`` (meshes/soft_robot.geo, P2, materials by region, Rayleigh
 damping, six chamber inputs, 40 centreline outputs) at three ``mesh_size`` values:
 
 ========  =========  ======================================
@@ -31,7 +31,7 @@ memory is its own, and measures
 The table gives every level's numbers and their ratios to the small level of
 the same run. Usage::
 
-    python benchmarks/soft_robot_levels.py [--levels small,medium,large]
+    python -m benchmarks.soft_robot_levels [--levels small,medium,large]
                                            [--out benchmarks/results/soft_robot_levels.json]
 """
 
@@ -52,9 +52,10 @@ from pathlib import Path
 
 import numpy as np
 
+from femrom.cases import scene_file
+
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))      # this checkout's femrom, not another installed one
-SCENE = ROOT / "cases" / "soft_robot.toml"
+SCENE = scene_file("soft_robot")
 #: mesh_size per level (gmsh 4.15: 2.35e4, 1.04e5 and 2.27e5 P2 dofs)
 LEVELS = {"small": 0.045, "medium": 0.017, "large": 0.0115}
 #: Newmark steps per timed run and runs per level (a large step takes seconds)
@@ -165,7 +166,9 @@ def main(argv=None):
         if level not in LEVELS:
             parser.error(f"unknown level {level!r}; valid: {', '.join(LEVELS)}")
         print(f"{level}: mesh_size = {LEVELS[level]} ...", file=sys.stderr, flush=True)
-        child = subprocess.run([sys.executable, __file__, "--single", level], cwd=ROOT, capture_output=True,
+        # python -m from the checkout's root: this checkout's femrom, not another installed one
+        child = subprocess.run([sys.executable, "-m", "benchmarks.soft_robot_levels", "--single", level], cwd=ROOT,
+                               capture_output=True,
                                text=True, env={**os.environ, "FEMROM_NO_PROGRESS": "1"})
         if child.returncode:
             last = (child.stderr.strip().splitlines() or ["no message"])[-1]
@@ -175,7 +178,7 @@ def main(argv=None):
         print(_table(rows), file=sys.stderr, flush=True)
     table = _table(rows)
     print(table)
-    record = {"benchmark": "soft_robot_levels", "scene": "cases/soft_robot.toml", "rows": rows, "table": table,
+    record = {"benchmark": "soft_robot_levels", "scene": "femrom/cases/soft_robot.toml", "rows": rows, "table": table,
               "machine": {"platform": platform.platform(), "processor": platform.processor(),
                           "cpus": os.cpu_count(), "load_average": os.getloadavg()},
               "timestamp": datetime.now(timezone.utc).isoformat(timespec="seconds")}

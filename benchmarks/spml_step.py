@@ -13,7 +13,7 @@ random weights (the cost does not depend on their values). Reported: the fastest
 ``--repeats`` blocks of ``--calls`` calls, microseconds per call, and the ratio torch / numpy,
 measured in the same process one after the other.
 
-Run ``PYTHONPATH=. python benchmarks/spml_step.py``; writes ``benchmarks/results/spml_step.json``.
+Run ``python -m benchmarks.spml_step``; writes ``benchmarks/results/spml_step.json``.
 """
 
 from __future__ import annotations

@@ -4,10 +4,10 @@ Two FOMs with a known nonlinear potential, each released from a family of
 initial states (the amplitude scaled), Newmark average acceleration, stored
 displacements, velocities and accelerations:
 
-- ``sine_gordon``: ``cases/sine_gordon.toml`` at n = 200 interior nodes, dt = 0.02, the
+- ``sine_gordon``: ``femrom/cases/sine_gordon.toml`` at n = 200 interior nodes, dt = 0.02, the
   breather's initial velocity scaled by the amplitude; trained on [0, 5] s, predicted to
   25 s (400 % outside the training window, as in the seed);
-- ``cubic_beam``: ``cases/beam.toml`` (Hermite cantilever, 100 dofs) with a cubic spring
+- ``cubic_beam``: ``femrom/cases/beam.toml`` (Hermite cantilever, 100 dofs) with a cubic spring
   at the tip (``spring_layer``, k3 = 1e7 N/m^3: at the 9.5 mm static deflection of 10 N the
   cubic force is about the beam's tip stiffness) and Rayleigh damping (alpha = 1 /s),
   released from the static deflection under a tip load scaled by the amplitude; trained on
@@ -23,7 +23,7 @@ all with the discrete-gradient scheme at the FOM's dt; errors are ``||Q^ - Q^_FO
 ||Q^_FOM||_F`` of the reduced coordinates inside and outside the training window. Costs:
 SpML's training time, seconds per ROM step (fastest of ``--repeats`` runs) and per FOM step.
 
-Run ``PYTHONPATH=. python benchmarks/spml_validation.py [--fom sine_gordon cubic_beam]``;
+Run ``python -m benchmarks.spml_validation [--fom sine_gordon cubic_beam]``;
 it prints a table and writes ``benchmarks/results/spml_validation.json``.
 """
 
@@ -41,6 +41,7 @@ from pathlib import Path
 import numpy as np
 
 from femrom.basis import POD
+from femrom.cases import scene_file
 from femrom.inference import (LagrangianOpInf, ProjectedNonlinearForce, SpML, SpMLConfig, galerkin,
                               reduce_snapshots)
 from femrom.integrators import Trajectory, simulate
@@ -71,7 +72,7 @@ class Family:
 
 
 def sine_gordon(n: int = 200, rank: int = 8, amplitudes=(1.0, 0.6, 0.8, 0.9, 0.7, 0.65, 0.75, 0.85)) -> Family:
-    text = (ROOT / "cases" / "sine_gordon.toml").read_text()
+    text = scene_file("sine_gordon").read_text()
     text = text.replace('velocity = "4.0 * 0.6', 'velocity = "{amplitude} * 4.0 * 0.6')
     elements = n + 1
     text = text.replace("mesh_size = 0.019990004997501248, probe_position = 0.49975012493753124",
@@ -80,7 +81,7 @@ def sine_gordon(n: int = 200, rank: int = 8, amplitudes=(1.0, 0.6, 0.8, 0.9, 0.7
 
 
 def cubic_beam(rank: int = 8, amplitudes=(1.0, 0.6, 0.8, 0.9, 0.7, 0.65, 0.75, 0.85)) -> Family:
-    text = (ROOT / "cases" / "beam.toml").read_text()
+    text = scene_file("beam").read_text()
     text = text.replace("bending = {}", 'bending = {}\nspring_layer = { at = "right", component = "w", cubic = 1.0e7 }\n'
                                         'damping = { kind = "rayleigh", alpha = 1.0, beta = 0.0 }')
     text = text.replace("magnitude = 10.0", "magnitude = {amplitude}")
@@ -141,7 +142,7 @@ def validate(family: Family, sizes=(1, 2, 4, 8), config: SpMLConfig = SpMLConfig
         rom = SecondOrderROM(operators, V, product=M)
         best, solution = np.inf, None
         for _ in range(repeats):
-            solution = rom.predict(states[:, 0], times, v0=test_data.velocities[:, 0], scheme="discrete_gradient")
+            solution = rom.predict(times, initial=(states[:, 0], test_data.velocities[:, 0]), scheme="discrete_gradient")
             best = min(best, solution.info["seconds_per_step"])
         energy = solution.energy
         rows.append({"method": name, "r": family.rank, **window_errors(solution.q, states, split),

@@ -11,8 +11,8 @@ and ``benchmarks/results/store_checksums.json``.
 
 Usage::
 
-    python benchmarks/store_checksums.py            # n = 2e4 and 2e5, K = 400, 5 rounds
-    python benchmarks/store_checksums.py --quick    # n = 2e4, K = 200, 3 rounds
+    python -m benchmarks.store_checksums            # n = 2e4 and 2e5, K = 400, 5 rounds
+    python -m benchmarks.store_checksums --quick    # n = 2e4, K = 200, 3 rounds
 """
 
 from __future__ import annotations
@@ -79,11 +79,11 @@ def measure(n: int, n_snapshots: int, repeats: int, folder: Path) -> dict:
 
 def measure_fom(n_steps: int, repeats: int, folder: Path) -> dict:
     """The small fishtail streamed into a store, with and without checksums, alternating."""
-    from femrom.cli import load_case
+    from femrom.cases import fishtail
     from femrom.integrators import simulate
     from femrom.scene import build
 
-    model = build(load_case("fishtail").load_scene("small"))
+    model = build(fishtail.load_scene("small"))
     t_end = n_steps * model.scene.time.dt
     seconds = {False: [], True: []}
     for _ in range(repeats):

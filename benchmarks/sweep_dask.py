@@ -1,6 +1,6 @@
 """FOM sweep on Dask against a sequential loop: 8 small-fishtail trajectories, 2 workers.
 
-The sweep: the small fishtail (``cases/fishtail.py``, level ``small``, about 2e4
+The sweep: the small fishtail (``femrom/cases/fishtail.py``, level ``small``, about 2e4
 P2 dofs, 300 Newmark steps of 1 ms) over 2 Young's moduli x 4 pressure
 amplitudes. Both ways run the same function per point
 (:func:`femrom.study.run_sweep_point`: build the model unless the previous point
@@ -19,7 +19,7 @@ They alternate ``--repeats`` times (in rotated order), so a change of the
 machine's load hits all. Reported per repeat: wall seconds of each, and the
 ratios sequential / dask.
 
-Run ``PYTHONPATH=. python benchmarks/sweep_dask.py [--repeats 2] [--level small]``;
+Run ``python -m benchmarks.sweep_dask [--repeats 2] [--level small]``;
 it prints a table and writes ``benchmarks/results/sweep_dask.json``.
 """
 
@@ -42,9 +42,7 @@ RESULTS = ROOT / "benchmarks" / "results" / "sweep_dask.json"
 
 
 def sweep_scene(level: str):
-    sys.path.insert(0, str(ROOT / "cases"))
-    import fishtail
-
+    from femrom.cases import fishtail
     from femrom.scene import SweepConfig
 
     scene = fishtail.load_scene(level)
@@ -78,8 +76,8 @@ def sequential_1thread(level: str, out: Path) -> float:
     import subprocess
 
     env = dict(os.environ, MKL_NUM_THREADS="1", OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1")
-    done = subprocess.run([sys.executable, __file__, "--child", str(out), "--level", level], env=env,
-                          capture_output=True, text=True, check=True)
+    done = subprocess.run([sys.executable, "-m", "benchmarks.sweep_dask", "--child", str(out), "--level", level],
+                          env=env, cwd=ROOT, capture_output=True, text=True, check=True)
     return float(done.stdout.strip().splitlines()[-1])
 
 

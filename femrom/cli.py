@@ -1,8 +1,8 @@
 """``femrom`` command line: run a scene file or a named case, list the cases.
 
-    femrom cases                      list the case scripts in cases/
+    femrom cases                      list the named cases (the modules of femrom.cases)
     femrom --debug COMMAND ...        errors with their traceback (otherwise one line, exit 2)
-    femrom run beam [case options]    run a named case (cases/beam.py)
+    femrom run beam [case options]    run a named case (femrom/cases/beam.py)
     femrom run my_scene.toml -o out/  run any scene file: outputs, energy, plot; with a
                                       [rom] section the whole reduced-model study and report
     femrom info my_scene.toml         build the scene and print its sizes and effects
@@ -15,7 +15,10 @@
 from __future__ import annotations
 
 import argparse
+import ast
+import importlib
 import importlib.util
+import pkgutil
 import sys
 import time
 import warnings
@@ -23,36 +26,51 @@ from pathlib import Path
 
 import numpy as np
 
+from femrom._errors import FemromValueError
 
-def cases_directory() -> Path:
-    """The repository's ``cases/`` folder (next to ``femrom/`` in a source checkout)."""
-    return Path(__file__).resolve().parents[1] / "cases"
+
+#: The package of the named cases: one module per case, its scene file beside it.
+CASES_PACKAGE = "femrom.cases"
+
+
+class CaseError(FemromValueError):
+    """A case name that is not one of :func:`available_cases`."""
 
 
 def available_cases() -> dict[str, str]:
-    """Case name -> first line of its docstring."""
+    """Case name -> the first line of its module docstring, for every module of ``femrom.cases``
+    (``pkgutil.iter_modules``; a name starting with ``_`` is not a case), in name order.
+
+    The docstrings are read from the sources: listing runs no case."""
+    package = importlib.import_module(CASES_PACKAGE)
     found = {}
-    for path in sorted(cases_directory().glob("*.py")):
-        if path.name.startswith("_"):
+    for info in sorted(pkgutil.iter_modules(package.__path__), key=lambda m: m.name):
+        if info.name.startswith("_") or info.ispkg:
             continue
-        text = path.read_text()
-        doc = ""
-        if text.lstrip().startswith('"""'):
-            doc = text.lstrip()[3:].split("\n", 1)[0].strip().rstrip('"')
-        found[path.stem] = doc
+        found[info.name] = _first_doc_line(f"{CASES_PACKAGE}.{info.name}")
     return found
 
 
+def _first_doc_line(module: str) -> str:
+    spec = importlib.util.find_spec(module)
+    if spec is None or not spec.origin or not spec.origin.endswith(".py"):
+        return ""
+    doc = ast.get_docstring(ast.parse(Path(spec.origin).read_text()))
+    return doc.splitlines()[0].strip() if doc else ""
+
+
 def load_case(name: str):
+    """The case module ``femrom.cases.<name>`` (imported, not run).
+
+    Raises
+    ------
+    CaseError
+        ``name`` is not a case; the message lists the valid ones.
+    """
     cases = available_cases()
     if name not in cases:
-        raise SystemExit(f"femrom: unknown case {name!r}; available: {', '.join(cases) or '(none)'}")
-    path = cases_directory() / f"{name}.py"
-    spec = importlib.util.spec_from_file_location(f"femrom_case_{name}", path)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module  # dataclasses resolve annotations through it
-    spec.loader.exec_module(module)
-    return module
+        raise CaseError(f"unknown case {name!r}; available: {', '.join(cases) or '(none)'}")
+    return importlib.import_module(f"{CASES_PACKAGE}.{name}")
 
 
 #: Steps and in-memory fields above which ``femrom run`` asks for ``--yes``.
@@ -240,7 +258,7 @@ def _user_errors() -> tuple[type[BaseException], ...]:
     from femrom.snapshots import IngestError, SnapshotStoreError
 
     # OSError: a full disk, a folder without write permission, a missing file (its message names it)
-    return SceneError, IngestError, SnapshotStoreError, MeshError, OSError, ValueError
+    return SceneError, IngestError, SnapshotStoreError, MeshError, CaseError, OSError, ValueError
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -305,8 +323,10 @@ def _main(argv: list[str]) -> int:
         args, rest = parser.parse_args(argv), []
 
     if args.command == "cases":
-        for name, doc in available_cases().items():
-            print(f"{name:20s} {doc}")
+        cases = available_cases()
+        width = max(map(len, cases), default=0)
+        for name, doc in cases.items():
+            print(f"{name:{width}s}  {doc}")
         return 0
     if args.command == "info":
         from femrom.scene import Scene, build

@@ -7,13 +7,14 @@ import sys
 import numpy as np
 import pytest
 
-from femrom.cli import available_cases, load_case, main
+from femrom.cases import beam
+from femrom.cli import CaseError, available_cases, load_case, main
 
 
 @pytest.fixture(scope="module")
 def beam_metrics(tmp_path_factory):
     out = tmp_path_factory.mktemp("beam")
-    return load_case("beam").run(out, quick=True), out
+    return beam.run(out, quick=True), out
 
 
 def test_beam_case_writes_its_report(beam_metrics):
@@ -122,7 +123,7 @@ def test_beam_rom_state_error_against_the_projection_error(beam_metrics):
     for r, row in _rows(metrics, "rom", "lopinf").items():
         # L-OpInf at every r against the projection error combined with d(r), the a priori phase
         # error of a model that learned the data's *discrete* Newmark frequencies exactly and is
-        # stepped by Newmark once more (cases/beam.py: dispersion_error; no fitted constant).
+        # stepped by Newmark once more (femrom/cases/beam.py: dispersion_error; no fitted constant).
         # The ratio to the projection error alone runs from 1.03 (r = 2) to 33 (r = 6); the ratio
         # to sqrt(projection^2 + d^2) is 0.999-1.000 here (0.998-1.002 for r = 2..12 in the
         # default run). 5 %: a uniform relative error of 3e-5 in the learned frequencies already
@@ -160,9 +161,35 @@ def test_beam_plain_opinf_is_harmless_on_fine_data_and_blows_up_on_coarse_data(b
 
 
 def test_cli_lists_cases(capsys):
-    assert "beam" in available_cases()
+    cases = available_cases()
+    assert list(cases) == ["beam", "fishtail", "jointed_beam", "jointed_beam_measured", "jointed_beam_prestress",
+                           "jointed_beam_rom", "nls", "sine_gordon", "soft_robot"]
+    assert cases["beam"].startswith("Euler-Bernoulli cantilever")
     assert main(["cases"]) == 0
-    assert "beam" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert all(name in out for name in cases)
+
+
+def test_cli_imports_a_case_by_name_and_names_the_valid_ones_otherwise(capsys):
+    assert load_case("beam") is beam
+    with pytest.raises(CaseError, match=r"unknown case 'wobble'; available: beam, fishtail, .*soft_robot$"):
+        load_case("wobble")
+    with pytest.raises(CaseError):
+        load_case("femrom")     # a name that imports but is no case
+    assert main(["run", "wobble"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and err.startswith("femrom: unknown case 'wobble'; available: beam")
+
+
+def test_every_case_ships_its_scene_file_beside_it():
+    from femrom.cases import scene_file
+    from femrom.scene import Scene
+
+    for name in ("beam", "fishtail", "jointed_beam", "sine_gordon", "soft_robot"):
+        assert Scene.from_toml(scene_file(name)).name == name
+    assert "[initial_condition]" in scene_file("nls").read_text()     # the NLS case's own format
+    with pytest.raises(CaseError, match="no scene file 'wobble'"):
+        scene_file("wobble")
 
 
 def test_cli_runs_a_scene_file(tmp_path, capsys):
@@ -252,7 +279,6 @@ def test_beam_rom_costs_hold_on_a_loaded_machine(tmp_path):
     before the study layer, once showed the same r = 12 step at 1.5e-5 and 1.5e-6 s in one
     report: a factor 10.
     """
-    beam = load_case("beam")
     quiet = beam.run(tmp_path / "quiet", ladders=False)
     burner = subprocess.Popen([sys.executable, "-c", "while True: pass"])
     try:
@@ -275,3 +301,48 @@ def test_beam_rom_costs_hold_on_a_loaded_machine(tmp_path):
         # the costs measure work: a 100-dof Newmark step (27 us) against a (3r x 3r) product (about 1 us)
         for m in (quiet, loaded):
             assert all(row["speedup"] > 5 for row in m[study]["rows"]), study
+
+
+def _imports(path):
+    """Every module a file imports (``from x import y`` gives ``x`` and ``x.y``)."""
+    import ast
+
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.ImportFrom) and node.module:
+            yield node.module
+            yield from (f"{node.module}.{alias.name}" for alias in node.names)
+        elif isinstance(node, ast.Import):
+            yield from (alias.name for alias in node.names)
+
+
+def test_no_case_imports_another_and_cases_use_public_names():
+    from pathlib import Path
+
+    import femrom.cases
+
+    package = Path(femrom.cases.__file__).parent
+    cases = set(available_cases())
+    for path in package.glob("*.py"):
+        for module in _imports(path):
+            parts = module.split(".")
+            if parts[0] != "femrom":
+                continue
+            assert not (len(parts) >= 3 and parts[1] == "cases" and parts[2] in cases), f"{path.name} imports {module}"
+            # public names of the library only: femrom.<package>, never femrom.<package>._<module>
+            assert not any(part.startswith("_") for part in parts[1:-1]), f"{path.name} imports {module}"
+    # and the library below imports no case
+    for path in package.parent.rglob("*.py"):
+        if package in path.parents:
+            continue
+        assert not any(m.startswith("femrom.cases") for m in _imports(path)), path
+
+
+def test_nothing_edits_the_import_path_or_loads_a_module_from_a_file():
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    for folder in ("femrom", "tests", "benchmarks"):
+        for path in (root / folder).rglob("*.py"):
+            text = path.read_text()
+            for forbidden in ("sys.path.insert", "sys.path.append", "spec_from_file_location", "SourceFileLoader"):
+                assert forbidden not in text or path == Path(__file__), f"{path.relative_to(root)}: {forbidden}"

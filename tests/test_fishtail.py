@@ -1,6 +1,6 @@
 """The soft-robotic fishtail: geometry, chamber loads, P1 locking, the pipeline, renders.
 
-The pipeline test runs ``cases/fishtail.py`` on the ``tiny`` mesh (about 4.8e3
+The pipeline test runs ``femrom/cases/fishtail.py`` on the ``tiny`` mesh (about 4.8e3
 dofs) over a 0.12 s window; the bounds below were measured on that
 configuration (see each assertion) and are stated with their margin.
 """
@@ -24,10 +24,9 @@ from femrom.inference import reduce_snapshots
 from femrom.rom import SecondOrderROM
 from femrom.scene import InputConfig, MaterialConfig, SceneError, SignalVector, build
 from femrom.study import mass_norm, project_run
+from femrom.cases import fishtail
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "cases"))
-import fishtail  # noqa: E402
 
 
 @pytest.fixture(scope="module")

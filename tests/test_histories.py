@@ -1,25 +1,23 @@
 """The study's helpers for judging ROMs over time, the scene's own run, ladders and report sections."""
 
 import time
-from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
+from femrom.cases import scene_file
 from femrom.post import table_section
 from femrom.scene import Derivatives, Scene, build
 from femrom.study import HYPER_COLUMNS, call_cost, invariant_drift, extrapolation_config, extrapolation_scene, \
     final_state, final_state_ladders, final_state_section, hyper_reduced_rows, mass_norm, observed_order, \
     reconstructed_energy_error, rom_table, run_study, scene_run, state_energy
 
-CASES = Path(__file__).parent.parent / "cases"
-
 
 @pytest.fixture(scope="module")
 def chain():
     """The sine-Gordon scene at 60 nodes over a short window: a nonlinear conservative system."""
-    scene = Scene.from_toml(CASES / "sine_gordon.toml")
+    scene = Scene.from_toml(scene_file("sine_gordon"))
     return scene.with_geometry(mesh_size=40.0 / 61, probe_position=30 / 61).with_time(dt=0.05, t_end=1.0)
 
 

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
+from femrom.cases import scene_file
 from femrom.integrators import Newmark, integrate
 from femrom.scene import Scene, SceneError, SecondOrderSystem
 from femrom.snapshots import SnapshotStore, SnapshotStoreError
@@ -114,7 +115,7 @@ def test_a_journal_left_beside_a_replaced_store_is_stale(tmp_path):
 
 # -- scene keys: wrong types, non-finite and out-of-range values, valid extremes ------------
 def _beam(**material):
-    text = (ROOT / "cases" / "beam.toml").read_text()
+    text = scene_file("beam").read_text()
     import tomllib
 
     data = tomllib.loads(text)
@@ -168,7 +169,7 @@ def _femrom(*args, cwd=None):
 
 def test_cli_errors_are_one_line_and_debug_shows_the_traceback(tmp_path):
     bad = tmp_path / "bad.toml"
-    bad.write_text((ROOT / "cases" / "beam.toml").read_text().replace("density = 7850.0", "density = true"))
+    bad.write_text(scene_file("beam").read_text().replace("density = 7850.0", "density = true"))
     for command in (["info", str(bad)], ["run", str(bad), "-o", str(tmp_path / "out")]):
         proc = _femrom(*command)
         lines = proc.stderr.strip().splitlines()
@@ -201,7 +202,7 @@ def test_a_nan_initial_state_is_refused_by_name():
 def test_an_output_path_that_is_a_file_is_refused_before_anything_runs(tmp_path):
     out = tmp_path / "out"
     out.write_text("a file")
-    proc = _femrom("run", str(ROOT / "cases" / "beam.toml"), "-o", str(out))
+    proc = _femrom("run", str(scene_file("beam")), "-o", str(out))
     assert proc.returncode == 2 and proc.stderr.strip().splitlines() == [f"femrom: {out}: exists and is not a folder"]
     assert out.read_text() == "a file"
 
@@ -211,7 +212,7 @@ def test_a_failed_run_keeps_the_previous_results_and_leaves_no_staging(tmp_path)
     out.mkdir()
     (out / "metrics.json").write_text("{\"old\": true}")
     bad = tmp_path / "bad.toml"
-    bad.write_text((ROOT / "cases" / "beam.toml").read_text().replace('clamped = ["left"]', 'clamped = ["nowhere"]'))
+    bad.write_text(scene_file("beam").read_text().replace('clamped = ["left"]', 'clamped = ["nowhere"]'))
     proc = _femrom("run", str(bad), "-o", str(out))
     assert proc.returncode == 2 and len(proc.stderr.strip().splitlines()) == 1 and "nowhere" in proc.stderr
     assert sorted(p.name for p in out.iterdir()) == ["metrics.json"]
@@ -225,7 +226,7 @@ def test_a_second_run_into_the_same_folder_at_once_is_refused(tmp_path):
     out = tmp_path / "out"
     with staged_output(out) as staging:          # a run in progress (this process holds the folder)
         (staging / "partial.txt").write_text("x")
-        proc = _femrom("run", str(ROOT / "cases" / "beam.toml"), "-o", str(out))
+        proc = _femrom("run", str(scene_file("beam")), "-o", str(out))
         assert proc.returncode == 2 and proc.stderr.strip().splitlines() == [
             f"femrom: {out}: another run is writing its results there now"]
     assert (out / "partial.txt").read_text() == "x"   # the first run's results, whole
@@ -379,7 +380,7 @@ def test_a_named_case_into_a_folder_that_is_a_file_is_one_line(tmp_path):
 # -- numerics: scales double precision cannot carry, steps that resolve nothing ----------------
 def test_a_modulus_beyond_double_precision_is_refused_naming_the_material(tmp_path):
     scene = tmp_path / "huge.toml"
-    scene.write_text((ROOT / "cases" / "beam.toml").read_text()
+    scene.write_text(scene_file("beam").read_text()
                      .replace("youngs_modulus = 2.1e11", "youngs_modulus = 1.0e300"))
     proc = _femrom("run", str(scene), "-o", str(tmp_path / "out"))
     lines = proc.stderr.strip().splitlines()
@@ -414,7 +415,7 @@ def test_a_full_disk_while_the_cli_writes_results_keeps_the_previous_ones(tmp_pa
 
     env = {**os.environ, "FEMROM_CACHE": str(tmp_path / "cache"), "FEMROM_NO_PROGRESS": "1"}
     out = tmp_path / "out"
-    first = subprocess.run([sys.executable, "-m", "femrom", "run", str(ROOT / "cases" / "beam.toml"), "-o", str(out)],
+    first = subprocess.run([sys.executable, "-m", "femrom", "run", str(scene_file("beam")), "-o", str(out)],
                            capture_output=True, text=True, timeout=300, env=env)
     assert first.returncode == 0, first.stderr
     before = {p.name: p.read_bytes() for p in out.iterdir()}
@@ -423,7 +424,7 @@ def test_a_full_disk_while_the_cli_writes_results_keeps_the_previous_ones(tmp_pa
         signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
         resource.setrlimit(resource.RLIMIT_FSIZE, (50_000, 50_000))
 
-    second = subprocess.run([sys.executable, "-m", "femrom", "run", str(ROOT / "cases" / "beam.toml"), "-o", str(out)],
+    second = subprocess.run([sys.executable, "-m", "femrom", "run", str(scene_file("beam")), "-o", str(out)],
                             capture_output=True, text=True, timeout=300, env=env, preexec_fn=full_disk)
     lines = second.stderr.strip().splitlines()
     assert second.returncode == 2 and len(lines) == 1, second.stderr

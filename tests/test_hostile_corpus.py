@@ -20,13 +20,13 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
+from femrom.cases import scene_file
 from femrom.mesh import MeshError, generate_mesh, load_mesh
 from femrom.scene import Scene, SceneError, SecondOrderSystem, build
 from femrom.snapshots import SnapshotStore, SnapshotStoreError
 
-ROOT = Path(__file__).parents[1]
-BEAM = tomllib.loads((ROOT / "cases" / "beam.toml").read_text())
-FISH = tomllib.loads((ROOT / "cases" / "fishtail.toml").read_text())
+BEAM = tomllib.loads(scene_file("beam").read_text())
+FISH = tomllib.loads(scene_file("fishtail").read_text())
 ACCEPT = None
 
 

@@ -2,36 +2,32 @@
 
 Small models with closed forms (two stacked blocks: uniform compression; a rigid block on a
 Winkler contact under an eccentric load), then the bolted half Brake-Reuss beam at a coarse
-mesh (cases/jointed_beam.toml): reactions, total normal force, the closed region around the
+mesh (femrom/cases/jointed_beam.toml): reactions, total normal force, the closed region around the
 bolts, the rigid-body modes, the tied beam against the bonded one; the calibration on the
 measured f1 behind ``slow``.
 """
 
-import importlib.util
-import sys
-from pathlib import Path
+import tomllib
 
 import numpy as np
 import pytest
-import scipy.sparse as sp
-from scipy.optimize import brentq
 from skfem import MeshTet
 
 import femrom.mesh as fm
-from femrom import fem
+from femrom.cases import jointed_beam_prestress, scene_file
 from femrom.scene import (
     Scene,
     SceneError,
     build,
     linearized_modes,
+    mode_frequency,
     point_supports,
     preload,
     solve_static,
     with_friction_coefficient,
+    with_law_parameters,
 )
-
-CASES = Path(__file__).resolve().parents[1] / "cases"
-
+from femrom.study import JOINTED_BEAM
 
 # --- two stacked blocks ----------------------------------------------------------------------
 
@@ -232,18 +228,9 @@ def test_frictionless_switch_needs_a_unilateral_law():
 
 # --- the bolted beam, coarse ------------------------------------------------------------------
 
-def load_case():
-    spec = importlib.util.spec_from_file_location("femrom_case_jointed_beam_prestress",
-                                                  CASES / "jointed_beam_prestress.py")
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module
-    spec.loader.exec_module(module)
-    return module
-
-
 @pytest.fixture(scope="module")
 def case():
-    return load_case()
+    return jointed_beam_prestress
 
 
 # The coarsest mesh that resolves the layers' bending (P2): 25.4 mm away from the joint, 12.7 mm
@@ -271,7 +258,7 @@ def test_beam_interface_stays_closed_only_around_the_bolts(beam, case):
     pressure = -joint.tractions(beam.preload.displacement, beam.preload.state)[:, 2]
     pairs = fm.interface_pairs(beam.fom.space.mesh, "interface_left", "interface_right", order=2)
     x, z = pairs.points[:, 0], pairs.points[:, 2]
-    distance = np.min(np.hypot(x[:, None] - case.BOLTS_X[None, :], z[:, None]), axis=1)
+    distance = np.min(np.hypot(x[:, None] - JOINTED_BEAM.bolts_x[None, :], z[:, None]), axis=1)
     washer = 0.00873125
     # under the washers (r < washer radius) every pair is closed; beyond two washer radii none is
     # (measured: closed out to 15.0 mm from a bolt axis, 48 % of the area; 12.7 / 6.35 mm: 18 mm,
@@ -284,7 +271,7 @@ def test_beam_interface_stays_closed_only_around_the_bolts(beam, case):
 
 
 def test_beam_prestressed_modes_rigid_body_and_shapes(beam, case):
-    system = case.with_tangential_stiffness(beam.fom.system, 1e12)
+    system = with_law_parameters(beam.fom.system, tangential_stiffness=1e12)
     modes = linearized_modes(system, beam.preload.displacement, beam.preload.state, n_modes=9)
     f = modes.frequencies
     # six rigid-body modes: the stuck joint ties the halves (measured |f| < 0.002 Hz against 82.2 Hz)
@@ -347,22 +334,23 @@ def test_tied_beam_lies_between_the_stuck_joint_and_the_bonded_beam(case, defaul
         "material": {"youngs_modulus": 2.0e11, "poisson_ratio": 0.29, "density": 7800.0},
         "effects": {"inertia": {}, "elasticity": {}}, "time": {"t_end": 1.0, "dt": 1e-3}}
     bonded = linearized_modes(build(Scene.from_dict(data)).system, n_modes=7).frequencies[6]
-    data = case._scene_data(Scene.from_toml(case.SCENE))
+    data = tomllib.loads(scene_file("jointed_beam").read_text())
     data["effects"]["joint"] = {"between": ["interface_left", "interface_right"], "law": "jenkins",
                                 "parameters": {"tangential_stiffness": 1e18, "slip_traction": 1e20,
                                                "normal_stiffness": 1e18}}
     del data["effects"]["bolt_preload"]
     f = linearized_modes(build(Scene.from_dict(data)).system, n_modes=7).frequencies
     assert np.abs(f[:6]).max() < 1e-3 * f[6]
-    low, high = (case.first_bending(default_beam, k_t) for k_t in case.BRACKET)
-    assert low < case.MEASURED_F1 < high < f[6] < bonded
+    low, high = (mode_frequency(default_beam, 6, shape=("vertical", 2), tangential_stiffness=k_t)
+                 for k_t in JOINTED_BEAM.stiffness_bracket)
+    assert low < JOINTED_BEAM.measured_f1 < high < f[6] < bonded
 
 
 @pytest.mark.slow
 def test_calibrated_beam_predicts_the_next_two_measured_modes(case):
     result = case.run()
     # the root find hits the measured f1 (Brent, xtol 1e-5 in log10 k_t)
-    assert result["f1"] == pytest.approx(case.MEASURED_F1, abs=1e-3)
+    assert result["f1"] == pytest.approx(JOINTED_BEAM.measured_f1, abs=1e-3)
     # the issue's target: the modes near 221.7 and 297.7 Hz within 3 % (measured -0.67 % and +1.81 %),
     # named by the model's shapes: first in-plane bending, second vertical bending
     first, second = result["predictions"]

@@ -4,12 +4,11 @@ model's validation against the full model, the ring-down, the metrics the issue 
 import numpy as np
 import pytest
 
-from femrom.cli import load_case
+from femrom.cases import jointed_beam as case
 
 
 @pytest.fixture(scope="module")
 def metrics(tmp_path_factory):
-    case = load_case("jointed_beam")
     # the Iwan joint at the fitted chi, beta (the case's defaults; fitting needs the full QSMA grid)
     config = case.JointedBeamCase(ring_down=1.0, qsma_amplitudes=(1.0, 1.76, 3.1, 5.46, 9.61, 16.9, 30.0), fit_iwan=False,
                                   training_impacts=(300.0,), training_window=0.1,

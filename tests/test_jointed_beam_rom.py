@@ -1,5 +1,5 @@
 """SpML against L-OpInf on ring-downs of a small hysteretic (clamped-Iwan) structure: the jointed beam's
-ROM study (``cases/jointed_beam_rom.py``, ``femrom.study.compare_ring_downs``) on a synthetic analogue.
+ROM study (``femrom/cases/jointed_beam_rom.py``, ``femrom.study.compare_ring_downs``) on a synthetic analogue.
 
 Four nodes in a chain, each on a linear ground spring and a clamped-Iwan pair (the joint a quarter of
 the stuck stiffness, slip tractions growing fourfold along the chain), projected on its six stuck

@@ -1,7 +1,7 @@
 """Data-only ROMs from band-limited multi-channel records (issue 17, part 4).
 
 ``femrom.post.modal_record`` on synthetic records with known modal coordinates, then
-the jointed beam's measured hammer-impact ring-down (``cases/jointed_beam_measured.py``;
+the jointed beam's measured hammer-impact ring-down (``femrom/cases/jointed_beam_measured.py``;
 skipped when the data folder is absent: ``$FEMROM_BRB_DATA`` or ``../shared/data/brb``).
 """
 
@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from femrom.cli import load_case
+from femrom.cases import jointed_beam_measured as case
 from femrom.post import band_limited_integrals, brb_data_dir, modal_record
 
 RATE = 2000.0
@@ -87,7 +87,6 @@ def measured(tmp_path_factory):
         brb_data_dir()
     except FileNotFoundError as missing:
         pytest.skip(f"jointed-beam data absent: {missing}")
-    case = load_case("jointed_beam_measured")
     # the case's defaults; the in-sample predictions (docs only) are left out to keep the test short
     config = case.MeasuredRomCase(in_sample=False)
     return case.run(config, tmp_path_factory.mktemp("brb_measured"), progress=lambda line: None)

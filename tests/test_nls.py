@@ -1,7 +1,7 @@
 """Cubic NLS: canonical integrators, H-OpInf with a known quartic Hamiltonian, and the case.
 
 The FOM is ``i psi_t + psi_xx + gamma |psi|^2 psi = 0``, ``psi = q + i p``, on
-64 periodic points (2n = 128, cases/nls.py): ``H = q^T K q / 2 + p^T K p / 2
+64 periodic points (2n = 128, femrom/cases/nls.py): ``H = q^T K q / 2 + p^T K p / 2
 - gamma/4 sum (q^2 + p^2)^2`` with ``K = -Laplacian``.
 """
 
@@ -12,13 +12,11 @@ import numpy as np
 import pytest
 
 from femrom.basis import CotangentLiftPSD
-from femrom.cli import load_case
+from femrom.cases import nls
 from femrom.inference import CanonicalData, HamiltonianOpInf, ProjectedPotential
 from femrom.integrators import integrate_canonical
 from femrom.rom import FirstOrderROM, HamiltonianROM
 from femrom.study import linear_operator
-
-nls = load_case("nls")
 
 
 def relative(A, B):

@@ -3,12 +3,12 @@
 import io
 import re
 import types
-from pathlib import Path
 
 import numpy as np
 import pytest
 import scipy.sparse as sp
 
+from femrom.cases import scene_file
 from femrom import _progress
 from femrom._progress import Progress, Stage
 
@@ -191,7 +191,7 @@ def test_mesh_generation_reports_its_stage_but_not_a_cache_hit(terminal, monkeyp
 def test_scene_assembly_reports_its_stage(terminal, monkeypatch):
     from femrom.scene import Scene, build
 
-    scene = Scene.from_toml(Path(__file__).resolve().parents[1] / "cases" / "beam.toml")
+    scene = Scene.from_toml(scene_file("beam"))
     stream = FakeTTY()
     monkeypatch.setattr("sys.stderr", stream)
     build(scene)

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from scipy.optimize import nnls
 
-from femrom.cli import load_case
+from femrom.cases import sine_gordon
 from femrom.fem import LocalPotential
 from femrom.inference import ProjectedNonlinearForce
 from femrom.rom import HyperReducedPotential, ecsw_weights, sparse_nnls
@@ -16,7 +16,7 @@ from femrom.rom import HyperReducedPotential, ecsw_weights, sparse_nnls
 @pytest.fixture(scope="module")
 def sg(tmp_path_factory):
     out = tmp_path_factory.mktemp("sine_gordon")
-    metrics = load_case("sine_gordon").run(out, quick=True)
+    metrics = sine_gordon.run(out, quick=True)
     rows = {(row["method"], row["r"]): row for row in metrics["rows"]}
     return metrics, rows, out
 

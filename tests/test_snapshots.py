@@ -3,7 +3,6 @@ and one clear error for every kind of bad file."""
 
 import dataclasses
 import datetime
-import importlib.util
 import os
 import re
 import shutil
@@ -19,6 +18,7 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
+import _kill_helper as helper  # the same systems the script runs (tests/ is on the path)
 import femrom
 from femrom.integrators import (
     CentralDifference,
@@ -42,17 +42,7 @@ from femrom.snapshots import _format, _journal, _recovery, _writer
 from femrom.snapshots._superblock import lookup3, read_superblock
 
 REPO = Path(__file__).resolve().parents[1]
-HELPER = Path(__file__).with_name("_kill_helper.py")
-
-
-def _load_helper():
-    spec = importlib.util.spec_from_file_location("femrom_kill_helper", HELPER)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-helper = _load_helper()
+HELPER = Path(__file__).with_name("_kill_helper.py")    # also run as a script (a process to kill)
 
 
 def forced_chain(n: int = 6) -> SecondOrderSystem:

@@ -1,4 +1,4 @@
-"""The SERPENT-like soft robot (meshes/soft_robot.geo, cases/soft_robot.toml) at its small level:
+"""The SERPENT-like soft robot (meshes/soft_robot.geo, femrom/cases/soft_robot.toml) at its small level:
 regions, mass, the six chamber inputs and the 40 centreline outputs.
 
 Static responses ``K q = b_j`` (one solve per chamber) stand in for the dynamics here: they
@@ -8,15 +8,13 @@ check (a sign, a mirror image, a rigid motion beyond the loaded segment).
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 
+from femrom.cases import scene_file
 from femrom.scene import Scene, build, element_materials
 from femrom.solvers import make_solver
 
-ROOT = Path(__file__).resolve().parents[1]
 REGIONS = ("head", "segment_1", "segment_2", "segment_3", "couple_1", "couple_2", "tail", "strip")
 CHAMBERS = tuple(f"chamber_{i}_{side}" for i in (1, 2, 3) for side in ("left", "right"))
 
@@ -31,7 +29,7 @@ TAIL_START = HEAD + 3 * SEGMENT + 2 * COUPLE
 
 @pytest.fixture(scope="module")
 def model():
-    return build(Scene.from_toml(ROOT / "cases" / "soft_robot.toml"))
+    return build(Scene.from_toml(scene_file("soft_robot")))
 
 
 @pytest.fixture(scope="module")

@@ -5,14 +5,13 @@ import json
 
 import pytest
 
-from femrom.cli import load_case
+from femrom.cases import soft_robot as module
 
 TESTS = ("test_sines", "test_chirp", "test_random")
 
 
 @pytest.fixture(scope="module")
 def case(tmp_path_factory):
-    module = load_case("soft_robot")
     out = tmp_path_factory.mktemp("soft_robot")
     return module, module.run(out, module.SoftRobotCase.quick(), progress=lambda line: None), out
 
@@ -109,7 +108,6 @@ def test_mpc_on_the_fom_tracks_the_feasible_reference_within_its_bounds(case):
 
 
 def test_a_bad_configuration_is_refused_before_anything_runs(tmp_path):
-    module = load_case("soft_robot")
     out = tmp_path / "never"
     with pytest.raises(ValueError, match="test_window 1.0 s is shorter than control_window"):
         module.run(out, module.SoftRobotCase.quick(test_window=1.0))

@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from femrom.cases import scene_file
 from femrom.inference import (TORCH_MISSING, ConvexPowers, LagrangianOpInf, LearnedDissipation, LearnedPotential,
                               NetworkLayer, ProjectedNonlinearForce, ReducedOperators, ScalarNetwork, SecondOrderData,
                               SpML, SpMLConfig, SymmetricPolynomial, galerkin, learner_class, multi_indices,
@@ -280,7 +281,7 @@ def test_femrom_works_without_torch_and_spml_says_what_to_install():
 def test_for_system_leaves_the_known_force_for_spml_to_learn():
     from femrom.scene import Scene, build
 
-    text = (ROOT / "cases" / "sine_gordon.toml").read_text()
+    text = scene_file("sine_gordon").read_text()
     scene = Scene.from_dict(tomllib.loads(text)).with_geometry(mesh_size=40.0 / 31, probe_position=15 / 31)
     system = build(scene).system
     learner = SpML.for_system(system, config=SMALL)
@@ -331,7 +332,7 @@ def test_discrete_gradient_energy_never_increases_without_input():
 def _sine_gordon(amplitude, n=100, dt=0.04, t_end=5.0):
     from femrom.scene import Scene, build
 
-    text = (ROOT / "cases" / "sine_gordon.toml").read_text()
+    text = scene_file("sine_gordon").read_text()
     text = text.replace('velocity = "4.0 * 0.6', f'velocity = "{amplitude!r} * 4.0 * 0.6')
     scene = Scene.from_dict(tomllib.loads(text))
     elements = n + 1
@@ -389,11 +390,7 @@ def test_validation_sweep_on_both_foms():
     """``benchmarks/spml_validation.py`` at its defaults (sine-Gordon n = 200 and the cubic-spring
     beam, r = 8, 1 to 8 training trajectories; about 6 minutes): the learned force approaches
     Galerkin's as the data grow, and the predictions rank as in docs/spml.md."""
-    import importlib.util
-
-    spec = importlib.util.spec_from_file_location("spml_validation", ROOT / "benchmarks" / "spml_validation.py")
-    validation = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(validation)
+    from benchmarks import spml_validation as validation
     for family in (validation.sine_gordon(), validation.cubic_beam()):
         result = validation.validate(family, (1, 8), SpMLConfig(), repeats=1)
         growth, rows = result["growth"], {row["method"]: row for row in result["rows"]}
@@ -412,7 +409,6 @@ def test_validation_sweep_on_both_foms():
 def test_a_scene_study_fits_spml_by_name(tmp_path):
     """``[rom] learners = ["galerkin", "spml"]`` on the cantilever with a cubic tip spring: SpML gets
     the reduced data without the projected force (which it learns) and runs through the pipeline."""
-    sys.path.insert(0, str(ROOT / "tests"))
     from test_study_canonical import _beam
 
     from femrom.study import run_study

@@ -1,6 +1,6 @@
 """Canonical Hamiltonian learners in the [rom] pipeline: H-OpInf on a conservative scene.
 
-The cantilever of ``cases/beam.toml`` (Hermite elements, 100 free dofs, no damping,
+The cantilever of ``femrom/cases/beam.toml`` (Hermite elements, 100 free dofs, no damping,
 no inputs) is released from its static deflection; with ``V^T M V = I`` it is
 canonical in ``(q^, p^ = q^')`` and ``hopinf`` learns symmetric ``D^_q``, ``D^_p``.
 """
@@ -10,16 +10,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from femrom.cases import scene_file
 from femrom.inference import ForcePotential
 from femrom.scene import Scene, SceneError, build
 from femrom.study import check_canonical_learners, run_study
 
-CASES = Path(__file__).parents[1] / "cases"
 DATA = Path(__file__).parent / "data"
 
 
 def _beam(folder, learners, *, cubic=None, damping=False, product="mass", ranks=(4, 8)) -> Scene:
-    text = (CASES / "beam.toml").read_text().replace("t_end = 2.0", "t_end = 0.03")
+    text = scene_file("beam").read_text().replace("t_end = 2.0", "t_end = 0.03")
     if cubic is not None:   # a hardening spring at the tip: the cubic force equals the beam's tip stiffness at ~9 mm
         text = text.replace("bending = {}", "bending = {}\nspring_layer = { at = \"right\", component = \"w\", "
                                             f"cubic = {cubic} }}")

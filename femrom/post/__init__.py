@@ -3,7 +3,11 @@ deformed-shape renders and ParaView time series; a ROM's prediction exported on 
 mesh (:func:`export_prediction`: ``.pvd`` with the error field, outputs as CSV); backbone and
 damping-vs-amplitude curves from ring-down signals (:func:`hilbert_backbone`,
 :func:`peak_backbone`), from static solves by quasi-static modal analysis
-(:func:`quasi_static_modal_analysis`), and the jointed-beam impact data (:func:`read_hammer_impact`)."""
+(:func:`quasi_static_modal_analysis`; along a frictional joint's loading path: :func:`static_qsma`),
+backbone maps (:func:`period_corrected`: a time scheme's period error removed; :func:`with_linear_damping`),
+the linearised frequency response of a stuck joint (:func:`linear_accelerance`), figures of
+closed loops (:func:`plot_closed_loops`, :func:`render_closed_loop`), and the jointed-beam impact
+data (:func:`read_hammer_impact`)."""
 
 from femrom._json import jsonable
 from femrom.post._backbone import (
@@ -13,7 +17,10 @@ from femrom.post._backbone import (
     peak_backbone,
     spectral_peaks,
 )
+from femrom.post._backbone_maps import period_corrected, with_linear_damping
+from femrom.post._closed_loop_figures import plot_closed_loops, render_closed_loop
 from femrom.post._export import export_prediction
+from femrom.post._frf import linear_accelerance
 from femrom.post._integrate import BandIntegrals, ModalRecord, band_limited_integrals, band_weights, modal_record
 from femrom.post._impact import (
     ImpactRecord,
@@ -34,6 +41,7 @@ from femrom.post._plots import (
     save_figure,
 )
 from femrom.post._qsma import QuasiStaticBackbone, masing_damping, quasi_static_modal_analysis
+from femrom.post._static_qsma import static_qsma
 from femrom.post._render import (
     mesh_arrays,
     render_available,
@@ -53,4 +61,6 @@ __all__ = [
            "plot_time_series", "pyplot", "QuasiStaticBackbone", "quasi_static_modal_analysis",
            "read_hammer_impact", "render_available", "render_grid",
            "save_figure", "spectral_peaks", "staged_output", "table_section", "vertex_displacements",
-           "write_metrics", "write_vtu_series"]
+           "write_metrics", "write_vtu_series",
+           "linear_accelerance", "period_corrected", "plot_closed_loops", "render_closed_loop", "static_qsma",
+           "with_linear_damping"]

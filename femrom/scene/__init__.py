@@ -10,6 +10,11 @@ region averages and lines of probes (:class:`LineConfig`: n points along a polyl
 the mean of a component over its nearest nodes). Inputs sampled on a grid for training and
 tests: :func:`multisine`, :func:`chirp`, :func:`band_limited_noise` (``array`` signals with a
 raised-cosine onset, :func:`onset`).
+
+A preloaded structure with a frictional joint (:mod:`femrom.scene._prestressed`):
+:func:`prestressed_model` (build and :func:`preload` on point supports), :func:`with_law_parameters`,
+:func:`mode_frequency` and :func:`calibrate_law_parameter` (a law parameter set by a measured
+frequency), :func:`beam_mode_shapes`, :func:`clamped_iwan_joint` (the Iwan joint about the preload).
 """
 
 from femrom.scene._build import FullOrderModel, build
@@ -22,6 +27,15 @@ from femrom.scene._excitation import band_limited_noise, chirp, multisine, onset
 from femrom.scene._materials import MaterialConfig, RegionMaterialConfig, element_materials
 from femrom.scene._modal import BeamModeShape, Modes, beam_mode_shape, linearized_modes, tangent_stiffness
 from femrom.scene._outputs import LineConfig, OutputConfig, ProbeConfig
+from femrom.scene._prestressed import (
+    PrestressedModel,
+    beam_mode_shapes,
+    calibrate_law_parameter,
+    clamped_iwan_joint,
+    mode_frequency,
+    prestressed_model,
+    with_law_parameters,
+)
 from femrom.scene._projection import project_system
 from femrom.scene._rom import BasisSpec, Derivatives, LearnerSpec, ReportSpec, RomConfig, RunSpec, TimingSpec
 from femrom.scene._signals import Signal, SignalVector, half_sine_spectrum
@@ -41,4 +55,6 @@ __all__ = [
     "effect_class", "half_sine_spectrum", "register_effect", "registered_effects",
     "BeamModeShape", "Modes", "Preload", "StaticSolution", "beam_mode_shape", "linearized_modes",
     "point_supports", "preload", "project_system", "solve_static", "tangent_stiffness", "with_friction_coefficient",
+    "PrestressedModel", "beam_mode_shapes", "calibrate_law_parameter", "clamped_iwan_joint", "mode_frequency",
+    "prestressed_model", "with_law_parameters",
 ]

@@ -34,7 +34,23 @@ What the case scripts share, for any scene (``femrom run scene.toml`` with a
 - linear models in one form (:mod:`femrom.study._linear_models`): :class:`LinearModelSpec`,
   :func:`fit_linear_model`, :func:`linear_model_rows` (second-order ROMs and identified DMDc, ERA,
   OKID models as discrete state spaces on every run: output errors, spectral radii, long-window
-  stability, fit and step costs), :func:`state_space_data`;
+  stability, fit and step costs), :func:`state_space_data`, their table and figure
+  (:func:`linear_model_table`, :func:`plot_linear_model_errors`);
+- backbones against each other (:mod:`femrom.study._backbone_metrics`): :func:`compare_backbones`
+  (both at common amplitudes, :class:`BackboneComparison`), :func:`backbone_errors` (shift and damping
+  errors), :func:`backbone_shift` (one backbone between two amplitudes);
+- hammer blows on a small stateful model: :func:`with_impulse`, :func:`output_ring_down` (the outputs'
+  accelerations and ECSW snapshots, :class:`OutputRingDown`), :func:`ecsw_training`
+  (:class:`ImpactTraining`), :func:`step_cost` (a large model's seconds per step after a blow);
+  learned models against such a reference: :func:`reference_ring_down`,
+  :func:`compare_ring_downs`;
+- the jointed beam's facts and model chain, shared by its cases: :data:`JOINTED_BEAM`
+  (:class:`BrakeReussBeam`), :class:`JointedBeamModel` (scene, calibration, Iwan joint, modal
+  model, ECSW; :class:`CalibratedBeam`);
+- stepped sines: :func:`stepped_sine_response` (one model beside its linearisation at rest),
+  :func:`compare_stepped_sines` (models against a reference);
+- MPC closed loops on a FOM, each controller model on each reference: :func:`closed_loop_rows`
+  (:data:`CLOSED_LOOP_COLUMNS`), :func:`open_loop_error`;
 - hyper-reduction: :func:`hyper_reduced_rows` (a learned ROM's known conservative force
   replaced by its ECSW-sampled potential, :data:`HYPER_COLUMNS`);
 - costs: :class:`Cost` (the fastest of several timed blocks, and their quartiles),
@@ -113,18 +129,29 @@ from femrom.study._ladders import (
 from femrom.study._linear_models import LinearModelSpec, fit_linear_model, linear_model_rows, state_space_data
 from femrom.study._metrics import Projection, energy_ratio, invariant_drift, mass_norm, project_run, relative_error
 from femrom.study._pipeline import ROW_COLUMNS, StudyState, peak_rss_gb, public_rows, run_study, write_report
-from femrom.study._forced import compare_stepped_sines
+from femrom.study._forced import compare_stepped_sines, stepped_sine_response
 from femrom.study._ring_downs import (
     RING_DOWN_COLUMNS,
     RingDown,
     RingDownComparison,
-    backbone_errors,
     compare_ring_downs,
     mass_pod,
     reference_ring_down,
     ring_down_data,
 )
 from femrom.snapshots import FOMRun, run_fom, solver_factory
+from femrom.study._backbone_metrics import BackboneComparison, backbone_errors, backbone_shift, compare_backbones
+from femrom.study._impacts import (
+    ImpactTraining,
+    OutputRingDown,
+    ecsw_training,
+    output_ring_down,
+    step_cost,
+    with_impulse,
+)
+from femrom.study._jointed_beam import JOINTED_BEAM, BrakeReussBeam, CalibratedBeam, JointedBeamModel
+from femrom.study._closed_loops import CLOSED_LOOP_COLUMNS, closed_loop_rows, open_loop_error
+from femrom.study._linear_model_figures import linear_model_table, plot_linear_model_errors
 from femrom.study._scene_run import SceneRun, scene_run
 from femrom.study._study import (
     Evaluation,
@@ -150,9 +177,6 @@ from femrom.study._subsampled import every_kth, subsampled_rows, subsampled_sect
 from femrom.study._sweep import SweepRun, run_sweep, run_sweep_point, sweep_runs
 from femrom._timing import Cost, blocked_cost, call_cost, repeated_cost, repeated_costs
 
-#: The old name of :data:`EXTRAPOLATION_LEARNER_NAMES`, importable until the case scripts use the
-#: new one; not part of ``__all__``.
-LEARNER_NAMES = EXTRAPOLATION_LEARNER_NAMES
 
 __all__ = [
     "conservative_acceleration", "force_error", "nonlinear_forces",
@@ -173,4 +197,9 @@ __all__ = [
     "scored_columns", "solver_factory", "state_energy", "every_kth", "subsampled_rows", "subsampled_section",
     "state_error", "study_costs", "study_learners", "study_rows",
     "sweep_runs", "time_step_ladder", "time_step_section", "training_data", "write_report",
+    "BackboneComparison", "backbone_shift", "compare_backbones",
+    "ImpactTraining", "OutputRingDown", "ecsw_training", "output_ring_down", "step_cost", "with_impulse",
+    "JOINTED_BEAM", "BrakeReussBeam", "CalibratedBeam", "JointedBeamModel",
+    "stepped_sine_response", "CLOSED_LOOP_COLUMNS", "closed_loop_rows", "open_loop_error", "linear_model_table",
+    "plot_linear_model_errors",
 ]

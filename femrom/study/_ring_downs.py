@@ -34,6 +34,7 @@ from femrom.inference import IwanLOpInf, LagrangianOpInf, SecondOrderData, SpML,
 from femrom.integrators import Newmark, StepResult, Trajectory, integrate
 from femrom.post import Backbone, hilbert_backbone
 from femrom.rom import SecondOrderROM
+from femrom.study._backbone_metrics import backbone_errors
 
 #: Columns of one comparison row.
 RING_DOWN_COLUMNS = ("model", "r", "test", "frequency_shift_error", "damping_max_error", "time_domain_error",
@@ -105,26 +106,6 @@ def ring_down_data(basis, mass, runs) -> SecondOrderData:
     P = basis.T @ _dense(mass)
     return concatenate([SecondOrderData(P @ run.q, P @ run.v, P @ run.a, inputs=run.inputs, times=run.times)
                         for run in runs])
-
-
-def backbone_errors(model: Backbone, reference: Backbone, amplitude_range, n: int = 24) -> dict:
-    """The model's backbone against the reference's at ``n`` log-spaced amplitudes of ``amplitude_range``
-    (clipped to both backbones' ranges): relative error of the total frequency shift over the range and
-    the worst relative error of the damping ratio. ``None`` values when the ranges do not overlap."""
-    lo = max(amplitude_range[0], np.min(model.amplitude), np.min(reference.amplitude))
-    hi = min(amplitude_range[1], np.max(model.amplitude), np.max(reference.amplitude))
-    if not hi > lo:
-        return {"amplitude_range": [float(lo), float(hi)], "frequency_shift_error": None,
-                "damping_max_error": None}
-    a = np.geomspace(lo, hi, n)
-    f_m, z_m = model.at_amplitude(a)
-    f_r, z_r = reference.at_amplitude(a)
-    shift_m, shift_r = float(f_m[0] - f_m[-1]), float(f_r[0] - f_r[-1])
-    return {"amplitude_range": [float(lo), float(hi)], "frequency_shift_hz": shift_m,
-            "reference_shift_hz": shift_r,
-            "frequency_shift_error": abs(shift_m - shift_r) / abs(shift_r) if shift_r else None,
-            "frequency_max_difference_hz": float(np.max(np.abs(f_m - f_r))),
-            "damping_max_error": float(np.max(np.abs(z_m / z_r - 1)))}
 
 
 @dataclass(frozen=True)

@@ -14,7 +14,7 @@ on the free dofs (:class:`femrom.fem.JointForce`): ``t_i`` the law's traction
 the face allows it, ``n`` the outward normal of the first face), ``Delta_0``
 the initial normal gap.
 
-Example (``cases/jointed_beam.toml``)::
+Example (``femrom/cases/jointed_beam.toml``)::
 
     [effects.joint]
     between = ["interface_left", "interface_right"]

@@ -15,108 +15,52 @@ sensitive to; ``k_n`` (a hard-contact penalty, fixed) sets which part of the int
 stays closed under the preload, and ``k_t`` does not change that state (a frictionless
 preload), so the root find needs one static solve and one eigensolve per trial.
 
-Run ``python -m femrom run jointed_beam_prestress [--fine]``; tests import the functions.
+Run ``python -m femrom run jointed_beam_prestress [--fine] [-o DIR]``; tests import the functions.
 """
 
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import time
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from scipy.optimize import brentq
 
-from femrom import fem
-from femrom.scene import Scene, beam_mode_shape, build, linearized_modes, point_supports, preload
+from femrom.post import write_metrics
+from femrom.scene import (
+    PrestressedModel,
+    beam_mode_shapes,
+    calibrate_law_parameter,
+    linearized_modes,
+    prestressed_model,
+    with_law_parameters,
+)
+from femrom.study import JOINTED_BEAM, JointedBeamModel
 
 SCENE = Path(__file__).with_name("jointed_beam.toml")
 
-#: Measured spectral peaks of acc3 (data/brb/README.md), Hz: low-amplitude f1, then the next two.
-MEASURED_F1, MEASURED_NEXT = 80.5, (221.7, 297.7)
-LENGTH, WIDTH, THICKNESS = 0.720, 0.0254, 0.0127
-BOLTS_X = LENGTH / 2 + 0.030 * np.array([-1.0, 0.0, 1.0])
-#: Statically determinate supports of the free beam for the preload: 3-2-1 on the left end face
-#: (the six rigid-body modes) and three on the right end face (the right half's sliding in x, z
-#: and turning about y, free under frictionless contact). Far from the joint.
-SUPPORTS = [((0.0, 0.0, -WIDTH / 2), "xyz"), ((0.0, 0.0, WIDTH / 2), "xy"), ((0.0, THICKNESS, -WIDTH / 2), "x"),
-            ((LENGTH, 0.0, -WIDTH / 2), "xz"), ((LENGTH, 0.0, WIDTH / 2), "x")]
-#: The calibration's bracket of k_t [Pa/m]: f1 = 72.9 and 86.0 Hz at the ends (coarse mesh).
-BRACKET = (1e10, 1e13)
+
+def prestressed_beam(parameters: dict | None = None, *, scene_path: Path = SCENE,
+                     **joint_parameters) -> PrestressedModel:
+    """Build the scene (mesh ``parameters`` and the joint law's parameters overridden) and preload it on
+    the beam's statically determinate supports (:data:`femrom.study.JOINTED_BEAM`)."""
+    scene = JointedBeamModel(mesh=tuple((parameters or {}).items())).scene(scene_path, **joint_parameters)
+    return prestressed_model(scene, JOINTED_BEAM.supports)
 
 
-@dataclass(frozen=True, eq=False)
-class PrestressedBeam:
-    """The built scene, its supports and the preload sequence."""
-
-    fom: object
-    supports: np.ndarray
-    preload: object
-    seconds: float
-
-    @property
-    def joint(self) -> fem.JointForce:
-        return self.fom.system.nonlinear
+def calibrate(beam: PrestressedModel) -> tuple[float, int]:
+    """``(k_t, evaluations)`` with the first elastic mode, checked to be the first vertical bending mode, at
+    the measured f1: Brent's method on log10 k_t in the bracket (xtol 1e-5: 2.3e-5 relative in k_t, ~1e-5 Hz
+    in f1, df1/dlog10 k_t ~ 7 Hz)."""
+    return calibrate_law_parameter(beam, "tangential_stiffness", JOINTED_BEAM.measured_f1,
+                                   JOINTED_BEAM.stiffness_bracket, mode=6, shape=("vertical", 2))
 
 
-def prestressed_beam(parameters: dict | None = None, *, scene_path: Path = SCENE, **joint_parameters) -> PrestressedBeam:
-    """Build the scene (mesh ``parameters`` and the joint law's parameters overridden) and preload it."""
-    scene = Scene.from_toml(scene_path)
-    data = _scene_data(scene)
-    data["structure"]["parameters"].update(parameters or {})
-    data["effects"]["joint"]["parameters"].update(joint_parameters)
-    scene = Scene.from_dict(data)
-    tic = time.perf_counter()
-    fom = build(scene)
-    supports = point_supports(fom.space, fom.system.condensation, SUPPORTS)
-    state = preload(fom.system, supports=supports)
-    return PrestressedBeam(fom, supports, state, time.perf_counter() - tic)
-
-
-def _scene_data(scene: Scene) -> dict:
-    import tomllib
-    return tomllib.loads(scene.source_text)
-
-
-def with_tangential_stiffness(system, tangential_stiffness: float):
-    """The system with the joint law's ``k_t`` replaced (the preload state stays valid: it does not use k_t)."""
-    joint = system.nonlinear
-    law = {**joint.law.parameters(), "tangential_stiffness": float(tangential_stiffness)}
-    return dataclasses.replace(system, nonlinear=fem.JointForce.from_parameters({**joint.parameters(), "law": law}))
-
-
-def beam_modes(beam: PrestressedBeam, tangential_stiffness: float | None = None, n_modes: int = 12):
+def beam_modes(beam: PrestressedModel, tangential_stiffness: float, n_modes: int = 12):
     """``(frequencies (n_modes,) Hz, shapes: list of BeamModeShape for the elastic modes)``."""
-    system = beam.fom.system if tangential_stiffness is None else \
-        with_tangential_stiffness(beam.fom.system, tangential_stiffness)
+    system = with_law_parameters(beam.fom.system, tangential_stiffness=tangential_stiffness)
     modes = linearized_modes(system, beam.preload.displacement, beam.preload.state, n_modes=n_modes)
-    points = beam.fom.space.basis.doflocs[:, ::3].T
-    shapes = [beam_mode_shape(points, system.condensation.expand(modes.shapes[:, j]).reshape(-1, 3))
-              for j in range(6, n_modes)]
-    return modes.frequencies, shapes
-
-
-def first_bending(beam: PrestressedBeam, tangential_stiffness: float) -> float:
-    """f1 [Hz]: the first elastic mode, checked to be the first vertical bending mode."""
-    frequencies, shapes = beam_modes(beam, tangential_stiffness, n_modes=7)
-    if (shapes[0].kind, shapes[0].sign_changes) != ("vertical", 2):
-        raise RuntimeError(f"the first elastic mode is not the first vertical bending mode: {shapes[0]}")
-    return float(frequencies[6])
-
-
-def calibrate(beam: PrestressedBeam, target: float = MEASURED_F1, bracket=BRACKET) -> tuple[float, int]:
-    """``(k_t, evaluations)`` with f1(k_t) = target: Brent's method on log10 k_t (f1 rises with k_t)."""
-    count = [0]
-
-    def mismatch(log_kt):
-        count[0] += 1
-        return first_bending(beam, 10.0**log_kt) - target
-
-    # xtol 1e-5 in log10 k_t: 2.3e-5 relative in k_t, ~1e-5 Hz in f1 (df1/dlog10 k_t ~ 7 Hz)
-    log_kt = brentq(mismatch, *np.log10(bracket), xtol=1e-5)
-    return 10.0**log_kt, count[0]
+    return modes.frequencies, beam_mode_shapes(beam.fom.space, system.condensation, modes.shapes[:, 6:n_modes])
 
 
 def contact_summary(beam: PrestressedBeam) -> dict:
@@ -128,7 +72,7 @@ def contact_summary(beam: PrestressedBeam) -> dict:
     from femrom.mesh import interface_pairs
     pairs = interface_pairs(beam.fom.space.mesh, "interface_left", "interface_right", order=2)
     x, z = pairs.points[:, 0], pairs.points[:, 2]
-    distance = np.min(np.hypot(x[:, None] - BOLTS_X[None, :], z[:, None]), axis=1)
+    distance = np.min(np.hypot(x[:, None] - JOINTED_BEAM.bolts_x[None, :], z[:, None]), axis=1)
     bands = [(0.0, 0.0088), (0.0088, 0.0127), (0.0127, 0.018), (0.018, 1.0)]
     rings = []
     for low, high in bands:
@@ -155,7 +99,7 @@ def run(parameters: dict | None = None, **joint_parameters) -> dict:
     frequencies, shapes = beam_modes(beam, k_t, n_modes=12)
     elastic = frequencies[6:]
     predictions = []
-    for measured in MEASURED_NEXT:
+    for measured in JOINTED_BEAM.measured_next:
         j = int(np.argmin(np.abs(elastic - measured)))
         predictions.append({"measured": measured, "model": float(elastic[j]),
                             "error": float(elastic[j] / measured - 1),
@@ -175,13 +119,16 @@ def main(argv=None) -> int:
                         help="also the finer joint mesh (12.7 / 3.175 mm): the calibrated k_t's mesh sensitivity")
     parser.add_argument("--normal-stiffness", type=float, nargs="*", default=[],
                         help="also these k_n [Pa/m]: the calibrated k_t and the predictions under each")
+    parser.add_argument("-o", "--out", type=Path, help="also write the results to OUT/metrics.json")
     args = parser.parse_args(argv)
     runs = [({}, {})]
     if args.fine:
         runs.append(({"joint_mesh_size": 0.003175}, {}))
     runs += [({}, {"normal_stiffness": k_n}) for k_n in args.normal_stiffness]
+    results = []
     for mesh, joint in runs:
         result = run(mesh, **joint)
+        results.append(result)
         print(f"mesh {result['mesh']}, {result['n_dofs']} dofs, k_n = {result['normal_stiffness']:.3g} Pa/m: "
               f"k_t = {result['tangential_stiffness']:.5g} Pa/m, f1 = {result['f1']:.4f} Hz "
               f"({result['seconds']['evaluations']} eigensolves, {result['seconds']['calibration']:.0f} s; "
@@ -192,6 +139,9 @@ def main(argv=None) -> int:
         print("  contact:", {k: v for k, v in result["contact"].items() if k != "by_distance_from_bolt_axis"})
         for ring in result["contact"]["by_distance_from_bolt_axis"]:
             print("   ", ring)
+    if args.out is not None:
+        args.out.mkdir(parents=True, exist_ok=True)
+        write_metrics(args.out / "metrics.json", {"case": "jointed_beam_prestress", "runs": results})
     return 0
 
 

@@ -1,8 +1,9 @@
 """Jointed beam ROMs from model data: SpML, L-OpInf and Galerkin against the hyper-reduced Iwan model.
 
 Issue 17, part 3. The reference ("FOM" of this study) is the jointed-beam case's 10-mode model with
-its ECSW-sampled ``clamped_iwan`` joint (``cases/jointed_beam.py``; it stands in for the 24,522-dof
-model, against which it is validated in ``docs/cases/jointed_beam.md``). Its ring-downs after hammer
+its ECSW-sampled ``clamped_iwan`` joint (:class:`femrom.study.JointedBeamModel`, the model chain both
+cases share; it stands in for the 24,522-dof model, against which it is validated in
+``docs/cases/jointed_beam.md``). Its ring-downs after hammer
 blows at two levels train the models; a third level is the (interpolation) test, predicted from rest
 over ten times the training window. Per r: POD of the 10 modal coordinates, SpML and L-OpInf fitted
 on the projected ``q^, q^', q^''`` and the hammer input, Galerkin the reference projected on the same
@@ -24,7 +25,6 @@ from pathlib import Path
 
 import numpy as np
 
-from femrom.cli import load_case
 from femrom.inference import Output, SpMLConfig
 from femrom.integrators import (
     Newmark,
@@ -34,20 +34,23 @@ from femrom.integrators import (
     StepperPlant,
     StepResult,
     SystemPlant,
-    integrate,
 )
-from femrom.post import plot_backbones, staged_output, write_metrics
-from femrom.rom import SecondOrderROM, ecsw_joint, hyper_reduced_system
-from femrom.scene import Signal, SignalVector, point_supports
+from femrom.post import period_corrected, plot_backbones, staged_output, write_metrics
+from femrom.rom import SecondOrderROM
+from femrom.scene import Signal, SignalVector
 from femrom.study import (
     RING_DOWN_COLUMNS,
+    JointedBeamModel,
     RingDownComparison,
     compare_ring_downs,
     compare_stepped_sines,
     reference_ring_down,
+    step_cost,
+    with_impulse,
 )
 
-jb = load_case("jointed_beam")
+SCENE = Path(__file__).with_name("jointed_beam.toml")     # the jointed-beam case's scene
+BAND, WINDOW = (60.0, 100.0), 0.2                          # acc1's mode-1 band [Hz] and Hilbert window [s]
 
 
 @dataclass(frozen=True)
@@ -78,20 +81,11 @@ class JointedBeamRomCase:
 def full_model_step_cost(model, q0, z0, dt: float, steps: int, progress=print) -> dict:
     """Seconds per step of the full model with the joint (Newmark, condensed Newton) after a 300 N blow,
     from the step times after the first (the factorisation and the first step excluded)."""
-    hammer = Signal.from_dict({"kind": "impulse", "amplitude": 300.0, "start": 0.0, "duration": 3e-4})
-    shaker = Signal.from_dict({"kind": "sine", "amplitude": 0.0, "frequency": 80.5})
-    full = dataclasses.replace(model, inputs=SignalVector([hammer, shaker]))
-    n = full.n_dofs
-    stamps = []
-    start = StepResult(step=0, t=0.0, q=q0.copy(), v=np.zeros(n), a=np.zeros(n), state=z0)
-    tic = time.perf_counter()
-    summary = integrate(full, Newmark(newton=Newton(method="condensed")), None, None, dt, steps,
-                        consumers=[lambda result: stamps.append(time.perf_counter())], start=start, progress=None)
-    total = time.perf_counter() - tic
-    per_step = (stamps[-1] - stamps[0]) / max(len(stamps) - 1, 1)
-    progress(f"  full model: {n} dofs, {steps} steps in {total:.1f} s, {per_step:.3g} s/step after the first")
-    return {"n_dofs": n, "steps": steps, "seconds_total": total, "seconds_per_step": per_step,
-            "newton_iterations": getattr(summary, "newton_iterations", None)}
+    cost = step_cost(with_impulse(model, 300.0, 3e-4), q0, z0, dt, steps,
+                     scheme=Newmark(newton=Newton(method="condensed")))
+    progress(f"  full model: {cost['n_dofs']} dofs, {steps} steps in {cost['seconds_total']:.1f} s, "
+             f"{cost['seconds_per_step']:.3g} s/step after the first")
+    return cost
 
 
 def stepped_sines(hyper, rest_state, comparison: dict, config: JointedBeamRomCase, progress=print) -> dict:
@@ -124,31 +118,22 @@ def stepped_sines(hyper, rest_state, comparison: dict, config: JointedBeamRomCas
 
 
 def reference_models(config: JointedBeamRomCase, progress=print) -> dict:
-    """The jointed-beam case's models: the full model with the Iwan joint at its preloaded rest
-    (``model``, ``q0``, ``z0``), the 10-mode model with the ECSW-sampled joint (``hyper``, ``z_hyper``,
-    the reference of this study), ``dt = 1 / (128 f1)``, the case's settings and the seconds taken."""
+    """The jointed-beam case's models (:class:`femrom.study.JointedBeamModel` at its defaults): the full
+    model with the Iwan joint at its preloaded rest (``model``, ``q0``, ``z0``), the 10-mode model with
+    the ECSW-sampled joint (``hyper``, ``z_hyper``, the reference of this study), ``dt = 1 / (128 f1)``,
+    the model chain's settings (``case``) and the seconds taken."""
     tic = time.perf_counter()
-    case = jb.JointedBeamCase(fit_iwan=False, forced=False)
+    case = JointedBeamModel()
     progress("jointed beam ROMs: preload, k_t calibration, the Iwan joint (chi, beta: the case's fit) ...")
-    setup = jb.prestressed(case)
-    beam, system = setup["beam"], setup["system"]
-    left_face = point_supports(beam.fom.space, system.condensation, jb.prestress.SUPPORTS[:3])
-    model, q_iwan, z_iwan = jb.iwan_joint(setup, left_face, mu=case.friction_coefficient, chi=case.iwan_chi,
-                                          beta=case.iwan_beta)
-    reduced = jb.reduced_model(setup, case, model, q_iwan, z_iwan, config.damping_ratio)
-    f1 = float(setup["modes"].frequencies[6])
-    dt = 1.0 / (f1 * case.steps_per_period)
+    setup = case.calibrated(case.scene(SCENE))
+    model, q_iwan, z_iwan = case.iwan_joint(setup)
+    reduced = case.reduced(setup, model, q_iwan, z_iwan, config.damping_ratio)
+    f1, dt = setup.f1, case.dt(setup)
     seconds = {"setup": time.perf_counter() - tic}
 
     progress("jointed beam ROMs: ECSW sample of the joint (the case's training) ...")
     tic_ecsw = time.perf_counter()
-    snapshots = []
-    for peak in case.training_impacts:
-        *_, kept = jb.ring_down(jb.with_blow(reduced, peak, case.impact_width), z_iwan, case.training_window, dt,
-                                keep_every=4)
-        snapshots += kept
-    sampling = ecsw_joint(reduced, snapshots, z_iwan, tolerance=case.ecsw_tolerance)
-    hyper, z_hyper = hyper_reduced_system(reduced, sampling, z_iwan)
+    _, sampling, hyper, z_hyper = case.hyper_reduced(reduced, z_iwan, dt)
     seconds["ecsw"] = time.perf_counter() - tic_ecsw
     progress(f"  {sampling.pairs.size} of {sampling.n_pairs} pairs")
     return {"case": case, "model": model, "q0": q_iwan, "z0": z_iwan, "hyper": hyper, "z_hyper": z_hyper,
@@ -160,7 +145,7 @@ def reference_runs(models: dict, config: JointedBeamRomCase, progress=print) -> 
     case, hyper, z_hyper, dt = models["case"], models["hyper"], models["z_hyper"], models["dt"]
 
     def blow(peak):
-        return jb.with_blow(hyper, peak, case.impact_width)
+        return with_impulse(hyper, peak, case.impact_width)
 
     def shaken(amplitude, frequency):
         """The reference driven by the shaker alone (a sine from rest, zero at t = 0)."""
@@ -200,13 +185,13 @@ def run(config: JointedBeamRomCase, out: Path, progress=print) -> dict:
     seconds["reference_runs"] = time.perf_counter() - tic_ref
     reference_step = tests[0][0].seconds_per_step
 
-    settings = RingDownComparison(ranks=config.ranks, models=config.models, band=jb.BAND, window=jb.WINDOW,
+    settings = RingDownComparison(ranks=config.ranks, models=config.models, band=BAND, window=WINDOW,
                                   spml=SpMLConfig(max_iterations=config.spml_iterations, seed=0), iwan=config.iwan,
                                   range_window=0.05, range_trim=0.05)
     progress(f"jointed beam ROMs: models at r = {', '.join(map(str, config.ranks))} ...")
     tic_cmp = time.perf_counter()
     comparison = compare_ring_downs(hyper, z_hyper, training, validation, tests, settings,
-                                    correction=lambda b: jb.newmark_corrected(b, dt),
+                                    correction=lambda b: period_corrected(b, dt),
                                     progress=lambda line: progress(line))
     seconds["comparison"] = time.perf_counter() - tic_cmp
     rows = comparison["rows"]

@@ -43,11 +43,11 @@ import numpy as np
 
 from femrom.post import accuracy_cost_table, pyplot, save_figure, staged_output, table_section
 from femrom.scene import Derivatives, Scene, build
-from femrom.study import HYPER_COLUMNS, LEARNER_NAMES, extrapolation_scene, final_state_ladders, final_state_section, \
+from femrom.study import HYPER_COLUMNS, EXTRAPOLATION_LEARNER_NAMES, extrapolation_scene, final_state_ladders, final_state_section, \
     hyper_reduced_rows, invariant_drift, plot_histories, plot_output_history, rom_table, run_study
 
 SCENE = Path(__file__).with_suffix(".toml")
-NAMES = LEARNER_NAMES | {"lopinf_hyper": "L-OpInf + hyper-reduction"}
+NAMES = EXTRAPOLATION_LEARNER_NAMES | {"lopinf_hyper": "L-OpInf + hyper-reduction"}
 
 
 @dataclass(frozen=True)

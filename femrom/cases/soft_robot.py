@@ -39,13 +39,13 @@ from pathlib import Path
 
 import numpy as np
 
-from femrom.control import FullOrderPlant, KalmanObserver, LinearMPC, closed_loop, travelling_wave
+from femrom.control import travelling_wave
 from femrom.inference import system_impulse_response
-from femrom.post import accuracy_cost_table, mesh_arrays, pyplot, render_available, render_grid, save_figure, \
-    staged_output, vertex_displacements
+from femrom.post import accuracy_cost_table, plot_closed_loops, render_closed_loop, staged_output
 from femrom.scene import BasisSpec, Derivatives, InputConfig, LearnerSpec, ReportSpec, RomConfig, RunSpec, Scene, \
     TimingSpec, band_limited_noise, chirp, multisine, onset
-from femrom.study import LinearModelSpec, linear_model_rows, relative_error, run_study, solver_factory
+from femrom.study import CLOSED_LOOP_COLUMNS, LinearModelSpec, closed_loop_rows, linear_model_rows, \
+    linear_model_table, plot_linear_model_errors, run_study
 
 SCENE = Path(__file__).with_suffix(".toml")
 SEGMENTS = 3
@@ -183,146 +183,28 @@ def wave_reference(config: SoftRobotCase, scene: Scene, times: np.ndarray) -> np
 
 
 def control_rows(state, config: SoftRobotCase, models: dict, progress) -> tuple[list[dict], dict]:
-    """Closed loops on the FOM: each controller model on each reference."""
-    system, dt = state.model.system, state.scene.time.dt
+    """Closed loops on the FOM (:func:`femrom.study.closed_loop_rows`): each controller model on the
+    feasible reference (the FOM's response to the unseen phased sines) and the travelling wave; the
+    first controller's wave loop keeps the FOM's displacements for the render."""
+    dt = state.scene.time.dt
     n_steps = int(round(config.control_window / dt))
     K = n_steps + 1 + config.horizon
-    feasible = state.runs["test_sines"]
     times = dt * np.arange(K)
-    references = {"feasible": feasible.outputs[:, :K], "travelling_wave": wave_reference(config, state.scene, times)}
-    solver = solver_factory(state.model)        # one factorisation for every closed loop
-    rows, results = [], {}
-    try:
-        for label, r in config.controllers:
-            if (label, r) not in models:       # its fit failed (the comparison's row says why)
-                rows.append({"controller": label, "r": r, "reference": "-", "failed": "the model did not fit"})
-                continue
-            model = models[(label, r)]
-            for name, reference in references.items():
-                progress(f"closed loop on the FOM: {label} r = {r}, {name} reference ({n_steps} steps)")
-                size = float(np.sqrt(np.mean(reference ** 2)))
-                mpc = LinearMPC(model, horizon=config.horizon, output_weight=1.0 / size ** 2, input_weight=0.0,
-                                input_rate_weight=config.rate_weight / config.amplitude ** 2,
-                                input_bound=config.amplitude)
-                observer = KalmanObserver(model, measurement_noise=config.measurement_noise * size ** 2,
-                                          disturbance=config.disturbance)
-                plant = FullOrderPlant(system, dt, solver=solver)
-                # the FOM's displacements of the first controller's wave loop, for the render
-                record = (lambda p: p.last.q) if (label, r, name) == (*config.controllers[0], "travelling_wave") \
-                    else None
-                tic = time.perf_counter()
-                result = closed_loop(plant, mpc, observer, reference, n_steps, record_state=record, progress=False)
-                seconds = time.perf_counter() - tic
-                rows.append({"controller": label, "r": r, "reference": name, **result.metrics(),
-                             "model_error_on_applied_inputs": _model_error(model, result),
-                             "reference_rms": size, "loop_seconds": seconds})
-                results[(label, r, name)] = result
-    finally:
-        solver.cache.clear()
-    return rows, results
-
-
-def _model_error(model, result) -> float:
-    """The controller's model run open loop on the inputs the loop applied, against the FOM's outputs:
-    what feedback had to correct."""
-    predicted = model.simulate(result.inputs, np.zeros(model.n_states))[0]
-    return relative_error(result.outputs, predicted)
-
-
-# -- figures and tables ----------------------------------------------------------------------
-COMPARISON_COLUMNS = ["model", "r", "state_order", "test_sines", "test_chirp", "test_random", "stable",
-                      "spectral_radius", "fit_seconds", "seconds_per_step"]
-CONTROL_COLUMNS = ["controller", "r", "reference", "tracking_error", "model_error_on_applied_inputs",
-                   "input_effort", "max_constraint_violation", "qp_seconds_per_step", "qp_seconds_max",
-                   "n_fallbacks"]
-
-
-def comparison_table_rows(rows: list[dict]) -> list[dict]:
-    """One line per (model, r): the output error on each test input side by side."""
-    table = {}
-    for row in rows:
-        if "failed" in row:
-            table[(row["model"], row["r"])] = {"model": row["model"], "r": row["r"],
-                                               "stable": f"fit failed: {row['failed']}"}
-            continue
-        line = table.setdefault((row["model"], row["r"]), {
-            "model": row["model"], "r": row["r"], "state_order": row["state_order"], "stable": row["stable"],
-            "spectral_radius": row["spectral_radius"], "fit_seconds": row["fit_seconds"],
-            "seconds_per_step": row["seconds_per_step"]})
-        line[row["run"]] = row["test_output_error"]
-        line["stable"] = line["stable"] and row["stable"]
-    return list(table.values())
-
-
-def plot_comparison(path, rows: list[dict], runs, title: str) -> Path:
-    """Output error against r, one panel per test input, one line per model; unstable models hollow."""
-    plt = pyplot()
-    fig, axes = plt.subplots(1, len(runs), figsize=(4.6 * len(runs), 3.8), squeeze=False, sharey=True)
-    models = list(dict.fromkeys(row["model"] for row in rows if "failed" not in row))
-    for ax, run in zip(axes[0], runs):
-        for model, marker in zip(models, "osD^vx"):
-            sel = [row for row in rows if row.get("run") == run and row["model"] == model]
-            r = [row["r"] for row in sel]
-            e = [min(row["test_output_error"], 1e3) for row in sel]
-            line, = ax.semilogy(r, e, "-", label=model)
-            for ri, ei, row in zip(r, e, sel):
-                ax.plot(ri, ei, marker, color=line.get_color(), mfc=line.get_color() if row["stable"] else "none")
-        ax.set_title(run, fontsize=9)
-        ax.set_xlabel("r (2 r states)")
-        ax.grid(alpha=0.3, which="both")
-    axes[0, 0].set_ylabel("relative output error (hollow: unstable)")
-    axes[0, 0].legend(fontsize=8)
-    fig.suptitle(title, fontsize=10)
-    return save_figure(fig, path, dpi=110)
-
-
-def plot_control(path, results: dict, dt: float, bound: float, title: str) -> Path:
-    """Tail-tip lateral output (reference and closed loops) and the applied inputs, one column per reference."""
-    plt = pyplot()
-    references = list(dict.fromkeys(key[2] for key in results))
-    fig, axes = plt.subplots(2, len(references), figsize=(6 * len(references), 6), squeeze=False, sharex=True)
-    for j, name in enumerate(references):
-        top, bottom = axes[0, j], axes[1, j]
-        first = True
-        for (label, r, ref), result in results.items():
-            if ref != name:
-                continue
-            t = dt * np.arange(result.n_samples)
-            if first:
-                top.plot(t, 1e3 * result.reference[-1], "k-", lw=2, label="reference")
-                first = False
-            line, = top.plot(t, 1e3 * result.outputs[-1], "--", label=f"{label} r={r}")
-            for i in range(result.inputs.shape[0]):
-                bottom.plot(t, result.inputs[i], color=line.get_color(), lw=0.8, alpha=0.5 + 0.25 * i / 2,
-                            label=f"{label} r={r}" if i == 0 else None)
-        top.set_title(f"{name}: tail tip z", fontsize=9)
-        top.set_ylabel("z [mm]")
-        bottom.set_ylabel("pair inputs v_i")
-        bottom.set_xlabel("t [s]")
-        bottom.axhline(bound, color="r", lw=0.6, ls=":")
-        bottom.axhline(-bound, color="r", lw=0.6, ls=":")
-        for ax in (top, bottom):
-            ax.grid(alpha=0.3)
-        top.legend(fontsize=7)
-    fig.suptitle(title, fontsize=10)
-    return save_figure(fig, path, dpi=110)
-
-
-def render_controlled(path, model, result, label: str, dt: float, n_frames: int = 4) -> dict:
-    """The FOM's deformed body under the closed loop at ``n_frames`` times (``result.plant_states``)."""
-    ok, reason = render_available()
-    if not ok or result.plant_states is None:
-        return {"control_render": None, "control_render_backend": reason}
-    points, cells = mesh_arrays(model.space.mesh)
-    picks = np.unique(np.linspace(0, result.n_samples - 1, n_frames + 1).round().astype(int)[1:])
-    frames = [vertex_displacements(model.space.basis, model.system.condensation.expand(result.plant_states[:, k]))
-              for k in picks]
-    render_grid(path, points, cells, [frames], titles=[f"t = {k * dt:.2f} s" for k in picks],
-                row_labels=[f"FOM under MPC ({label})"], window_size=(320 * picks.size, 320), camera="xz")
-    return {"control_render": Path(path).name, "control_render_backend": reason}
+    references = {"feasible": state.runs["test_sines"].outputs[:, :K],
+                  "travelling_wave": wave_reference(config, state.scene, times)}
+    return closed_loop_rows(state.model, dt, models, config.controllers, references, n_steps, horizon=config.horizon,
+                            input_bound=config.amplitude, rate_weight=config.rate_weight,
+                            measurement_noise=config.measurement_noise, disturbance=config.disturbance,
+                            record=(*config.controllers[0], "travelling_wave") if config.controllers else None,
+                            progress=progress)
 
 
 # -- the case ---------------------------------------------------------------------------------
+#: the report's table of the linear models: one line per (model, r), the unseen inputs side by side
+COMPARISON_COLUMNS = ["model", "r", "state_order", "test_sines", "test_chirp", "test_random", "stable",
+                      "spectral_radius", "fit_seconds", "seconds_per_step"]
+
+
 def run(out_dir, config: SoftRobotCase = SoftRobotCase(), *, progress=None, scene_path=SCENE) -> dict:
     """Run the case; return its metrics (also written to ``out_dir/metrics.json``)."""
     out_dir = Path(out_dir)
@@ -361,8 +243,8 @@ def run(out_dir, config: SoftRobotCase = SoftRobotCase(), *, progress=None, scen
         metrics["comparison"] = rows
         metrics["linear_models_seconds"] = time.perf_counter() - tic
         title = f"soft robot: {system.n_dofs} dofs, unseen inputs"
-        plot_comparison(out_dir / "comparison.png", rows, list(tests), title)
-        table = comparison_table_rows(rows)
+        plot_linear_model_errors(out_dir / "comparison.png", rows, list(tests), title)
+        table = linear_model_table(rows)
         sections.append("## Linear models as discrete state spaces (output error on unseen inputs)\n\n"
                         "Every model run from rest on each test input; stable: spectral radius <= 1 and, over "
                         f"{config.extension:g}x the test window (the input zero after it), the free response in the "
@@ -373,16 +255,17 @@ def run(out_dir, config: SoftRobotCase = SoftRobotCase(), *, progress=None, scen
         control, results = control_rows(state, config, models, say)
         metrics["control_seconds"] = time.perf_counter() - tic
         metrics["control"] = control
-        plot_control(out_dir / "control.png", results, dt, config.amplitude,
-                     f"MPC on the FOM, horizon {config.horizon}")
-        sections.append("## MPC closed loops on the FOM\n\n" + accuracy_cost_table(control, CONTROL_COLUMNS)
+        plot_closed_loops(out_dir / "control.png", results, dt, config.amplitude,
+                          title=f"MPC on the FOM, horizon {config.horizon}", output=-1, output_label="tail tip z",
+                          scale=1e3, unit="mm", input_label="pair inputs v_i")
+        sections.append("## MPC closed loops on the FOM\n\n" + accuracy_cost_table(control, CLOSED_LOOP_COLUMNS)
                         + "\n\n![control](control.png)")
         label, r = config.controllers[0]
         shown = results.get((label, r, "travelling_wave"))
         metrics["renders_control"] = {"control_render": None}
         if config.render and shown is not None:
-            metrics["renders_control"] = render_controlled(out_dir / "control_render.png", state.model, shown,
-                                                           f"{label} r={r}, travelling wave", dt)
+            metrics["renders_control"] = render_closed_loop(out_dir / "control_render.png", state.model, shown,
+                                                            f"{label} r={r}, travelling wave", dt)
             if metrics["renders_control"]["control_render"]:
                 sections.append("![controlled motion](control_render.png)")
         return metrics, sections

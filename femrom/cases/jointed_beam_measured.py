@@ -22,7 +22,7 @@ or ``--data``) is the only input:
    stepped by the discrete-gradient scheme at ``predict_every`` samples; acc1's predicted
    signal (the coordinate's acceleration times acc1's entry of the shape) through the
    same Hilbert processing (band, 0.2 s windows, default trim), the midpoint rule's
-   period error removed (``f = tan(pi f_h dt) / (pi dt)``, exact for a linear mode).
+   period error removed (:func:`femrom.post.period_corrected`: ``f = tan(pi f_h dt) / (pi dt)``).
 5. **Errors** over the test amplitudes covered by both the prediction and the measured
    test windows: the frequency shift between the highest and the lowest of them
    (relative to the measured shift), the damping ratio per window (relative), the
@@ -48,6 +48,7 @@ from femrom.post import (
     hilbert_backbone,
     measured_backbone,
     modal_record,
+    period_corrected,
     plot_backbones,
     read_hammer_impact,
     spectral_peaks,
@@ -55,6 +56,7 @@ from femrom.post import (
     write_metrics,
 )
 from femrom.rom import SecondOrderROM
+from femrom.study import compare_backbones
 
 
 @dataclass(frozen=True)
@@ -92,11 +94,6 @@ def _segment(data: SecondOrderData, start: float, stop: float) -> SecondOrderDat
                            times=data.times[keep], diagnostics=dict(data.diagnostics))
 
 
-def midpoint_corrected(backbone: Backbone, dt: float) -> Backbone:
-    """The midpoint rule's period elongation removed: ``f = tan(pi f_h dt) / (pi dt)``."""
-    return dataclasses.replace(backbone, frequency_hz=np.tan(np.pi * backbone.frequency_hz * dt) / (np.pi * dt))
-
-
 def split_time(measured: Backbone, fraction: float) -> float:
     """Time where acc1's envelope has fallen by ``fraction`` of its log range (windows interpolated)."""
     log_a = np.log(measured.amplitude)
@@ -107,30 +104,24 @@ def split_time(measured: Backbone, fraction: float) -> float:
 def compare(predicted: Backbone, measured: Backbone, low: float, high: float) -> dict:
     """Frequency shift and damping of ``predicted`` against ``measured`` over amplitudes in ``[low, high]``.
 
-    Only windows of ``predicted`` inside ``[low, high]`` and the measured range count; the
-    shift is between the highest and the lowest such amplitude on each curve
-    (:meth:`Backbone.at_amplitude`).
+    At the windows of ``predicted`` inside ``[low, high]`` and the measured range, the measured backbone
+    interpolated there (:func:`femrom.study.compare_backbones` with ``at="model"``); the shift is between
+    the lowest and the highest such amplitude on each curve.
     """
-    lo = max(low, float(measured.amplitude.min()))
-    hi = min(high, float(measured.amplitude.max()))
-    inside = (predicted.amplitude >= lo) & (predicted.amplitude <= hi)
-    if inside.sum() < 2:
-        return {"windows": int(inside.sum())}
-    a = predicted.amplitude[inside]
-    f_p, z_p = predicted.frequency_hz[inside], predicted.damping_ratio[inside]
-    f_m, z_m = np.array([measured.at_amplitude(x) for x in a]).T
-    top, bottom = int(np.argmax(a)), int(np.argmin(a))
-    shift_p, shift_m = f_p[bottom] - f_p[top], f_m[bottom] - f_m[top]
-    damping_error = np.abs(z_p - z_m) / z_m
+    c = compare_backbones(predicted, measured, (low, high), at="model")
+    if len(c) < 2:
+        return {"windows": len(c)}
+    z_p, z_m = c.damping_model, c.damping_reference
+    damping_error = c.damping_relative_errors
     return {
-        "windows": int(inside.sum()),
-        "amplitude_range": [float(a.min()), float(a.max())],
-        "shift_predicted_hz": float(shift_p),
-        "shift_measured_hz": float(shift_m),
-        "shift_relative_error": float(abs(shift_p - shift_m) / abs(shift_m)),
-        "frequency_offset_hz": float(np.mean(f_p - f_m)),
-        "damping_predicted_percent": [float(100 * z_p[top]), float(100 * z_p[bottom])],
-        "damping_measured_percent": [float(100 * z_m[top]), float(100 * z_m[bottom])],
+        "windows": len(c),
+        "amplitude_range": [float(c.amplitude[0]), float(c.amplitude[-1])],
+        "shift_predicted_hz": c.shift_model,
+        "shift_measured_hz": c.shift_reference,
+        "shift_relative_error": float(abs(c.shift_model - c.shift_reference) / abs(c.shift_reference)),
+        "frequency_offset_hz": float(np.mean(c.frequency_model - c.frequency_reference)),
+        "damping_predicted_percent": [float(100 * z_p[-1]), float(100 * z_p[0])],
+        "damping_measured_percent": [float(100 * z_m[-1]), float(100 * z_m[0])],
         "damping_relative_error_max": float(damping_error.max()),
         "damping_relative_error_mean": float(damping_error.mean()),
     }
@@ -187,12 +178,12 @@ def predict_backbone(learner, record, q0, v0, start: float, duration: float, con
     rom = SecondOrderROM(learner.operators_, np.eye(config.rank))
     started = time.perf_counter()
     # the sliders' return mapping steps with Newmark (the same period error as the midpoint rule)
-    solution = rom.predict(q0, times, v0=v0,
+    solution = rom.predict(times, initial=(q0, v0),
                            scheme="newmark" if learner.operators_.stateful else "discrete_gradient")
     seconds = time.perf_counter() - started
     acc1 = record.channel_acceleration(solution.a, 0)
     backbone = hilbert_backbone(acc1, 1 / dt, config.band, window=config.window, start_time=start)
-    return midpoint_corrected(backbone, dt), {"predict_seconds": seconds, "steps": len(times), "dt": dt}
+    return period_corrected(backbone, dt), {"predict_seconds": seconds, "steps": len(times), "dt": dt}
 
 
 def _linear_summary(learner) -> dict:

@@ -38,7 +38,7 @@ import numpy as np
 from femrom.integrators import newmark_frequencies
 from femrom.post import machine_description, plot_accuracy_cost_groups, staged_output, table_section
 from femrom.scene import Derivatives, Scene
-from femrom.study import LEARNER_NAMES, extrapolation_scene, frequency_ladder, frequency_section, invariant_drift, \
+from femrom.study import EXTRAPOLATION_LEARNER_NAMES, extrapolation_scene, frequency_ladder, frequency_section, invariant_drift, \
     natural_frequencies, plot_histories, plot_output_history, rom_table, run_study, scene_run, scored_columns, \
     time_step_ladder, time_step_section
 
@@ -145,9 +145,9 @@ def beam_rows(state, study: RomStudy, out_dir: Path, prefix: str) -> dict:
             "predicted_learned_error": None if dispersion is None else float(np.hypot(row["projection_error"],
                                                                                         dispersion)),
             "offline_seconds": offline + study_row["fit_seconds"]})
-    plot_histories(out_dir, test, projection, state.evaluations, rows, histories, r_main, LEARNER_NAMES, prefix=prefix,
+    plot_histories(out_dir, test, projection, state.evaluations, rows, histories, r_main, EXTRAPOLATION_LEARNER_NAMES, prefix=prefix,
                    title=f"beam ROMs (dt = {study.dt:g}, trained on [0, {T:g}] s)", shade=(0.0, T), fom_energy=False)
-    plot_output_history(out_dir / f"{prefix}rom_tip_end.png", test, state.evaluations, r_main, LEARNER_NAMES,
+    plot_output_history(out_dir / f"{prefix}rom_tip_end.png", test, state.evaluations, r_main, EXTRAPOLATION_LEARNER_NAMES,
                         last=2 * T, ylabel="tip deflection [m]",
                         title=f"tip over the last {2 * T:g} s of the prediction (r={r_main})")
     plot_accuracy_cost_groups(out_dir / f"{prefix}accuracy_cost_rom_r.png", rows, "r", "test_error", "r", "method",

@@ -1,0 +1,200 @@
+r"""The bolted half Brake-Reuss beam: its facts and its model chain, shared by the jointed-beam cases.
+
+The beam (Chen et al., MSSP 166:108401, 2022; geometry ``meshes/jointed_beam.geo``, the scene
+``femrom/cases/jointed_beam.toml``: P2 solid, free-free, three bolts at 12 kN, dry-friction
+interface elements on the lap joint's node pairs) is modelled in steps that two cases share
+(``jointed_beam``: QSMA, ring-down, stepped sine; ``jointed_beam_rom``: ROMs trained on the
+hyper-reduced model), each a library function and the settings here:
+
+1. :meth:`JointedBeamModel.scene`: the scene file with mesh (and joint-law) parameters set;
+2. :meth:`JointedBeamModel.calibrated`: build, preload on the statically determinate supports of
+   :data:`JOINTED_BEAM` (:func:`~femrom.scene.prestressed_model`), the tangential stiffness ``k_t``
+   calibrated so that the first elastic mode, checked to be the first vertical bending mode, is the
+   measured ``f_1 = 80.5`` Hz (:func:`~femrom.scene.calibrate_law_parameter`), and the modes about
+   the preload (6 rigid-body modes, then ``n_modes`` elastic ones);
+3. :meth:`JointedBeamModel.iwan_joint`: the ``clamped_iwan`` joint about the preload at its static
+   equilibrium (:func:`~femrom.scene.clamped_iwan_joint`), held 3-2-1 on the left end face;
+4. :meth:`JointedBeamModel.reduced`: Galerkin on the ``n_modes`` elastic modes about that
+   equilibrium (:func:`~femrom.scene.project_system`, the joint on every pair), linear modal damping,
+   the inputs hammer (a half-sine of ``impact_peak``, ``impact_width``) and shaker (silent);
+5. :meth:`JointedBeamModel.hyper_reduced`: ECSW trained on short all-pair ring-downs
+   (:func:`ecsw_training`, :func:`~femrom.rom.ecsw_joint`): the joint's slip remainder sampled on
+   a few weighted pairs (:func:`~femrom.rom.hyper_reduced_system`);
+
+with the step ``dt = 1 / (steps_per_period f_1)`` (:meth:`JointedBeamModel.dt`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+import tomllib
+from dataclasses import dataclass
+
+import numpy as np
+
+from femrom.rom import ecsw_joint, hyper_reduced_system
+from femrom.scene import (
+    Scene,
+    Signal,
+    SignalVector,
+    beam_mode_shapes,
+    calibrate_law_parameter,
+    clamped_iwan_joint,
+    linearized_modes,
+    point_supports,
+    prestressed_model,
+    project_system,
+    with_law_parameters,
+)
+from femrom.study._impacts import ImpactTraining, ecsw_training
+
+
+@dataclass(frozen=True)
+class BrakeReussBeam:
+    """Facts of the half Brake-Reuss beam: dimensions [m], bolt axes, the measured modal frequencies
+    (low-amplitude peaks of acc3's spectrum, data/brb/README.md) [Hz] and the calibration's bracket of
+    ``k_t`` [Pa/m] (``f_1`` = 72.9 and 86.0 Hz at its ends on the coarse mesh)."""
+
+    length: float = 0.720
+    width: float = 0.0254
+    thickness: float = 0.0127
+    bolt_spacing: float = 0.030
+    measured_f1: float = 80.5
+    measured_next: tuple = (221.7, 297.7)
+    stiffness_bracket: tuple = (1e10, 1e13)
+
+    @property
+    def bolts_x(self) -> np.ndarray:
+        """(3,) x of the bolt axes (at z = 0)."""
+        return self.length / 2 + self.bolt_spacing * np.array([-1.0, 0.0, 1.0])
+
+    @property
+    def supports(self) -> list:
+        """Statically determinate supports of the free beam for the preload (:func:`~femrom.scene.point_supports`):
+        3-2-1 on the left end face (the six rigid-body modes) and three on the right end face (the
+        right half's sliding in x, z and turning about y, free under frictionless contact); far from
+        the joint."""
+        w, t, length = self.width, self.thickness, self.length
+        return [((0.0, 0.0, -w / 2), "xyz"), ((0.0, 0.0, w / 2), "xy"), ((0.0, t, -w / 2), "x"),
+                ((length, 0.0, -w / 2), "xz"), ((length, 0.0, w / 2), "x")]
+
+    @property
+    def left_face(self) -> list:
+        """The 3-2-1 supports on the left end face alone: no mechanism once the joint carries friction."""
+        return self.supports[:3]
+
+
+#: The beam of the jointed-beam cases.
+JOINTED_BEAM = BrakeReussBeam()
+
+
+@dataclass(frozen=True, eq=False)
+class CalibratedBeam:
+    """The preloaded beam with ``k_t`` calibrated, and its modes about the preload.
+
+    Attributes
+    ----------
+    beam : PrestressedModel
+    system : SecondOrderSystem
+        The full model with the calibrated ``k_t`` (dry-friction joint).
+    tangential_stiffness : float
+        ``k_t`` [Pa/m].
+    evaluations : int
+        Eigensolves of the calibration.
+    modes : Modes
+        6 rigid-body modes, then the elastic ones.
+    shapes : list of BeamModeShape
+        Of the elastic modes.
+    seconds : float
+    """
+
+    beam: object
+    system: object
+    tangential_stiffness: float
+    evaluations: int
+    modes: object
+    shapes: list
+    seconds: float
+
+    @property
+    def f1(self) -> float:
+        """The first elastic frequency [Hz]."""
+        return float(self.modes.frequencies[6])
+
+    @property
+    def left_face(self) -> np.ndarray:
+        """Free-dof indices of :attr:`BrakeReussBeam.left_face`."""
+        return point_supports(self.beam.fom.space, self.system.condensation, JOINTED_BEAM.left_face)
+
+
+@dataclass(frozen=True)
+class JointedBeamModel:
+    """Settings of the model chain (module docstring); the defaults are the cases'."""
+
+    mesh: tuple = ()                            #: geometry parameter overrides, e.g. (("joint_mesh_size", 0.003175),)
+    n_modes: int = 10                           #: elastic modes of the reduced model
+    impact_peak: float = 300.0                  #: hammer peak force [N]
+    impact_width: float = 3.0e-4                #: half-sine width [s]
+    steps_per_period: int = 128                 #: of mode 1: dt = 1 / (f1 N)
+    friction_coefficient: float = 0.6           #: mu of the Iwan joint's macro-slip traction mu p_0 (textbook)
+    iwan_chi: float = -0.5                      #: the Iwan density's exponent (the fit's result on the default mesh)
+    iwan_beta: float = 0.94                     #: the weight of its delta (idem)
+    training_impacts: tuple = (300.0, 1500.0)   #: blows [N] of the all-pair ring-downs ECSW trains on
+    training_window: float = 0.15               #: their length [s]
+    ecsw_tolerance: float = 3e-3                #: relative residual of the sampled slip remainder
+
+    def scene(self, path, **joint_parameters) -> Scene:
+        """The scene file at ``path`` with :attr:`mesh`'s geometry parameters and ``joint_parameters``
+        (the joint law's, e.g. ``normal_stiffness``) set."""
+        data = tomllib.loads(Scene.from_toml(path).source_text)
+        data["structure"]["parameters"].update(dict(self.mesh))
+        data["effects"]["joint"]["parameters"].update(joint_parameters)
+        return Scene.from_dict(data)
+
+    def calibrated(self, scene: Scene) -> CalibratedBeam:
+        """Build, preload, calibrate ``k_t`` on the measured ``f_1``, and the ``6 + n_modes`` modes about
+        the preload."""
+        tic = time.perf_counter()
+        beam = prestressed_model(scene, JOINTED_BEAM.supports)
+        k_t, evaluations = calibrate_law_parameter(beam, "tangential_stiffness", JOINTED_BEAM.measured_f1,
+                                                   JOINTED_BEAM.stiffness_bracket, mode=6, shape=("vertical", 2))
+        system = with_law_parameters(beam.fom.system, tangential_stiffness=k_t)
+        modes = linearized_modes(system, beam.preload.displacement, beam.preload.state,
+                                 n_modes=6 + self.n_modes)
+        shapes = beam_mode_shapes(beam.fom.space, system.condensation, modes.shapes[:, 6:6 + self.n_modes])
+        return CalibratedBeam(beam, system, k_t, evaluations, modes, shapes, time.perf_counter() - tic)
+
+    def iwan_joint(self, calibrated: CalibratedBeam, *, chi: float | None = None, beta: float | None = None):
+        """``(system, q0, z0)``: the full model with the ``clamped_iwan`` joint (``mu``: :attr:`friction_coefficient`;
+        ``chi``, ``beta``: these settings' unless given) at its static equilibrium about the preload."""
+        beam = calibrated.beam
+        return clamped_iwan_joint(calibrated.system, beam.preload.displacement, beam.preload.state,
+                                  calibrated.left_face, friction_coefficient=self.friction_coefficient,
+                                  chi=self.iwan_chi if chi is None else chi,
+                                  beta=self.iwan_beta if beta is None else beta)
+
+    def reduced(self, calibrated: CalibratedBeam, system, q0, z0, damping_ratio: float):
+        """Galerkin on the ``n_modes`` elastic modes about ``(q0, z0)``, the joint on every pair, modal damping
+        ``damping_ratio``; inputs: the hammer (peak :attr:`impact_peak`) and the shaker (amplitude 0: set by a
+        stepped sine)."""
+        hammer = Signal.from_dict({"kind": "impulse", "amplitude": self.impact_peak, "start": 0.0,
+                                   "duration": self.impact_width})
+        shaker = Signal.from_dict({"kind": "sine", "amplitude": 0.0, "frequency": 80.5})
+        full = dataclasses.replace(system, inputs=SignalVector([hammer, shaker]))
+        V = calibrated.modes.shapes[:, 6:6 + self.n_modes]
+        return project_system(full, V, reference=q0, reference_state=z0, damping_ratios=damping_ratio)
+
+    def dt(self, calibrated: CalibratedBeam) -> float:
+        """``1 / (steps_per_period f_1)``."""
+        return 1.0 / (calibrated.f1 * self.steps_per_period)
+
+    def hyper_reduced(self, reduced, z0, dt: float, *, progress=None):
+        """``(training, sampling, hyper, z_hyper)``: :func:`ecsw_training` at :attr:`training_impacts` over
+        :attr:`training_window` (every 4th step), ECSW at :attr:`ecsw_tolerance`, the hyper-reduced model and
+        its rest state."""
+        training: ImpactTraining = ecsw_training(reduced, z0, self.training_impacts, width=self.impact_width,
+                                                 window=self.training_window, dt=dt, progress=progress)
+        sampling = ecsw_joint(reduced, training.snapshots, z0, tolerance=self.ecsw_tolerance)
+        hyper, z_hyper = hyper_reduced_system(reduced, sampling, z0)
+        return training, sampling, hyper, z_hyper
