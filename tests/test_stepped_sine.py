@@ -15,8 +15,7 @@ from femrom.integrators import (
     SteadyStateCriterion,
     SteadyStateWarning,
     SteppedSine,
-    StepperPlant,
-    SystemPlant,
+    Shaker,
     first_harmonic,
     parabolic_peak,
     prewarped_frequency,
@@ -96,7 +95,7 @@ def test_linear_two_dof_matches_the_exact_accelerance_with_prewarping():
     f = np.array([1.1, 1.2, 1.3])
     lines = []
     result = SteppedSine(f, steps_per_period=16, steady_state=SteadyStateCriterion(TOL)).run(
-        SystemPlant(system, force), [0.5, 1.5], progress=lines.append)
+        Shaker(system, force), [0.5, 1.5], progress=lines.append)
     assert result.all_converged and len(lines) == 6 and "steady" in lines[0]
     H = exact_accelerance(system, force, f)
     for level in result.levels:
@@ -117,7 +116,7 @@ def test_without_prewarping_the_response_is_the_exact_one_at_the_warped_frequenc
     system, force = two_dof(), np.array([0.0, 1.0])
     f, N = np.array([1.15, 1.2, 1.25]), 16
     result = SteppedSine(f, steps_per_period=N, prewarp=False,
-                         steady_state=SteadyStateCriterion(TOL)).run(SystemPlant(system, force), 1.0)
+                         steady_state=SteadyStateCriterion(TOL)).run(Shaker(system, force), 1.0)
     warped = f * np.tan(np.pi / N) / (np.pi / N)   # Omega = (2/h) tan(omega h / 2), h = 1/(N f)
     level = result.levels[0]
     exact_warped = exact_accelerance(system, force, warped)
@@ -132,8 +131,8 @@ def test_reduced_stepper_plant_matches_the_exact_frf_and_the_system_plant():
     system = sdof(0.02)
     f = np.array([0.95, 1.0, 1.05])
     sweep = SteppedSine(f, steps_per_period=16, steady_state=SteadyStateCriterion(TOL))
-    from_rom = sweep.run(StepperPlant(reduced(system), 0, quantity="displacement"), 2.0).levels[0]
-    from_fom = sweep.run(SystemPlant(system, [1.0], quantity="displacement"), 2.0).levels[0]
+    from_rom = sweep.run(Shaker(reduced(system), 0, quantity="displacement"), 2.0).levels[0]
+    from_fom = sweep.run(Shaker(system, [1.0], quantity="displacement"), 2.0).levels[0]
     w = 2 * np.pi * f
     H = 1.0 / (W0 ** 2 - w ** 2 + 2j * 0.02 * W0 * w)
     assert np.max(np.abs(from_rom.receptance[0] / H - 1)) < 1.5 * TOL   # as above
@@ -151,7 +150,7 @@ def test_lighter_damping_takes_longer_and_stops_within_the_tolerance(tolerance):
     periods = []
     for zeta in (0.05, 0.01, 0.002):
         level = SteppedSine([1.0], steps_per_period=16, steady_state=SteadyStateCriterion(tolerance)).run(
-            SystemPlant(sdof(zeta), [1.0], quantity="displacement"), 1.0).levels[0]
+            Shaker(sdof(zeta), [1.0], quantity="displacement"), 1.0).levels[0]
         exact = 1.0 / (2j * zeta * W0 ** 2)
         error = abs(level.phasors[0, 0] / exact - 1)
         # within the tolerance (measured 0.75-0.99 tol); and not far better, which would
@@ -169,7 +168,7 @@ def test_the_cap_flags_and_warns():
     sweep = SteppedSine([1.0, 1.01], steps_per_period=16,
                         steady_state=SteadyStateCriterion(1e-6, max_periods=5))
     with pytest.warns(SteadyStateWarning, match="not steady after 5 periods"):
-        result = sweep.run(SystemPlant(sdof(0.01), [1.0]), 1.0)
+        result = sweep.run(Shaker(sdof(0.01), [1.0]), 1.0)
     level = result.levels[0]
     assert not result.all_converged and not level.converged.any()
     assert list(level.periods) == [5, 5] and np.all(level.remaining > 1e-6)
@@ -195,7 +194,7 @@ def harmonic_balance_amplitudes(f, force, zeta=ZETA_DUFFING, cubic=CUBIC):
 @pytest.fixture(scope="module")
 def duffing_sweeps():
     system = sdof(ZETA_DUFFING, nonlinear=LocalPotential.cubic(np.ones(1), CUBIC))
-    plant = StepperPlant(reduced(system), 0, quantity="displacement")
+    plant = Shaker(reduced(system), 0, quantity="displacement")
     f = np.round(np.arange(1.12, 1.2801, 0.02), 10)
     # 16 steps per period: the third harmonic (about 1.5 % of the response here) is then
     # warped by 12 %, a 0.2 % effect on the first harmonic
@@ -297,7 +296,7 @@ FORCES_JENKINS = (0.2, 1.0, 3.0)
 def jenkins_levels():
     system = sdof(ZETA_JENKINS, stiffness=K0, undamped_stiffness=K0 + K_JOINT,
                   nonlinear=JenkinsForce(K_JOINT, SLIP_FORCE, 1, dofs=[0]))
-    plant = StepperPlant(reduced(system), 0, quantity="displacement")
+    plant = Shaker(reduced(system), 0, quantity="displacement")
     # 32 steps a period resolve the stick-slip corners to 1/32 of a period; a grid per level
     # around where the peak is expected (0.02 Hz steps, a fifth of the 0.1 Hz bandwidth)
     grids = {0.2: np.arange(1.18, 1.261, 0.02), 1.0: np.arange(1.15, 1.231, 0.02),
@@ -344,8 +343,8 @@ def test_a_stateful_force_is_carried_across_frequencies_by_both_plants():
     system = sdof(ZETA_JENKINS, stiffness=K0, undamped_stiffness=K0 + K_JOINT,
                   nonlinear=JenkinsForce(K_JOINT, SLIP_FORCE, 1, dofs=[0]))
     sweep = SteppedSine([1.13, 1.15, 1.17], steps_per_period=16, steady_state=SteadyStateCriterion(1e-3))
-    fom = sweep.run(SystemPlant(system, [1.0], quantity="displacement"), 1.0).levels[0]
-    rom = sweep.run(StepperPlant(reduced(system), 0, quantity="displacement"), 1.0).levels[0]
+    fom = sweep.run(Shaker(system, [1.0], quantity="displacement"), 1.0).levels[0]
+    rom = sweep.run(Shaker(reduced(system), 0, quantity="displacement"), 1.0).levels[0]
     # same steps, different Newton loops and solvers (measured 8e-12 apart)
     np.testing.assert_allclose(fom.phasors, rom.phasors, rtol=1e-6)
     np.testing.assert_array_equal(fom.periods, rom.periods)
@@ -379,26 +378,24 @@ def test_bad_plants_and_levels_are_refused():
     system = sdof(0.02)
     sweep = SteppedSine([1.0])
     with pytest.raises(ValueError, match="force_amplitudes"):
-        sweep.run(SystemPlant(system, [1.0]), [1.0, 0.0])
-    with pytest.raises(ValueError, match="prewarp"):
-        sweep.run(SystemPlant(system, [1.0], scheme=GeneralizedAlpha(0.8)), 1.0)
-    with pytest.raises(ValueError, match="force_vector"):
-        SystemPlant(system, [1.0, 2.0])
-    with pytest.raises(ValueError, match="force_vector"):
-        SystemPlant(system, [0.0])
+        sweep.run(Shaker(system, [1.0]), [1.0, 0.0])
+    with pytest.raises(ValueError, match=r"force must be a finite, nonzero \(1,\) vector"):
+        Shaker(system, [1.0, 2.0])
+    with pytest.raises(ValueError, match=r"force must be a finite, nonzero \(1,\) vector"):
+        Shaker(system, [0.0])
     with pytest.raises(ValueError, match="quantity"):
-        SystemPlant(system, [1.0], quantity="velocity")
+        Shaker(system, [1.0], quantity="velocity")
     with pytest.raises(ValueError, match="output_matrix"):
-        SystemPlant(SecondOrderSystem(mass=system.mass, stiffness=system.stiffness), [1.0])
-    with pytest.raises(ValueError, match="input_index"):
-        StepperPlant(reduced(system), 1)
-    with pytest.raises(ValueError, match="stepper"):
-        StepperPlant(system, 0)
+        Shaker(SecondOrderSystem(mass=system.mass, stiffness=system.stiffness), [1.0])
+    with pytest.raises(ValueError, match=r"force must be an input index in \[0, 1\)"):
+        Shaker(reduced(system), 1)
+    with pytest.raises(ValueError, match="model must be a SecondOrderSystem"):
+        Shaker(object(), 0)
     with pytest.raises(ValueError, match="samples"):
         first_harmonic(np.ones((2, 2)))
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        SteppedSine([1.0], prewarp=False, steady_state=SteadyStateCriterion(1e-2)).run(SystemPlant(system, [1.0], scheme=GeneralizedAlpha(0.8)), 1.0)
+        SteppedSine([1.0], prewarp=False, steady_state=SteadyStateCriterion(1e-2)).run(Shaker(system, [1.0], scheme=GeneralizedAlpha(0.8)), 1.0)
 
 
 def test_compare_stepped_sines_against_a_reference():
@@ -411,9 +408,9 @@ def test_compare_stepped_sines_against_a_reference():
     stiffer = sdof(0.02, stiffness=1.02 * W0 ** 2)
     f = np.round(np.arange(0.95, 1.05 + 1e-9, 0.01), 3)
     sweep = SteppedSine(f, steps_per_period=16, steady_state=SteadyStateCriterion(TOL))
-    out = compare_stepped_sines(SystemPlant(system, [1.0], quantity="displacement"),
-                                {"same": StepperPlant(reduced(system), 0, quantity="displacement"),
-                                 "stiffer": StepperPlant(reduced(stiffer), 0, quantity="displacement")},
+    out = compare_stepped_sines(Shaker(system, [1.0], quantity="displacement"),
+                                {"same": Shaker(reduced(system), 0, quantity="displacement"),
+                                 "stiffer": Shaker(reduced(stiffer), 0, quantity="displacement")},
                                 sweep, [2.0])
     rows = {row["model"]: row for row in out["rows"]}
     assert set(out["results"]) == {"reference", "same", "stiffer"}

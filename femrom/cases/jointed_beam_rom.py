@@ -26,15 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from femrom.inference import Output, SpMLConfig
-from femrom.integrators import (
-    Newmark,
-    Newton,
-    SteadyStateCriterion,
-    SteppedSine,
-    StepperPlant,
-    StepResult,
-    SystemPlant,
-)
+from femrom.integrators import Newmark, Newton, Shaker, SteadyStateCriterion, SteppedSine, StepResult
 from femrom.post import period_corrected, plot_backbones, staged_output, write_metrics
 from femrom.rom import SecondOrderROM
 from femrom.scene import Signal, SignalVector
@@ -91,29 +83,29 @@ def full_model_step_cost(model, q0, z0, dt: float, steps: int, progress=print) -
 def stepped_sines(hyper, rest_state, comparison: dict, config: JointedBeamRomCase, progress=print) -> dict:
     """The stepped sine at the shaker on the reference and on the ROMs of rank ``config.forced_rank``.
 
-    The reference and the Galerkin ROM (a projected system) step with the full integrators from their
-    committed rest state; the learned ROMs are reduced steppers (Newmark) whose output is
-    ``E V q^''`` (the sensors through the basis, as in the ring-down comparison)."""
+    Every model is on a :class:`~femrom.integrators.Shaker` stepped by Newmark, the reference and the
+    Galerkin ROM from their committed rest state; the learned ROMs' output is ``E V q^''`` (the sensors
+    through the basis, as in the ring-down comparison)."""
     r = config.forced_rank
     shaker = np.asarray(hyper.input_matrix[:, 1]).ravel()
     V = comparison["basis"][:, :r]
     E = hyper.output_matrix.toarray() if hasattr(hyper.output_matrix, "toarray") else np.asarray(hyper.output_matrix)
 
     def rest(n):
-        return StepResult(step=0, t=0.0, q=np.zeros(n), v=np.zeros(n), a=np.zeros(n), state=rest_state)
+        return StepResult.at_rest(n, state=rest_state)
 
     plants = {}
     for (name, rank), model in comparison["models"].items():
         if rank != r:
             continue
         if name == "galerkin":
-            plants[name] = SystemPlant(model, V.T @ shaker, rest=rest(r))
+            plants[name] = Shaker(model, V.T @ shaker, rest=rest(r))
         else:
             sensed = SecondOrderROM(model.operators_.with_terms(Output(E @ V)), model.basis)
-            plants[name] = StepperPlant(sensed, input_index=1, scheme="newmark", output_names=hyper.output_names)
+            plants[name] = Shaker(sensed, 1, scheme="newmark", output_names=hyper.output_names)
     sweep = SteppedSine(np.asarray(config.forced_frequencies), steps_per_period=config.forced_steps_per_period,
                         steady_state=SteadyStateCriterion(tolerance=config.forced_tolerance))
-    reference = SystemPlant(hyper, shaker, rest=rest(hyper.n_dofs))
+    reference = Shaker(hyper, shaker, rest=rest(hyper.n_dofs))
     return compare_stepped_sines(reference, plants, sweep, config.forced_levels, progress=progress)
 
 

@@ -18,8 +18,8 @@ Three separate pieces:
   :class:`OutputRecorder`, :class:`EnergyRecorder`, or any callable);
   :func:`march` steps a model over a grid with sampled inputs into arrays, and a
   :class:`Stepper` one input at a time;
-- a *stepped sine* (:class:`SteppedSine`) drives a *plant* (:class:`SystemPlant`,
-  :class:`StepperPlant`) frequency by frequency without restarting, whole periods at
+- a *stepped sine* (:class:`SteppedSine`) drives any model on a :class:`Shaker`
+  frequency by frequency without restarting, whole periods at
   a time to a tested steady state (:class:`SteadyStateCriterion`), and reports the
   first-harmonic amplitude and phase of each output (:class:`SteppedSineResult`);
 - a *linear-solver strategy* (:func:`femrom.solvers.make_solver`) factorises
@@ -68,7 +68,6 @@ from femrom.integrators.schemes.implicit_midpoint import ImplicitMidpoint
 from femrom.integrators.schemes.newmark import Newmark, newmark_frequencies
 from femrom.integrators._simulate import SimulationResult, simulate
 from femrom.integrators._shaker import Shaker
-from femrom.integrators._sine_plants import StepperPlant, SystemPlant
 from femrom.integrators._stability import bound_max_frequency, estimate_max_frequency
 from femrom.integrators._steady_state import SteadyStateCriterion, first_harmonic
 from femrom.integrators._stepped_sine import (
@@ -92,6 +91,6 @@ __all__ = [
     "Trajectory", "bound_max_frequency", "estimate_max_frequency", "integrate", "integrate_canonical",
     "iterate", "newmark_frequencies", "register_scheme", "scheme_for", "simulate",     "LinearParts", "Scheme", "Stepper", "march", "newton_loop", "registered_schemes", "run_linear",
     "Shaker", "input_sample", "time_scheme", "uniform_step",     "FrequencyResponse", "Peak", "SteadyStateCriterion", "SteadyStateWarning",
-    "SteppedSine", "SteppedSineResult", "StepperPlant", "SystemPlant", "first_harmonic", "parabolic_peak",
+    "SteppedSine", "SteppedSineResult", "first_harmonic", "parabolic_peak",
     "prewarped_frequency",
 ]

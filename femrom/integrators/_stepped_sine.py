@@ -16,10 +16,10 @@ state under ``F sin(omega t_n)`` is *exactly* the continuous one at the warped f
 ``Omega = (2 / h) tan(omega h / 2)`` (for a linear system of any size: ``Q = (K - Omega^2 M
 + i Omega C)^{-1} F``, ``A = -Omega^2 Q``), a relative shift ``tan(pi/N)/(pi/N) - 1 ~
 pi^2 / (3 N^2)``: 2.0e-4 at ``N = 128``, i.e. 0.016 Hz at 80 Hz, an eighth of the
-half-power bandwidth of a 0.13 %-damped mode. With ``prewarp`` (the default, allowed for
-plants whose scheme is average acceleration) the model is driven at
-``omega_s = omega (pi/N) / tan(pi/N)`` with ``h = 2 pi / (N omega_s)``, so that ``Omega``
-equals the requested ``omega``: a linear model's phasors are then exact up to the steady-
+half-power bandwidth of a 0.13 %-damped mode. With ``prewarp`` (the default) the model is
+driven where the scheme's own frequency map (:meth:`~femrom.integrators.Scheme.frequency`)
+puts the requested frequency: for average acceleration at ``omega_s = omega (pi/N) /
+tan(pi/N)`` with ``h = 2 pi / (N omega_s)``, so that ``Omega`` equals the requested ``omega``: a linear model's phasors are then exact up to the steady-
 state tolerance for any ``N`` (bilinear-transform prewarping; Franklin, Powell & Workman,
 *Digital Control of Dynamic Systems*, 3rd ed., sec. 6.3). For a nonlinear force the first
 harmonic obeys the same harmonic balance at ``Omega`` (the force acts on the sampled
@@ -252,12 +252,12 @@ class SteppedSine:
     steady_state : SteadyStateCriterion
     prewarp : bool
         Drive at ``f (pi/N) / tan(pi/N)`` so that average acceleration responds as at ``f``
-        (:func:`prewarped_frequency`); needs a plant with ``tustin = True``.
+        (:func:`prewarped_frequency` with the shaker's scheme).
 
     Examples
     --------
     >>> sweep = SteppedSine(np.arange(79.0, 81.5 + 1e-9, 0.05))          # doctest: +SKIP
-    >>> result = sweep.run(SystemPlant(system, shaker), [0.2, 0.5, 1.5])  # doctest: +SKIP
+    >>> result = sweep.run(Shaker(model, shaker), [0.2, 0.5, 1.5])  # doctest: +SKIP
     >>> metrics["forced_response"] = result.rows()                        # doctest: +SKIP
     """
 
@@ -285,7 +285,9 @@ class SteppedSine:
 
         Parameters
         ----------
-        plant : SystemPlant, StepperPlant or any plant (see :mod:`._sine_plants`)
+        plant : Shaker
+            Or any object with its ``periods``, ``reset``, ``output_names``, ``quantity`` and
+            ``scheme`` (:mod:`._shaker`).
         force_amplitudes : float or sequence of float
             ``F > 0`` per level.
         progress : callable, optional
@@ -303,15 +305,12 @@ class SteppedSine:
         """
         amplitudes = _force_amplitudes(force_amplitudes)
         scheme = getattr(plant, "scheme", None)
-        tustin = getattr(plant, "tustin", False)
-        if self.prewarp and not (hasattr(scheme, "continuous_frequency") or tustin):
-            raise FemromValueError("prewarp=True needs a plant whose scheme has a frequency map (plant.scheme) "
-                             "or that is stepped by Newmark average acceleration (plant.tustin); "
-                             "pass prewarp=False")
+        if self.prewarp and not hasattr(scheme, "continuous_frequency"):
+            raise FemromValueError("prewarp=True needs a plant whose scheme has a frequency map (plant.scheme); "
+                                   "pass prewarp=False")
         N, criterion = int(self.steps_per_period), self.steady_state
-        driven = (prewarped_frequency(self.frequencies_hz, N,
-                                      scheme if hasattr(scheme, "continuous_frequency") else None)
-                  if self.prewarp else np.asarray(self.frequencies_hz))
+        driven = (prewarped_frequency(self.frequencies_hz, N, scheme) if self.prewarp
+                  else np.asarray(self.frequencies_hz))
         levels = []
         for F in amplitudes:
             plant.reset()

@@ -55,13 +55,10 @@ from femrom.rom._hyper import sparse_nnls
 
 
 def _projected_joint(model) -> TransformedForce:
-    """The joint on the reduced coordinates of a Galerkin model (its projected force's transformed force),
-    or of a projected system's force."""
-    if isinstance(model, ReducedOperators):
-        term = model.term("projected_force")
-        force = None if term is None else term.transformed
-    else:
-        force = getattr(model.nonlinear, "transformed", model.nonlinear)
+    """The joint on the reduced coordinates of a Galerkin model: its projected force's transformed force
+    (the model as :class:`~femrom.inference.ReducedOperators` or as its system)."""
+    term = model.term("projected_force") if isinstance(model, ReducedOperators) else model.nonlinear
+    force = getattr(term, "transformed", None)
     if not (isinstance(force, TransformedForce) and isinstance(force.force_model, JointForce)):
         raise FemromValueError("the model's nonlinear force must be a projected joint (femrom.inference.galerkin "
                                f"of a system with a JointForce), got {type(force).__name__}")
@@ -179,10 +176,11 @@ def hyper_reduced_system(system, sampling: JointSampling, rest_state):
     r"""The projected model with its joint sampled (module docstring): ``(model, rest state of the sample)``.
 
     The stuck joint's stiffness and the rest force stay exact (corrections to ``K^`` and
-    the load); the joint acts through the sampled pairs with weighted areas. ``system`` is
-    a Galerkin model (:class:`~femrom.inference.ReducedOperators`, :func:`~femrom.inference.galerkin`
-    of the full model about its preloaded state) and so is the result; the returned state
-    is ``rest_state[pairs]``.
+    the load); the joint acts through the sampled pairs with weighted areas. ``system`` is a
+    Galerkin model (:func:`~femrom.inference.galerkin` of the full model about its preloaded
+    state), as :class:`~femrom.inference.ReducedOperators` or as its
+    :class:`~femrom.scene.SecondOrderSystem`, and the result is of the same kind; the returned
+    state is ``rest_state[pairs]``.
     """
     force = _projected_joint(system)
     r = force.n_dofs
@@ -196,18 +194,19 @@ def hyper_reduced_system(system, sampling: JointSampling, rest_state):
     f_sampled = sampled.force(zero, None, sampled_state)
     load = np.zeros(r) if system.load is None else np.asarray(system.load, dtype=float)
     description = {"method": "ecsw_joint", **sampling.describe()}
+    shifted = transform_force(restricted, None, reference=force.reference) if force.reference is not None \
+        else restricted
     if isinstance(system, ReducedOperators):
         terms = registered_terms()
         term = system.term("projected_force")
-        shifted = transform_force(restricted, None, reference=force.reference) if force.reference is not None \
-            else restricted
         hyper = system.with_terms(terms["stiffness"](system.stiffness + K_all - K_sampled),
                                   terms["constant_load"](load - f_all + f_sampled),
                                   type(term)(shifted, term.basis))
         hyper.metadata["hyper_reduction"] = description
         return hyper, sampled_state
-    stiffness = sp.csr_matrix(_dense(system.stiffness) + K_all - K_sampled)
+    term = system.nonlinear
+    stiffness = _dense(system.stiffness) + K_all - K_sampled
     metadata = {**system.metadata, "hyper_reduction": description}
-    hyper = dataclasses.replace(system, stiffness=stiffness, load=load - f_all + f_sampled, nonlinear=sampled,
-                                metadata=metadata)
+    hyper = dataclasses.replace(system, stiffness=stiffness, load=load - f_all + f_sampled,
+                                nonlinear=type(term)(shifted, term.basis), metadata=metadata)
     return hyper, sampled_state

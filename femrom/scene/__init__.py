@@ -36,7 +36,6 @@ from femrom.scene._prestressed import (
     prestressed_model,
     with_law_parameters,
 )
-from femrom.scene._projection import project_system
 from femrom.scene._rom import BasisSpec, Derivatives, LearnerSpec, ReportSpec, RomConfig, RunSpec, TimingSpec
 from femrom.scene._signals import Signal, SignalVector, half_sine_spectrum
 from femrom.scene._static import Preload, StaticSolution, point_supports, preload, solve_static, with_friction_coefficient
@@ -54,7 +53,7 @@ __all__ = [
     "band_limited_noise", "chirp", "multisine", "onset", "sample_times", "sampled_signal",
     "effect_class", "half_sine_spectrum", "register_effect", "registered_effects",
     "BeamModeShape", "Modes", "Preload", "StaticSolution", "beam_mode_shape", "linearized_modes",
-    "point_supports", "preload", "project_system", "solve_static", "tangent_stiffness", "with_friction_coefficient",
+    "point_supports", "preload", "solve_static", "tangent_stiffness", "with_friction_coefficient",
     "PrestressedModel", "beam_mode_shapes", "calibrate_law_parameter", "clamped_iwan_joint", "mode_frequency",
     "prestressed_model", "with_law_parameters",
 ]

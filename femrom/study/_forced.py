@@ -5,9 +5,9 @@ force levels ``F`` and lists, beside each first-harmonic output amplitude, the a
 of the model linearised there (:func:`femrom.post.linear_accelerance`: a stuck joint), the
 small-force limit the nonlinear response tends to.
 
-For :func:`compare_stepped_sines`, every plant (:class:`~femrom.integrators.SystemPlant` for a system
-stepped by the full integrators, :class:`~femrom.integrators.StepperPlant` for a reduced model) runs the same
-:class:`~femrom.integrators.SteppedSine` at the same force levels. Per model and level, the
+For :func:`compare_stepped_sines`, every model on its :class:`~femrom.integrators.Shaker` (the full model,
+a Galerkin or a learned ROM alike) runs the same :class:`~femrom.integrators.SteppedSine` at the same
+force levels. Per model and level, the
 first-harmonic amplitude of one output is compared with the reference's: the peak (parabolic
 interpolation around the discrete maximum) in frequency and in amplitude, and the worst relative
 amplitude difference over the frequencies.
@@ -19,7 +19,7 @@ import time
 
 import numpy as np
 
-from femrom.integrators import SteadyStateCriterion, SteppedSine, StepResult, SystemPlant
+from femrom.integrators import Shaker, SteadyStateCriterion, SteppedSine, StepResult
 from femrom.post import linear_accelerance
 
 
@@ -27,16 +27,14 @@ def stepped_sine_response(system, rest_state, input: int, frequencies, levels, *
                           tolerance: float, linear_key: str = "linear_amplitude", progress=None):
     """``(result, rows)``: the stepped sine of ``system`` driven through input column ``input`` at the force
     ``levels`` [N] over ``frequencies`` [Hz], from rest in the committed force state ``rest_state``
-    (:class:`~femrom.integrators.SystemPlant`, :class:`~femrom.integrators.SteppedSine` with
+    (:class:`~femrom.integrators.Shaker`, :class:`~femrom.integrators.SteppedSine` with
     ``steps_per_period`` steps per period and :class:`~femrom.integrators.SteadyStateCriterion` at
     ``tolerance``).
 
     ``rows``: ``result.rows()`` with, in every point of every output, ``linear_key``: ``F |H(f)|`` of the
     model linearised at rest (:func:`femrom.post.linear_accelerance`), in the outputs' acceleration units."""
     force = np.asarray(system.input_matrix[:, input]).ravel()
-    r = system.n_dofs
-    plant = SystemPlant(system, force, rest=StepResult(step=0, t=0.0, q=np.zeros(r), v=np.zeros(r), a=np.zeros(r),
-                                                        state=rest_state))
+    plant = Shaker(system, force, rest=StepResult.at_rest(system.n_dofs, state=rest_state))
     sweep = SteppedSine(np.asarray(frequencies), steps_per_period=steps_per_period,
                         steady_state=SteadyStateCriterion(tolerance=tolerance))
     result = sweep.run(plant, list(levels), progress=progress)

@@ -15,7 +15,7 @@ hyper-reduced model), each a library function and the settings here:
 3. :meth:`JointedBeamModel.iwan_joint`: the ``clamped_iwan`` joint about the preload at its static
    equilibrium (:func:`~femrom.scene.clamped_iwan_joint`), held 3-2-1 on the left end face;
 4. :meth:`JointedBeamModel.reduced`: Galerkin on the ``n_modes`` elastic modes about that
-   equilibrium (:func:`~femrom.scene.project_system`, the joint on every pair), linear modal damping,
+   equilibrium (:func:`~femrom.inference.galerkin`, the joint on every pair), linear modal damping,
    the inputs hammer (a half-sine of ``impact_peak``, ``impact_width``) and shaker (silent);
 5. :meth:`JointedBeamModel.hyper_reduced`: ECSW trained on short all-pair ring-downs
    (:func:`ecsw_training`, :func:`~femrom.rom.ecsw_joint`): the joint's slip remainder sampled on
@@ -33,6 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from femrom.inference import galerkin
 from femrom.rom import ecsw_joint, hyper_reduced_system
 from femrom.scene import (
     Scene,
@@ -44,7 +45,6 @@ from femrom.scene import (
     linearized_modes,
     point_supports,
     prestressed_model,
-    project_system,
     with_law_parameters,
 )
 from femrom.study._impacts import ImpactTraining, ecsw_training
@@ -181,9 +181,9 @@ class JointedBeamModel:
         hammer = Signal.from_dict({"kind": "impulse", "amplitude": self.impact_peak, "start": 0.0,
                                    "duration": self.impact_width})
         shaker = Signal.from_dict({"kind": "sine", "amplitude": 0.0, "frequency": 80.5})
-        full = dataclasses.replace(system, inputs=SignalVector([hammer, shaker]))
         V = calibrated.modes.shapes[:, 6:6 + self.n_modes]
-        return project_system(full, V, reference=q0, reference_state=z0, damping_ratios=damping_ratio)
+        model = galerkin(system, V, reference=q0, reference_state=z0, damping_ratios=damping_ratio).system
+        return dataclasses.replace(model, inputs=SignalVector([hammer, shaker]), output_names=system.output_names)
 
     def dt(self, calibrated: CalibratedBeam) -> float:
         """``1 / (steps_per_period f_1)``."""
