@@ -70,7 +70,7 @@ def output_ring_down(system, rest_state, duration: float, dt: float, *, keep_eve
         if keep_every and result.step % keep_every == 0:
             kept.append((result.q.copy(), result.state))
 
-    rest = StepResult(step=0, t=0.0, q=np.zeros(r), v=np.zeros(r), a=np.zeros(r), state=rest_state)
+    rest = StepResult.at_rest(r, state=rest_state)
     tic = time.perf_counter()
     summary = integrate(system, Newmark(), None, None, dt, n_steps, consumers=[trajectory, keep], start=rest,
                         progress=None)
@@ -110,8 +110,7 @@ def step_cost(system, displacement, state, dt: float, n_steps: int, *, scheme=No
     Returns ``{"n_dofs", "steps", "seconds_total", "seconds_per_step", "newton_iterations"}``."""
     n = system.n_dofs
     stamps = []
-    start = StepResult(step=0, t=0.0, q=np.array(displacement, dtype=float), v=np.zeros(n), a=np.zeros(n),
-                       state=state)
+    start = StepResult.at_rest(n, q=displacement, state=state)
     tic = time.perf_counter()
     summary = integrate(system, scheme or Newmark(), None, None, dt, n_steps,
                         consumers=[lambda result: stamps.append(time.perf_counter())], start=start, progress=None)

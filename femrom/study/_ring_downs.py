@@ -76,7 +76,7 @@ def reference_ring_down(system, rest_state, duration: float, dt: float, *, label
     n = system.n_dofs
     steps = int(round(duration / dt))
     trajectory = Trajectory(fields=("q", "v", "a"))
-    rest = StepResult(step=0, t=0.0, q=np.zeros(n), v=np.zeros(n), a=np.zeros(n), state=rest_state)
+    rest = StepResult.at_rest(n, state=rest_state)
     tic = time.perf_counter()
     summary = integrate(system, scheme or Newmark(), None, None, dt, steps, consumers=[trajectory], start=rest,
                         progress=None)
