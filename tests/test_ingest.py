@@ -26,7 +26,7 @@ from femrom.rom import SecondOrderROM
 from femrom.scene import Scene, Signal, build
 from femrom.snapshots import IngestError, SnapshotStore, TabulatedInputs, ingest, ingested_model, \
     read_input_table, read_series
-from femrom.study import relative_error
+from femrom.post import relative_error
 
 DATA = Path(__file__).parent / "data"
 EVERY = 2

@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 
 from femrom.scene import Signal, SignalVector
-from femrom.study import Cost, FOMRun, LinearModelSpec, linear_model_rows
+from femrom.snapshots import FOMRun
+from femrom.study import Cost, LinearModelSpec, linear_model_rows
 
 
 def _run(q0):

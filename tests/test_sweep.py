@@ -15,7 +15,8 @@ import pytest
 
 from femrom.scene import Scene, SceneError, build
 from femrom.snapshots import SnapshotStore
-from femrom.study import run_fom, run_sweep, sweep_runs
+from femrom.snapshots import run_fom
+from femrom.study import run_sweep, sweep_runs
 
 pytest.importorskip("distributed")
 

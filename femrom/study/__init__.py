@@ -3,9 +3,8 @@
 What the case scripts share, for any scene (``femrom run scene.toml`` with a
 ``[rom]`` section calls :func:`run_study`):
 
-- runs: :func:`run_fom` (one model, any input signals, fields streamed to a
-  store, each step timed without the consumers), :class:`FOMRun`,
-  :func:`solver_factory` (one factorisation for all runs of one ``dt``);
+- runs: :func:`femrom.snapshots.run_fom` (one model, any input signals, fields streamed to a
+  store, each step timed without the consumers) gives each :class:`~femrom.snapshots.FOMRun`;
 - a study of extrapolation in time (train on a release's first window, predict far beyond it):
   :func:`extrapolation_config` (its learners :data:`EXTRAPOLATION_LEARNERS`, named
   :data:`EXTRAPOLATION_LEARNER_NAMES`),
@@ -21,7 +20,7 @@ What the case scripts share, for any scene (``femrom run scene.toml`` with a
   unstructured baselines of :class:`CanonicalSpec`, training and extrapolation windows,
   invariant drifts, costs by timed blocks), :func:`canonical_time_step_ladder`,
   :func:`state_error`, :func:`mass_generator`, :func:`plot_invariant_drifts`;
-- metrics: :func:`relative_error`, :func:`mass_norm`, :class:`Projection` / :func:`project_run`
+- metrics (:func:`femrom.post.relative_error` beside them): :func:`mass_norm`, :class:`Projection` / :func:`project_run`
   (exact field errors at every r from one pass), :func:`energy_ratio`;
 - over time on one run: :func:`state_energy` and :func:`reconstructed_energy_error` (the FOM
   energy of a ROM's reconstructed state), :func:`rom_table` (errors, energy errors and costs
@@ -127,7 +126,7 @@ from femrom.study._ladders import (
     time_step_section,
 )
 from femrom.study._linear_models import LinearModelSpec, fit_linear_model, linear_model_rows, state_space_data
-from femrom.study._metrics import Projection, energy_ratio, invariant_drift, mass_norm, project_run, relative_error
+from femrom.study._metrics import Projection, energy_ratio, invariant_drift, mass_norm, project_run
 from femrom.study._pipeline import ROW_COLUMNS, StudyState, peak_rss_gb, public_rows, run_study, write_report
 from femrom.study._forced import compare_stepped_sines, stepped_sine_response
 from femrom.study._ring_downs import (
@@ -139,7 +138,6 @@ from femrom.study._ring_downs import (
     reference_ring_down,
     ring_down_data,
 )
-from femrom.snapshots import FOMRun, run_fom, solver_factory
 from femrom.study._backbone_metrics import BackboneComparison, backbone_errors, backbone_shift, compare_backbones
 from femrom.study._impacts import (
     ImpactTraining,
@@ -180,7 +178,7 @@ from femrom._timing import Cost, blocked_cost, call_cost, repeated_cost, repeate
 
 __all__ = [
     "conservative_acceleration", "force_error", "nonlinear_forces",
-    "CanonicalRun", "CanonicalSpec", "Cost", "Evaluation", "FINAL_STATE_COLUMNS", "FOMRun", "FREQUENCY_COLUMNS", "HYPER_COLUMNS", "EXTRAPOLATION_LEARNERS", "EXTRAPOLATION_LEARNER_NAMES",
+    "CanonicalRun", "CanonicalSpec", "Cost", "Evaluation", "FINAL_STATE_COLUMNS", "FREQUENCY_COLUMNS", "HYPER_COLUMNS", "EXTRAPOLATION_LEARNERS", "EXTRAPOLATION_LEARNER_NAMES",
     "Projection", "RING_DOWN_COLUMNS", "ROW_COLUMNS", "RingDown", "RingDownComparison", "backbone_errors",
     "compare_ring_downs", "compare_stepped_sines", "mass_pod", "reference_ring_down", "ring_down_data", "SceneHamiltonianROM", "SceneRun", "StudyState", "SweepRun", "TIME_STEP_COLUMNS", "blocked_cost",
     "call_cost", "canonical_rows", "canonical_time_step_ladder", "check_canonical_learners",
@@ -192,9 +190,9 @@ __all__ = [
     "plot_energy_error_history", "plot_error_history", "plot_errors", "plot_histories",
     "plot_invariant_drifts", "plot_output_history", "plot_outputs", "pod_basis", "product_matrix",
     "project_run", "projected_forces", "public_rows", "reconstructed_energy_error", "reduce_runs",
-    "relative_error", "render_fields", "repeated_cost", "repeated_costs", "rom_cost", "rom_costs",
-    "rom_table", "run_canonical", "run_fom", "run_study", "run_sweep", "run_sweep_point", "scene_run",
-    "scored_columns", "solver_factory", "state_energy", "every_kth", "subsampled_rows", "subsampled_section",
+    "render_fields", "repeated_cost", "repeated_costs", "rom_cost", "rom_costs",
+    "rom_table", "run_canonical", "run_study", "run_sweep", "run_sweep_point", "scene_run",
+    "scored_columns", "state_energy", "every_kth", "subsampled_rows", "subsampled_section",
     "state_error", "study_costs", "study_learners", "study_rows",
     "sweep_runs", "time_step_ladder", "time_step_section", "training_data", "write_report",
     "BackboneComparison", "backbone_shift", "compare_backbones",
