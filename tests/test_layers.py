@@ -20,9 +20,9 @@ import femrom
 
 PACKAGE = Path(femrom.__file__).resolve().parent
 
-#: The layers, lowest first.
+#: The layers, lowest first (the cases on top: the command line finds them by name, at run time).
 LAYERS = ("solvers", "mesh", "fem", "scene", "integrators", "snapshots", "linalg", "basis", "inference",
-          "rom", "control", "post", "study", "cli")
+          "rom", "control", "post", "study", "cli", "cases")
 
 #: Top-level modules usable from every layer.
 HELPERS = {"_errors", "_progress", "_json", "_registry", "_timing"}
