@@ -86,9 +86,9 @@ def memory_bound_bytes() -> int:
         try:
             value = float(text)
         except ValueError:
-            raise ValueError(f"FEMROM_MEMORY_LIMIT_GB must be a number of GB, got {text!r}") from None
+            raise FemromValueError(f"FEMROM_MEMORY_LIMIT_GB must be a number of GB, got {text!r}") from None
         if not value > 0:
-            raise ValueError(f"FEMROM_MEMORY_LIMIT_GB must be positive, got {text!r}")
+            raise FemromValueError(f"FEMROM_MEMORY_LIMIT_GB must be positive, got {text!r}")
         return int(value * 1e9)
     try:
         return int(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") // 2)

@@ -256,8 +256,8 @@ def test_saved_model_predicts_bit_for_bit_and_loads_without_torch(duffing, tmp_p
     # without torch: the file loads and predicts the same numbers
     code = (HIDE_TORCH + f"import numpy as np\nfrom femrom.rom import SecondOrderROM\n"
             f"rom = SecondOrderROM.load({str(path)!r})\n"
-            f"sol = rom.predict(np.array({q0.tolist()!r}), np.array({t[:200].tolist()!r}), "
-            f"v0=np.array({v0.tolist()!r}), inputs=np.array({U[:, :200].tolist()!r}), scheme='newmark')\n"
+            f"sol = rom.predict(np.array({t[:200].tolist()!r}), np.array({U[:, :200].tolist()!r}), "
+            f"initial=(np.array({q0.tolist()!r}), np.array({v0.tolist()!r})), scheme='newmark')\n"
             f"np.save({str(tmp_path / 'q.npy')!r}, sol.q)\n"
             f"assert 'torch' not in sys.modules\n")
     subprocess.run([sys.executable, "-c", code], check=True, cwd=ROOT, capture_output=True)

@@ -37,6 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
+from femrom._errors import FemromValueError
 from femrom.post import accuracy_cost_table, plot_accuracy_cost, staged_output
 from femrom.scene import BasisSpec, Derivatives, InputConfig, LearnerSpec, ReportSpec, RomConfig, RunSpec, \
     Scene, Signal, build
@@ -92,7 +93,7 @@ def pressure_signal(scene: Scene, kind: str) -> Signal:
         dt = scene.time.dt
         start = (round(max(p["midpoint"] - 4 * p["width"], 0.0) / dt) + 0.5) * dt
         return Signal.from_dict({"kind": "step", "amplitude": p["amplitude"], "start": start})
-    raise ValueError(f"unknown pressure signal {kind!r}; valid: sigmoid, step")
+    raise FemromValueError(f"unknown pressure signal {kind!r}; valid: sigmoid, step")
 
 
 def pressure_signals(scene: Scene, kind: str) -> tuple[Signal, ...]:
@@ -107,7 +108,7 @@ def with_inputs(scene: Scene, n_inputs: int) -> Scene:
     if n_inputs == 1:
         return scene
     if n_inputs != 2:
-        raise ValueError(f"the fishtail has 1 (antagonistic) or 2 (one per chamber) inputs, got {n_inputs}")
+        raise FemromValueError(f"the fishtail has 1 (antagonistic) or 2 (one per chamber) inputs, got {n_inputs}")
     first = scene.inputs[0]
     left, right = first.loads
     inputs = (InputConfig("pressure_left", dataclasses.replace(left, magnitude=1.0), first.signal),
@@ -190,10 +191,10 @@ def run(out_dir, *, quick: bool = False, level: str = "small", train: str = "sig
     if t_end is not None:
         scene = with_time(scene, t_end=t_end)
     if train not in ("sigmoid", "step"):
-        raise ValueError(f"unknown training input {train!r}; valid: sigmoid, step")
+        raise FemromValueError(f"unknown training input {train!r}; valid: sigmoid, step")
     learners = tuple(learners)
     if any(x not in LEARNERS for x in learners) or "lopinf" not in learners:
-        raise ValueError(f"learners must include 'lopinf' and be among {', '.join(LEARNERS)}; got {learners}")
+        raise FemromValueError(f"learners must include 'lopinf' and be among {', '.join(LEARNERS)}; got {learners}")
     ranks = tuple(ranks or ((2, 4, 6, 8) if quick else (2, 4, 6, 8, 12)))
     dt_factors = ((5, 2) if quick else (10, 5, 2)) if ladders else ()
     scene = dataclasses.replace(scene, rom=rom_config(scene, train, ranks, learners, extension=extension,

@@ -41,6 +41,7 @@ from pathlib import Path
 
 import numpy as np
 
+from femrom._errors import FemromValueError
 from femrom.post import accuracy_cost_table, pyplot, save_figure, staged_output, table_section
 from femrom.scene import Derivatives, Scene, build
 from femrom.study import HYPER_COLUMNS, EXTRAPOLATION_LEARNER_NAMES, extrapolation_scene, final_state_ladders, final_state_section, \
@@ -124,7 +125,7 @@ def exact_breather(model, t: float) -> np.ndarray:
     s = np.sqrt(1.0 - BREATHER_FREQUENCY**2)
     v_exact = 4.0 * s / np.cosh(s * (x - BREATHER_CENTRE))
     if not np.allclose(model.initial_velocity, v_exact, atol=1e-12 * np.abs(v_exact).max()):
-        raise ValueError("the scene's initial velocity is not the breather of BREATHER_FREQUENCY; "
+        raise FemromValueError("the scene's initial velocity is not the breather of BREATHER_FREQUENCY; "
                          "the exact reference of the mesh ladder would not apply")
     return breather(x, t)
 

@@ -39,6 +39,7 @@ from pathlib import Path
 
 import numpy as np
 
+from femrom._errors import FemromValueError
 from femrom.control import travelling_wave
 from femrom.inference import system_impulse_response
 from femrom.post import accuracy_cost_table, plot_closed_loops, render_closed_loop, staged_output
@@ -211,14 +212,14 @@ def run(out_dir, config: SoftRobotCase = SoftRobotCase(), *, progress=None, scen
     say = progress or (lambda message: print(f"soft_robot: {message}", file=sys.stderr, flush=True))
     unknown = [m for m in config.models if m not in MODELS]
     if unknown or "lopinf" not in config.models:
-        raise ValueError(f"models must include 'lopinf' and be among {', '.join(MODELS)}; got {config.models}")
+        raise FemromValueError(f"models must include 'lopinf' and be among {', '.join(MODELS)}; got {config.models}")
     bad = [(m, r) for m, r in config.controllers if m not in config.models or r not in config.ranks]
     if bad:
-        raise ValueError(f"controllers {bad} are not among the compared models {config.models} at r = {config.ranks}")
+        raise FemromValueError(f"controllers {bad} are not among the compared models {config.models} at r = {config.ranks}")
     scene = pair_scene(config, scene_path)
     needed = config.control_window + config.horizon * scene.time.dt
     if config.controllers and config.test_window < needed - 1e-9:
-        raise ValueError(f"test_window {config.test_window} s is shorter than control_window + horizon steps "
+        raise FemromValueError(f"test_window {config.test_window} s is shorter than control_window + horizon steps "
                          f"({needed:g} s): the feasible reference (the FOM's response on test_sines) needs the "
                          "horizon beyond the loop")
     scene = dataclasses.replace(scene, rom=rom_config(config, scene.time.dt))

@@ -24,6 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import brentq
 
+from femrom._errors import FemromRuntimeError
 from femrom.fem import ClampedIwanLaw, JointForce, clamped_iwan_state, clamped_state
 from femrom.scene._build import build
 from femrom.scene._modal import BeamModeShape, beam_mode_shape, linearized_modes
@@ -103,7 +104,7 @@ def mode_frequency(model: PrestressedModel, mode: int, *, shape: tuple[str, int]
     if shape is not None:
         (found,) = beam_mode_shapes(model.fom.space, system.condensation, modes.shapes[:, mode:mode + 1])
         if (found.kind, found.sign_changes) != tuple(shape):
-            raise RuntimeError(f"mode {mode} is not of shape {tuple(shape)}: {found}")
+            raise FemromRuntimeError(f"mode {mode} is not of shape {tuple(shape)}: {found}")
     return float(modes.frequencies[mode])
 
 

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from femrom._errors import FemromValueError
 from femrom.post import Backbone
 
 
@@ -97,7 +98,7 @@ def compare_backbones(model: Backbone, reference: Backbone, amplitude_range=(0.0
         return BackboneComparison((float(lo), float(hi)), a, f_m, z_m, f_r, z_r)
     if isinstance(at, str):
         if at != "log":
-            raise ValueError(f"at must be 'log', 'model', 'reference' or an array of amplitudes, got {at!r}")
+            raise FemromValueError(f"at must be 'log', 'model', 'reference' or an array of amplitudes, got {at!r}")
         a = np.geomspace(lo, hi, n) if hi > lo else np.empty(0)
     else:
         a = np.asarray(at, dtype=float)
