@@ -69,3 +69,15 @@ def test_modal_damping_on_a_mass_normalised_mode_basis():
         galerkin(system, 2 * V, damping_ratios=0.02)
     with pytest.raises(ValueError, match=r"basis has shape \(5, 4\), expected \(8, r\)"):
         galerkin(system, V[:5])
+
+
+def test_a_static_solve_on_the_galerkin_model_commits_without_velocities():
+    """``solve_static`` on the Galerkin model (the full basis about the preload) commits the joint's state with
+    no velocity (a static step), as on the full model: the same displacement under an extra load."""
+    system, static = preloaded_chain()
+    reduced = galerkin(system, np.eye(N), reference=static.displacement).system
+    extra = np.zeros(N)
+    extra[3] = 5.0
+    full = solve_static(system, system.load + extra, state=static.state)
+    hat = solve_static(reduced, reduced.load + extra, state=static.state)
+    np.testing.assert_allclose(hat.displacement + static.displacement, full.displacement, atol=1e-10)

@@ -117,10 +117,10 @@ class ProjectedNonlinearForce(ReducedTerm):
     def commit(self, q, v, state):
         W = self._local
         if W is None:
-            return self.force_model.commit(self.basis @ q, self.basis @ v, state)
+            return self.force_model.commit(self.basis @ q, None if v is None else self.basis @ v, state)
         if not self.stateful:
             return state
-        return self.transformed.local_commit(W @ q, W @ v, state)
+        return self.transformed.local_commit(W @ q, None if v is None else W @ v, state)
 
     def checkpoint(self, state):
         return self.force_model.checkpoint(state)
