@@ -37,7 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
-from femrom._errors import FemromValueError
+from femrom import FemromValueError
 from femrom.post import accuracy_cost_table, plot_accuracy_cost, staged_output
 from femrom.scene import BasisSpec, Derivatives, InputConfig, LearnerSpec, ReportSpec, RomConfig, RunSpec, \
     Scene, Signal, build

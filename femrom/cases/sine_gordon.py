@@ -41,7 +41,7 @@ from pathlib import Path
 
 import numpy as np
 
-from femrom._errors import FemromValueError
+from femrom import FemromValueError
 from femrom.post import accuracy_cost_table, pyplot, save_figure, staged_output, table_section
 from femrom.scene import Derivatives, Scene, build
 from femrom.study import HYPER_COLUMNS, EXTRAPOLATION_LEARNER_NAMES, extrapolation_scene, final_state_ladders, final_state_section, \

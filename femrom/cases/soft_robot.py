@@ -39,7 +39,7 @@ from pathlib import Path
 
 import numpy as np
 
-from femrom._errors import FemromValueError
+from femrom import FemromValueError
 from femrom.control import travelling_wave
 from femrom.inference import system_impulse_response
 from femrom.post import accuracy_cost_table, plot_closed_loops, render_closed_loop, staged_output
