@@ -148,9 +148,12 @@ class ReducedOperators:
         """The model as a :class:`~femrom.scene.SecondOrderSystem` with dense (r, r) operators
         (the identity mass when none is held; the nonlinear terms as its force): what every
         time scheme steps."""
+        E = self.output_matrix
+        names = tuple(self.metadata.get("output_names", ()))
         return SecondOrderSystem(mass=self.mass_matrix, stiffness=self.stiffness, damping=self.damping,
-                                 input_matrix=self.input_matrix, output_matrix=self.output_matrix,
-                                 nonlinear=self.nonlinear, load=self.load, metadata=dict(self.metadata))
+                                 input_matrix=self.input_matrix, output_matrix=E, nonlinear=self.nonlinear,
+                                 load=self.load, output_names=names if E is not None and len(names) == E.shape[0] else (),
+                                 metadata=dict(self.metadata))
 
     @property
     def stiffness(self) -> np.ndarray:
@@ -313,6 +316,8 @@ def galerkin(system, basis: np.ndarray, *, reference: np.ndarray | None = None, 
                                "write one (femrom.inference.register_term)")
     metadata = {"method": "galerkin", "mass_orthonormal": bool(mass_orthonormal),
                 "about_reference": reference is not None}
+    if system.output_names:
+        metadata["output_names"] = list(system.output_names)
     ops = ReducedOperators(tuple(terms), metadata)
     if damping_ratios is not None:
         ops = _modal_damping(ops, damping_ratios, reference_state)
