@@ -23,7 +23,7 @@ from femrom.integrators import (
     integrate,
     iterate,
 )
-from femrom.integrators.schemes import generalized_alpha, implicit_midpoint, newmark
+from femrom.integrators.schemes import implicit_midpoint, newmark
 from femrom.scene import SecondOrderSystem
 from femrom.solvers import make_solver
 

@@ -16,7 +16,7 @@ from scipy.sparse.linalg import eigsh
 import femrom.mesh as fm
 from femrom.fem import JointForce, interface_law
 from femrom.integrators import EnergyBalance, Newmark, Newton, integrate
-from femrom.scene import Scene, SecondOrderSystem, build, craig_bampton
+from femrom.scene import Scene, build, craig_bampton
 
 E, NU, RHO = 2.0e11, 0.29, 7800.0
 PATCH = 0.00635                                    # the sensor / hammer patch side (geometry default)

@@ -63,7 +63,7 @@ def beam_modes(beam: PrestressedModel, tangential_stiffness: float, n_modes: int
     return modes.frequencies, beam_mode_shapes(beam.fom.space, system.condensation, modes.shapes[:, 6:n_modes])
 
 
-def contact_summary(beam: PrestressedBeam) -> dict:
+def contact_summary(beam: PrestressedModel) -> dict:
     """The preloaded interface: closed area, total normal force, and how the pressure sits around the bolts."""
     joint = beam.joint
     traction = joint.tractions(beam.preload.displacement, beam.preload.state)

@@ -43,7 +43,6 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from threadpoolctl import threadpool_limits
 
-from femrom._errors import FemromValueError
 from femrom.integrators._newton import ConvergenceError, Newton
 from femrom.integrators._scheme import time_scheme
 

@@ -42,7 +42,6 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
-import scipy.linalg as sl
 
 from femrom._errors import FemromTypeError, FemromValueError
 from femrom._json import dumps

@@ -33,7 +33,7 @@ import numpy as np
 from femrom._errors import FemromValueError
 from femrom.inference import IwanLOpInf, LagrangianOpInf, SecondOrderData, SpML, SpMLConfig, concatenate, galerkin
 from femrom.integrators import Newmark, StepResult, Trajectory, integrate
-from femrom.post import Backbone, hilbert_backbone
+from femrom.post import hilbert_backbone
 from femrom.rom import SecondOrderROM
 from femrom.study._backbone_metrics import backbone_errors
 
