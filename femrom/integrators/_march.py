@@ -16,6 +16,7 @@ prediction's inputs, a controller's moves), and the states are kept in arrays:
 
 from __future__ import annotations
 
+import functools
 import time
 from typing import Callable
 
@@ -292,7 +293,8 @@ class Stepper:
         self._theta = float(self.scheme.input_time)
         self._linear = self.nonlinear is None and dense_model(system)
         factory = solver or dense_solver
-        self._mass_solver = factory(system.mass, spd=True)
+        # the mass is factorised only when asked for: the initial acceleration, or a scheme that solves with it
+        self._mass_solver = functools.cache(lambda: factory(system.mass, spd=True))
         self.a = self._acceleration(self.force(self.u)) if a0 is None else np.array(a0, dtype=float)
         if self._linear:
             parts = LinearParts.of(system)
@@ -302,7 +304,7 @@ class Stepper:
             if not self.scheme.carries_acceleration:
                 self.a = None
         else:
-            self._cache = self.scheme.init(system, self.dt, factory, lambda: self._mass_solver, self.t, self.q,
+            self._cache = self.scheme.init(system, self.dt, factory, self._mass_solver, self.t, self.q,
                                            self.v, self.a, self.state)
 
     def _input(self, u) -> np.ndarray:
@@ -315,7 +317,7 @@ class Stepper:
         rhs = rhs - self.system.stiffness @ self.q
         if self.nonlinear is not None:
             rhs = rhs - self.nonlinear.force(self.q, self.v, self.state)
-        return self._mass_solver.solve(rhs)
+        return self._mass_solver().solve(rhs)
 
     @property
     def n_inputs(self) -> int:
