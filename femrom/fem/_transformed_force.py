@@ -236,22 +236,22 @@ class TransformedForce(NonlinearForce):
         return loaded
 
 
-def dense_projection(W: np.ndarray, force, q_hat, v_hat=None, state=None):
+def dense_projection(W: np.ndarray, force, q_hat, v_hat=None, state=None, *, tangent_only: bool = False):
     r"""``(W^T g, W^T (dg/dx) W, W^T (dg/dxdot) W)`` of a force's local law at ``x = W q^``, as dense arrays.
 
     ``W`` (s, k) maps ``k`` coordinates to the force's ``s`` local ones (``L T``, ``L V``); ``force``
     has ``local_force`` and ``local_tangent`` (each tangent ``None``, an (s,) diagonal or an (s, s)
     matrix), or ``local_force_and_blocks`` and ``has_blocks`` (a joint: force and 3 x 3 tangent
     blocks per pair from one law evaluation, the product ``W^T D W`` formed block by block).
+    ``tangent_only``: the two tangents alone (the law's force is not evaluated where it need not be).
     """
     x = W @ q_hat
     if getattr(force, "has_blocks", False):
         g, D = force.local_force_and_blocks(x, state)
         s = D.shape[0]
         WD = np.matmul(D, W.reshape(s, 3, -1)).reshape(3 * s, -1)
-        return W.T @ g, W.T @ WD, None
+        return (W.T @ WD, None) if tangent_only else (W.T @ g, W.T @ WD, None)
     xdot = None if v_hat is None else W @ v_hat
-    g = force.local_force(x, xdot, state)
     parts = []
     for D in force.local_tangent(x, xdot, state):
         if D is None:
@@ -260,7 +260,9 @@ def dense_projection(W: np.ndarray, force, q_hat, v_hat=None, state=None):
             parts.append(W.T @ (D[:, None] * W))
         else:
             parts.append(W.T @ np.asarray(D @ W))
-    return (W.T @ g, *parts)
+    if tangent_only:
+        return tuple(parts)
+    return (W.T @ force.local_force(x, xdot, state), *parts)
 
 
 def transform_force(force: NonlinearForce | None, transformation, *, reference=None) -> NonlinearForce | None:

@@ -97,7 +97,7 @@ class ProjectedNonlinearForce(ReducedTerm):
             V = self.basis
             dq, dv = self.force_model.tangent(V @ q, None if v is None else V @ v, state)
             return tuple(None if D is None else V.T @ np.asarray(D @ V) for D in (dq, dv))
-        return dense_projection(W, self.transformed, q, v, state)[1:]
+        return dense_projection(W, self.transformed, q, v, state, tangent_only=True)
 
     def dense_force_and_tangent(self, q, v=None, state=None):
         """``(f^, df^/dq^, df^/dv^)`` from one evaluation of the law (what a reduced Newton step asks)."""

@@ -30,11 +30,9 @@ from typing import Any
 import numpy as np
 import scipy.sparse as sp
 
-from femrom.integrators._newton import Newton, newton_loop
-from femrom.integrators._scheme import Scheme, register_scheme
-from femrom.integrators.schemes._canonical import midpoint_step_matrix
+from femrom.integrators._newton import newton_loop
+from femrom.integrators._scheme import register_scheme
 from femrom.integrators.schemes.implicit_midpoint import ImplicitMidpoint, end_acceleration
-from femrom.integrators.schemes.newmark import newmark_frequencies, trapezoidal_inverse
 
 #: Above this ``||q1 - q0||^2`` (relative to ``||q0||^2 + ||q1||^2 + 1``) the quadrature is
 #: projected onto the exact energy identity; below it the quadrature's own error,
@@ -108,8 +106,12 @@ class DiscreteGradientCache:
 
 @register_scheme
 @dataclass(frozen=True)
-class DiscreteGradient(Scheme):
+class DiscreteGradient(ImplicitMidpoint):
     r"""Implicit midpoint, the conservative forces by their discrete gradient (module docstring).
+
+    A linear model is stepped by the midpoint rule itself: the step map, the frequency map,
+    the canonical step matrix and the end-of-step acceleration are :class:`ImplicitMidpoint`'s;
+    only the nonlinear step and, for canonical models, the quadrature of the gradient differ.
 
     Newton on ``v_m`` with the exact Jacobian ``(2/h) M + C + df/dv + (h/2) (K + df/dq)
     + h int_0^1 s d^2U(q_k + s Delta) ds``, converged when ``||dv_m|| <= rtol max(||v_m||,
@@ -126,29 +128,13 @@ class DiscreteGradient(Scheme):
         ``rtol`` and ``max_iterations`` of the update test.
     """
 
-    accelerations: bool = True
-    newton: Newton = Newton()
-
     name = "discrete_gradient"
     aliases = ("avf",)
-    order = 2
     models = ("second_order", "canonical")
-    input_time = 0.5
-    carries_acceleration = False
 
     @property
     def label(self) -> str:
         return "DiscreteGradient"
-
-    @property
-    def uses_mass_solver(self) -> bool:  # type: ignore[override]
-        return self.accelerations
-
-    def frequency(self, omega, dt):
-        return newmark_frequencies(omega, dt)
-
-    def continuous_frequency(self, Omega, dt):
-        return trapezoidal_inverse(Omega, dt)
 
     def init(self, system, dt: float, make_solver, mass_solver, t0, q0, v0, a0, state0):
         h = float(dt)
@@ -217,13 +203,6 @@ class DiscreteGradient(Scheme):
         state1 = state if system.nonlinear is None else system.nonlinear.commit(q1, v1, state)
         a1 = end_acceleration(system, cache.mass_solver, force_end, q1, v1, state1) if self.accelerations else None
         return q1, v1, a1, state1, iterations
-
-    def step_map(self, parts, dt, forcing):
-        return ImplicitMidpoint().step_map(parts, dt, forcing)
-
-    def canonical_step_matrix(self, position, momentum, dt):
-        """The average of a linear gradient is its midpoint value: the midpoint rule."""
-        return midpoint_step_matrix(position, momentum, float(dt))
 
     def canonical_nodes(self, quadrature=2):
         r"""Gauss-Legendre nodes and weights on [0, 1]: the average vector field ``int_0^1 grad H(y_0 + s
