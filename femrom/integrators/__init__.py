@@ -51,7 +51,7 @@ from femrom.integrators._hamiltonian import (
     integrate_canonical,
 )
 from femrom.integrators._implicit import ImplicitSolve
-from femrom.integrators._march import Stepper, input_sample, march, run_linear, uniform_step
+from femrom.integrators._march import Stepper, input_sample, input_samples, march, run_linear, uniform_step
 from femrom.integrators._newton import ConvergenceError, Newton, newton_loop
 from femrom.integrators._scheme import (
     LinearParts,
@@ -90,7 +90,7 @@ __all__ = [
     "Newton", "OutputRecorder", "SimulationResult", "StepClock", "StepResult",
     "Trajectory", "bound_max_frequency", "estimate_max_frequency", "integrate", "integrate_canonical",
     "iterate", "newmark_frequencies", "register_scheme", "scheme_for", "simulate",     "LinearParts", "Scheme", "Stepper", "march", "newton_loop", "registered_schemes", "run_linear",
-    "Shaker", "input_sample", "time_scheme", "uniform_step",     "FrequencyResponse", "Peak", "SteadyStateCriterion", "SteadyStateWarning",
+    "Shaker", "input_sample", "input_samples", "time_scheme", "uniform_step",     "FrequencyResponse", "Peak", "SteadyStateCriterion", "SteadyStateWarning",
     "SteppedSine", "SteppedSineResult", "first_harmonic", "parabolic_peak",
     "prewarped_frequency",
 ]

@@ -29,6 +29,7 @@ import numpy as np
 from femrom._errors import FemromTypeError, FemromValueError
 from femrom._json import dumps
 from femrom.inference import StateSpaceOperators
+from femrom.integrators import input_samples
 from femrom.rom._base import uniform_step
 from femrom.rom._statespace import DiscreteStateSpace, StateSpaceSolution, StateSpaceStepper, input_sample
 
@@ -121,16 +122,9 @@ class StateSpaceROM:
         return z0
 
     def _samples(self, inputs, times: np.ndarray) -> np.ndarray:
-        m = self._ops().n_inputs
-        if callable(inputs):
-            U = np.column_stack([np.atleast_1d(np.asarray(inputs(t), dtype=float)) for t in times])
-        else:
-            U = np.atleast_2d(np.asarray(inputs, dtype=float))
-        if U.shape != (m, times.size):
-            raise FemromValueError(f"inputs have shape {U.shape}, expected ({m}, {times.size})")
-        if not np.all(np.isfinite(U)):
-            raise FemromValueError("inputs are not finite")
-        return U
+        """(m, K) samples of ``inputs`` on ``times`` (:func:`~femrom.integrators.input_samples`; (0, K) without inputs)."""
+        U = input_samples(inputs, times, self._ops().n_inputs)
+        return np.zeros((0, times.size)) if U is None else U
 
     def predict(self, times, inputs=None, *, initial=None) -> StateSpaceSolution:
         r"""Outputs and states on a uniform grid with the model's step.
