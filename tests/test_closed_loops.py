@@ -6,26 +6,18 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 import scipy.linalg as sla
-import scipy.sparse as sp
 
+from _control_chain import chain as control_chain
 from femrom.control import FullOrderPlant, KalmanObserver, LinearMPC, closed_loop, open_loop
 from femrom.rom import SecondOrderROM
-from femrom.scene import SecondOrderSystem
 from femrom.study import closed_loop_rows, linear_model_table, open_loop_error
 
 DT = 0.01
 
 
-def chain(n=10, m=2, p=3):
-    """A damped spring-mass chain (tests/test_control.py's): inputs at the middle and the last mass."""
-    K = 400.0 * sp.diags([2.0 * np.ones(n), -np.ones(n - 1), -np.ones(n - 1)], [0, 1, -1], format="csr")
-    M = sp.identity(n, format="csr")
-    B = np.zeros((n, m))
-    B[n // 2, 0] = B[-1, 1] = 1.0
-    E = np.zeros((p, n))
-    E[np.arange(p), np.linspace(1, n - 1, p).astype(int)] = 1.0
-    return SecondOrderSystem(mass=M, stiffness=K, damping=0.02 * K + 0.5 * M, input_matrix=B,
-                             inputs=lambda t: np.zeros(m), output_matrix=sp.csr_matrix(E))
+def chain(n=10):
+    """The control tests' chain with ten masses."""
+    return control_chain(n)
 
 
 def test_each_controller_on_each_reference_as_a_direct_closed_loop():

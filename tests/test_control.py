@@ -24,6 +24,7 @@ from femrom.control import (
     registered_formulations,
     travelling_wave,
 )
+from _control_chain import chain
 from femrom.integrators import ImplicitMidpoint, Newmark
 from femrom.rom import DiscreteStateSpace, SecondOrderROM
 from femrom.scene import SecondOrderSystem
@@ -31,18 +32,6 @@ from femrom.scene import SecondOrderSystem
 control = pytest.importorskip("control")
 
 DT = 0.01
-
-
-def chain(n=8, m=2, p=3):
-    """A damped spring-mass chain: inputs at the middle and the last mass, p displacement outputs."""
-    K = 400.0 * sp.diags([2.0 * np.ones(n), -np.ones(n - 1), -np.ones(n - 1)], [0, 1, -1], format="csr")
-    M = sp.identity(n, format="csr")
-    B = np.zeros((n, m))
-    B[n // 2, 0] = B[-1, 1] = 1.0
-    E = np.zeros((p, n))
-    E[np.arange(p), np.linspace(1, n - 1, p).astype(int)] = 1.0
-    return SecondOrderSystem(mass=M, stiffness=K, damping=0.02 * K + 0.5 * M, input_matrix=B,
-                             inputs=lambda t: np.zeros(m), output_matrix=sp.csr_matrix(E))
 
 
 def exact_model(system, scheme="newmark"):

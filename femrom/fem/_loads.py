@@ -1,12 +1,7 @@
 r"""Loads of a displacement field on named mesh regions or at points: columns of the input
 matrix ``B``, (n_total,) ndarrays.
 
-Everything lives on the full dof numbering of a vector basis
-``skfem.Basis(mesh, ElementVector(ElementTetP1() or ElementTetP2()))``
-(``n_total = basis.N``; component ``c`` of scalar node ``s`` is dof ``3 s + c``).
-Regions are looked up by name in ``mesh.boundaries`` (facets) and
-``mesh.subdomains`` (elements) through :mod:`femrom.mesh`; an unknown name
-raises ``MeshError`` listing the valid ones.
+On the full dof numbering of a vector basis, regions looked up by name: as in :mod:`._vector_basis`.
 """
 
 from __future__ import annotations

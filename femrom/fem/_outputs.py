@@ -1,12 +1,7 @@
 r"""Outputs of a displacement field: rows of the output matrix ``E``, (p, n_total) sparse matrices
 that read a component at points, over the nodes nearest to points, or averaged over a named region.
 
-Everything lives on the full dof numbering of a vector basis
-``skfem.Basis(mesh, ElementVector(ElementTetP1() or ElementTetP2()))``
-(``n_total = basis.N``; component ``c`` of scalar node ``s`` is dof ``3 s + c``).
-Regions are looked up by name in ``mesh.boundaries`` (facets) and
-``mesh.subdomains`` (elements) through :mod:`femrom.mesh`; an unknown name
-raises ``MeshError`` listing the valid ones.
+On the full dof numbering of a vector basis, regions looked up by name: as in :mod:`._vector_basis`.
 """
 
 from __future__ import annotations
