@@ -18,7 +18,7 @@ from femrom.fem import ClampedIwanLaw, JointForce
 from femrom.inference import SpMLConfig
 from femrom.inference import galerkin
 from femrom.scene import SecondOrderSystem, Signal, SignalVector
-from femrom.study import RingDownComparison, compare_ring_downs, reference_ring_down
+from femrom.study import ModelSpec, RingDownComparison, compare_ring_downs, reference_ring_down
 
 pytest.importorskip("torch")
 
@@ -61,8 +61,11 @@ def comparison():
     training = [reference_ring_down(runs[p], z0, 1.0, dt, label=f"{p:g} N") for p in (150.0, 600.0)]
     validation = [reference_ring_down(runs[400.0], z0, 0.3, dt, label="400 N")]
     test = reference_ring_down(runs[300.0], z0, 1.0, dt, label="300 N")
-    settings = RingDownComparison(ranks=(2,), models=("lopinf", "spml", "iwan"), band=(0.5 * f1, 1.6 * f1), window=0.1,
-                                  spml=SpMLConfig(max_iterations=1000))
+    linear = {"terms": ("damping", "input")}
+    models = (ModelSpec("lopinf", options=linear),
+              ModelSpec("spml", options={**linear, "config": SpMLConfig(max_iterations=1000)}),
+              ModelSpec("iwan_lopinf", "iwan", linear))
+    settings = RingDownComparison(ranks=(2,), models=models, band=(0.5 * f1, 1.6 * f1), window=0.1)
     out = compare_ring_downs(reference, z0, training, validation, [(test, runs[300.0])], settings,
                              progress=lambda line: None)
     return {row["model"]: row for row in out["rows"]}, out

@@ -5,7 +5,7 @@ import pytest
 
 from femrom.scene import Signal, SignalVector
 from femrom.snapshots import FOMRun
-from femrom.study import Cost, LinearModelSpec, linear_model_rows
+from femrom.study import Cost, ModelSpec, linear_model_rows
 
 
 def _run(q0):
@@ -16,13 +16,13 @@ def _run(q0):
 
 
 def test_a_spec_names_a_known_learner():
-    with pytest.raises(ValueError, match="unknown learner 'nope'.*dmdc, era, okid"):
-        LinearModelSpec("x", "nope")
-    assert LinearModelSpec("x", "okid", (("observer_order", 4),)).learner == "okid"
+    with pytest.raises(ValueError, match="unknown learner 'nope'; registered: .*dmdc.*okid"):
+        ModelSpec("nope", "x")
+    assert ModelSpec("okid", "x", {"observer_order": 4}).options == (("observer_order", 4),)
 
 
 def test_runs_must_start_at_rest_where_a_model_from_rest_starts():
     # models start from z_0 = 0; a run that does not is named before anything is fitted
     with pytest.raises(ValueError, match="run 'moved' does not start at rest"):
-        linear_model_rows([LinearModelSpec("dmdc", "dmdc")], [2], {"moved": _run([1.0, 0.0, 0.0])},
+        linear_model_rows([ModelSpec("dmdc")], [2], {"moved": _run([1.0, 0.0, 0.0])},
                           system=None, basis=None, product=None, data={})

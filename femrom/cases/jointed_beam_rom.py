@@ -25,17 +25,17 @@ from pathlib import Path
 
 import numpy as np
 
-from femrom.inference import Output, SpMLConfig
-from femrom.integrators import Newmark, Newton, Shaker, SteadyStateCriterion, SteppedSine, StepResult
+from femrom.inference import SpMLConfig
+from femrom.integrators import Newmark, Newton, SteadyStateCriterion, SteppedSine
 from femrom.post import period_corrected, plot_backbones, staged_output, write_metrics
-from femrom.rom import SecondOrderROM
 from femrom.scene import Signal, SignalVector
 from femrom.study import (
     RING_DOWN_COLUMNS,
     JointedBeamModel,
+    ModelSpec,
     RingDownComparison,
+    SteppedSineTest,
     compare_ring_downs,
-    compare_stepped_sines,
     reference_ring_down,
     step_cost,
     with_impulse,
@@ -80,33 +80,32 @@ def full_model_step_cost(model, q0, z0, dt: float, steps: int, progress=print) -
     return cost
 
 
+def model_specs(config: JointedBeamRomCase) -> tuple:
+    """The compared models as registry specs: the projection, L-OpInf and SpML on damping and input
+    terms, and the ``iwan_lopinf`` variants of ``config.iwan``, in the order of ``config.models``."""
+    linear = {"terms": ("damping", "input")}
+    specs = {"galerkin": ModelSpec("galerkin"), "lopinf": ModelSpec("lopinf", options=linear),
+             "spml": ModelSpec("spml", options={**linear, "config": SpMLConfig(max_iterations=config.spml_iterations,
+                                                                                seed=0)}),
+             **{name: ModelSpec("iwan_lopinf", name, {**linear, **dict(options)}) for name, options in config.iwan}}
+    return tuple(specs[name] for name in config.models)
+
+
 def stepped_sines(hyper, rest_state, comparison: dict, config: JointedBeamRomCase, progress=print) -> dict:
-    """The stepped sine at the shaker on the reference and on the ROMs of rank ``config.forced_rank``.
-
-    Every model is on a :class:`~femrom.integrators.Shaker` stepped by Newmark, the reference and the
-    Galerkin ROM from their committed rest state; the learned ROMs' output is ``E V q^''`` (the sensors
-    through the basis, as in the ring-down comparison)."""
-    r = config.forced_rank
-    shaker = np.asarray(hyper.input_matrix[:, 1]).ravel()
-    V = comparison["basis"][:, :r]
-    E = hyper.output_matrix.toarray() if hasattr(hyper.output_matrix, "toarray") else np.asarray(hyper.output_matrix)
-
-    def rest(n):
-        return StepResult.at_rest(n, state=rest_state)
-
-    plants = {}
-    for (name, rank), model in comparison["models"].items():
-        if rank != r:
-            continue
-        if name == "galerkin":
-            plants[name] = Shaker(model, V.T @ shaker, rest=rest(r))
-        else:
-            sensed = SecondOrderROM(model.operators_.with_terms(Output(E @ V)), model.basis)
-            plants[name] = Shaker(sensed, 1, scheme="newmark", output_names=hyper.output_names)
+    """The stepped sine at the shaker (input 1) on the reference and on the ROMs of rank ``config.forced_rank``
+    (:class:`femrom.study.SteppedSineTest`: Newmark, the sensors through each model's basis)."""
     sweep = SteppedSine(np.asarray(config.forced_frequencies), steps_per_period=config.forced_steps_per_period,
                         steady_state=SteadyStateCriterion(tolerance=config.forced_tolerance))
-    reference = Shaker(hyper, shaker, rest=rest(hyper.n_dofs))
-    return compare_stepped_sines(reference, plants, sweep, config.forced_levels, progress=progress)
+    experiment = SteppedSineTest(hyper, sweep, config.forced_levels, input=1, rest_state=rest_state)
+    rows, results, seconds = [], {"reference": experiment.reference_result}, {"reference": experiment.reference_seconds}
+    for (name, rank), model in comparison["models"].items():
+        if rank == config.forced_rank:
+            outcome = experiment.run(model)
+            results[name], seconds[name] = outcome["_result"], outcome["seconds"]
+            rows += [{"model": name, **level, "seconds": outcome["seconds"]} for level in outcome["levels"]]
+            progress(f"  stepped sine {name}: " + ", ".join(f"{row['force_n']:g} N: {row['peak_frequency_hz']:.3f} Hz"
+                                                            for row in outcome["levels"]))
+    return {"results": results, "rows": rows, "seconds": seconds}
 
 
 def reference_models(config: JointedBeamRomCase, progress=print) -> dict:
@@ -177,8 +176,7 @@ def run(config: JointedBeamRomCase, out: Path, progress=print) -> dict:
     seconds["reference_runs"] = time.perf_counter() - tic_ref
     reference_step = tests[0][0].seconds_per_step
 
-    settings = RingDownComparison(ranks=config.ranks, models=config.models, band=BAND, window=WINDOW,
-                                  spml=SpMLConfig(max_iterations=config.spml_iterations, seed=0), iwan=config.iwan,
+    settings = RingDownComparison(ranks=config.ranks, models=model_specs(config), band=BAND, window=WINDOW,
                                   range_window=0.05, range_trim=0.05)
     progress(f"jointed beam ROMs: models at r = {', '.join(map(str, config.ranks))} ...")
     tic_cmp = time.perf_counter()

@@ -45,15 +45,14 @@ from femrom.inference import system_impulse_response
 from femrom.post import accuracy_cost_table, plot_closed_loops, render_closed_loop, staged_output
 from femrom.scene import BasisSpec, Derivatives, InputConfig, LearnerSpec, ReportSpec, RomConfig, RunSpec, Scene, \
     TimingSpec, band_limited_noise, chirp, multisine, onset
-from femrom.study import CLOSED_LOOP_COLUMNS, LinearModelSpec, closed_loop_rows, linear_model_rows, \
+from femrom.study import CLOSED_LOOP_COLUMNS, ModelSpec, closed_loop_rows, linear_model_rows, \
     linear_model_table, plot_linear_model_errors, run_study
 
 SCENE = Path(__file__).with_suffix(".toml")
 SEGMENTS = 3
 #: the linear models of the comparison (docs/cases/soft_robot.md)
-MODELS = {"galerkin": LinearModelSpec("galerkin", "galerkin"), "lopinf": LinearModelSpec("lopinf", "lopinf"),
-          "dmdc": LinearModelSpec("dmdc", "dmdc"), "era": LinearModelSpec("era", "era"),
-          "okid": LinearModelSpec("okid", "okid", (("observer_order", 10),))}
+MODELS = {"galerkin": ModelSpec("galerkin"), "lopinf": ModelSpec("lopinf"), "dmdc": ModelSpec("dmdc"),
+          "era": ModelSpec("era"), "okid": ModelSpec("okid", options={"observer_order": 10})}
 
 
 @dataclass(frozen=True)

@@ -12,7 +12,9 @@
   :class:`SecondOrderData`, :func:`reduce_canonical_snapshots` /
   :class:`CanonicalData`; snapshots every k-th step refined between by the model
   (:func:`alternating_fill`);
-- learners (``fit(data) -> self``, ``operators_``; :func:`registered_learners` by name):
+- learners (``fit(data, *, validation=None) -> self``, ``operators_``; :func:`registered_learners`
+  by name), each built for a study by ``for_training(training, r, **options)`` from one
+  :class:`TrainingSet` (the reduced runs, the system, Markov parameters: what it ``needs``):
   :class:`LagrangianOpInf` (structure-preserving, a semidefinite program solved by
   its ``solver=`` object: :class:`FastSolver` (default, :func:`solve_fast`) or
   :class:`ConicSolver`, the cvxpy reference, :func:`solve_conic`),
@@ -79,6 +81,7 @@ from femrom.inference._learner import (
     registered_learners,
 )
 from femrom.inference._operators import ReducedForces, ReducedOperators, galerkin
+from femrom.inference._training import TrainingSet
 from femrom.inference._problem import Block, GramProblem
 from femrom.inference._realization import (
     block_hankel,
@@ -141,5 +144,5 @@ __all__ = [
     "block_hankel", "era_realization", "impulse_response", "markov_parameters", "observer_markov_parameters",
     "markov_from_observer", "okid_markov_parameters", "okid_observer_gain", "system_impulse_response",
     "system_markov_from_observer",
-    "IwanLOpInf", "LearnedHysteresis", "SliderState", "slider_stretches", "spml_module",
+    "IwanLOpInf", "TrainingSet", "LearnedHysteresis", "SliderState", "slider_stretches", "spml_module",
 ]

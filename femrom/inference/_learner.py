@@ -41,11 +41,27 @@ class Learner:
         What the learner is called in metadata and reports.
     model : str
         The kind of model it fits: ``"second_order"``, ``"canonical"`` or ``"state_space"``.
+    needs : tuple of str
+        What it reads of a study's training set (:meth:`for_training`).
     """
 
     method: ClassVar[str] = ""
     model: ClassVar[str] = "second_order"
+    #: What it reads of a study's :class:`~femrom.inference.TrainingSet` (``"reduced_data"``,
+    #: ``"system"``: the full operators, intrusive; ``"markov"``).
+    needs: ClassVar[tuple[str, ...]] = ("reduced_data",)
     operators_: Any
+
+    @classmethod
+    def for_training(cls, training, r: int, **options) -> tuple["Learner", Any, Any]:
+        """``(learner, data, validation)``: an unfitted learner for size ``r`` of ``training`` (a
+        :class:`~femrom.inference.TrainingSet`) and the data it fits and judges itself on.
+
+        How a study builds every model: one call for every registered learner. The default is
+        ``cls(**options)`` on the first ``r`` coordinates of the reduced runs; learners that
+        read more (the system's effects, Markov parameters) override it.
+        """
+        return cls(**options), training.reduced(r), training.reduced(r, validation=True)
 
     def fit(self, data, *, validation=None) -> "Learner":  # pragma: no cover - interface
         """Fit on ``data``; ``validation`` (data of the same kind) is what the learner judges itself on:

@@ -189,6 +189,12 @@ class SecondOrderLearner(Learner):
                                   f"use {cls.__name__}(terms=...) to choose them by hand")
         return cls(system_terms(system, basis), **options)
 
+    @classmethod
+    def for_training(cls, training, r: int, *, terms=None, extra_terms=(), **options):
+        """``(learner, data, validation)`` at size ``r`` of a study's training set
+        (:func:`terms_for_training`: the given ``terms``, or the system's plus ``extra_terms``)."""
+        return terms_for_training(cls, training, r, terms, extra_terms, options)
+
     # -- views -------------------------------------------------------------------------
     @property
     def damping(self) -> bool:
@@ -354,3 +360,21 @@ class SecondOrderLearner(Learner):
             out["objective"] = self.objective_
             out["error_split"] = asdict(self.error_split_)
         return out
+
+
+def terms_for_training(cls, training, r: int, terms, extra_terms, options: dict, system_options=None):
+    """``(learner, data, validation)``: ``cls`` with exactly ``terms`` when given, else with the terms
+    of the training system's effects (``cls.for_system``: which effects exist, never their values)
+    and the learnable ``extra_terms`` it lacks (damping of a structure the learner is not told is
+    damped); the reduced runs at size ``r`` and the validation runs. ``system_options`` go to
+    ``for_system`` only."""
+    V = training.basis_at(r)
+    if terms is not None:
+        learner = cls(list(terms), **options)
+    else:
+        learner = cls.for_system(training.system, basis=V, **options, **(system_options or {}))
+        known = [t.name for t in (*learner.learned_terms, *learner.known_terms)]
+        missing = [t for t in extra_terms if t not in known]
+        if missing:
+            learner = cls([*learner.learned_terms, *learner.known_terms, *missing], **options)
+    return learner, training.reduced(r), training.reduced(r, validation=True)

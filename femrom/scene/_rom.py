@@ -71,23 +71,27 @@ class Derivatives:
 
 @dataclass(frozen=True)
 class LearnerSpec:
-    """One reduced model of the study: a registered learner (or ``galerkin``), its derivative
+    """One reduced model of the study: a registered learner (``galerkin`` is one), its derivative
     data and regularisation, under a ``label`` (the row name in the report); ``terms``
     names terms to learn beyond those of the scene's effects (``"damping"`` for a
-    structure the learner is not told is undamped)."""
+    structure the learner is not told is undamped); ``options``: the learner's other keyword
+    options (``{ thresholds = 8 }`` for ``iwan_lopinf``), as ``(name, value)`` pairs."""
 
     label: str
     learner: str
     derivatives: Derivatives
     regularization: float = 0.0
     terms: tuple[str, ...] = ()
+    options: tuple = ()
 
     @classmethod
     def from_value(cls, value, where: str, derivatives: Derivatives, regularization: float) -> "LearnerSpec":
         if isinstance(value, str):
             value = {"learner": value}
         d = _table(value, where, {"learner": None, "label": None, "derivatives": None,
-                                  "regularization": None, "terms": []}, ("learner",))
+                                  "regularization": None, "terms": [], "options": {}}, ("learner",))
+        if not isinstance(d["options"], dict):
+            raise SceneError(f"[{where}] options must be a table of the learner's keyword options, got {d['options']!r}")
         if not isinstance(d["terms"], list) or not all(isinstance(t, str) for t in d["terms"]):
             raise SceneError(f"[{where}] terms must be an array of term names, got {d['terms']!r}")
         if not isinstance(d["learner"], str):
@@ -98,7 +102,24 @@ class LearnerSpec:
         if isinstance(reg, bool) or not isinstance(reg, (int, float)) or reg < 0:
             raise SceneError(f"[{where}] regularization must be a number >= 0, got {reg!r}")
         label = d["label"] if d["label"] is not None else d["learner"]
-        return cls(str(label), d["learner"], own, float(reg), tuple(d["terms"]))
+        options = tuple((str(k), tuple(v) if isinstance(v, list) else v) for k, v in d["options"].items())
+        return cls(str(label), d["learner"], own, float(reg), tuple(d["terms"]), options)
+
+
+@dataclass(frozen=True)
+class ExperimentSpec:
+    """One ``[[rom.experiments]]`` entry: a registered experiment's ``kind`` and its keyword ``options``
+    (``(name, value)`` pairs; the name is checked against the registry by the study)."""
+
+    kind: str
+    options: tuple = ()
+
+    @classmethod
+    def from_dict(cls, data, where: str) -> "ExperimentSpec":
+        if not isinstance(data, dict) or not isinstance(data.get("kind"), str):
+            raise SceneError(f"[{where}] must be a table with a kind (a registered experiment's name), got {data!r}")
+        return cls(data["kind"], tuple((str(k), tuple(v) if isinstance(v, list) else v)
+                                       for k, v in data.items() if k != "kind"))
 
 
 @dataclass(frozen=True)
@@ -222,9 +243,10 @@ class RomConfig:
     timing: TimingSpec = TimingSpec()
     report: ReportSpec = ReportSpec()
     snapshot_every: int = 1
+    experiments: tuple[ExperimentSpec, ...] = ()
 
     KEYS = ("train", "test", "learners", "basis", "derivatives", "regularization", "extension",
-            "timing", "report", "snapshot_every")
+            "timing", "report", "snapshot_every", "experiments")
 
     @classmethod
     def from_dict(cls, data, n_inputs: int) -> "RomConfig":
@@ -260,12 +282,10 @@ class RomConfig:
             raise SceneError(f"[rom] extension must be >= 1 (the test window itself), got {extension}")
         every = 1 if d["snapshot_every"] is None else _positive(d["snapshot_every"], "rom.snapshot_every",
                                                                  integer=True)
+        experiments = d["experiments"] if d["experiments"] is not None else []
+        if not isinstance(experiments, list):
+            raise SceneError("[rom] experiments must be an array of tables [[rom.experiments]] with a kind")
         return cls(runs["train"], runs["test"], learners,
                    BasisSpec.from_dict(d["basis"], "rom.basis"), extension,
                    TimingSpec.from_dict(d["timing"], "rom.timing"), ReportSpec.from_dict(d["report"], "rom.report"),
-                   every)
-
-    @property
-    def needs_stored_derivatives(self) -> bool:
-        """Whether any learner trains on the run's stored ``q'``, ``q''`` (else only ``q`` is stored)."""
-        return any(s.derivatives.kind == "stored" and s.learner != "galerkin" for s in self.learners)
+                   every, tuple(ExperimentSpec.from_dict(e, f"rom.experiments[{i}]") for i, e in enumerate(experiments)))

@@ -125,7 +125,8 @@ from femrom.study._ladders import (
     time_step_ladder,
     time_step_section,
 )
-from femrom.study._linear_models import LinearModelSpec, fit_linear_model, linear_model_rows, state_space_data
+from femrom.study._linear_models import linear_model_rows
+from femrom.study._models import ModelSpec
 from femrom.study._metrics import Projection, energy_ratio, invariant_drift, mass_norm, project_run
 from femrom.study._pipeline import ROW_COLUMNS, StudyState, peak_rss_gb, public_rows, run_study, write_report
 from femrom.study._forced import compare_stepped_sines, stepped_sine_response
@@ -151,11 +152,13 @@ from femrom.study._jointed_beam import JOINTED_BEAM, BrakeReussBeam, CalibratedB
 from femrom.study._closed_loops import CLOSED_LOOP_COLUMNS, closed_loop_rows, open_loop_error
 from femrom.study._linear_model_figures import linear_model_table, plot_linear_model_errors
 from femrom.study._scene_run import SceneRun, scene_run
+from femrom.study._experiment import Experiment, register_experiment, registered_experiments
+from femrom.study.experiments.ring_down import RingDownTest
+from femrom.study.experiments.stepped_sine import SteppedSineTest
+from femrom.study.experiments.unseen_input import Evaluation, UnseenInput, evaluate, scored_columns
 from femrom.study._study import (
-    Evaluation,
     check_rom_config,
-    evaluate,
-    fit_rom,
+    model_spec,
     fom_runs,
     operator_checks,
     pod_basis,
@@ -164,13 +167,11 @@ from femrom.study._study import (
     reduce_runs,
     rom_cost,
     rom_costs,
-    scored_columns,
     study_costs,
-    study_learners,
     study_rows,
-    training_data,
+    training_set,
 )
-from femrom.study._canonical import SceneHamiltonianROM, check_canonical_learners, fit_canonical_rom
+from femrom.study._canonical import SceneHamiltonianROM, check_canonical_learners
 from femrom.study._subsampled import every_kth, subsampled_rows, subsampled_section
 from femrom.study._sweep import SweepRun, run_sweep, run_sweep_point, sweep_runs
 from femrom._timing import Cost, blocked_cost, call_cost, repeated_cost, repeated_costs
@@ -183,9 +184,9 @@ __all__ = [
     "compare_ring_downs", "compare_stepped_sines", "mass_pod", "reference_ring_down", "ring_down_data", "SceneHamiltonianROM", "SceneRun", "StudyState", "SweepRun", "TIME_STEP_COLUMNS", "blocked_cost",
     "call_cost", "canonical_rows", "canonical_time_step_ladder", "check_canonical_learners",
     "check_rom_config", "energy_ratio", "evaluate", "evaluate_runs", "extra_rom_rows", "extrapolation_config", "extrapolation_scene",
-    "final_state", "final_state_ladders", "final_state_section", "fit_canonical_rom", "fit_rom", "fom_runs", "frequency_ladder", "frequency_section", "hyper_reduced_rows", "invariant_drift",
-    "ladder_section", "ladder_table", "linear_model_rows", "linear_operator", "LinearModelSpec", "fit_linear_model",
-    "state_space_data", "mass_generator", "mass_norm", "natural_frequencies",
+    "final_state", "final_state_ladders", "final_state_section", "fom_runs", "frequency_ladder", "frequency_section", "hyper_reduced_rows", "invariant_drift",
+    "ladder_section", "ladder_table", "linear_model_rows", "linear_operator", "ModelSpec", "model_spec", "training_set",
+    "mass_generator", "mass_norm", "natural_frequencies",
     "observed_order", "operator_checks", "peak_rss_gb", "plot_accuracy_cost", "plot_energy",
     "plot_energy_error_history", "plot_error_history", "plot_errors", "plot_histories",
     "plot_invariant_drifts", "plot_output_history", "plot_outputs", "pod_basis", "product_matrix",
@@ -193,8 +194,8 @@ __all__ = [
     "render_fields", "repeated_cost", "repeated_costs", "rom_cost", "rom_costs",
     "rom_table", "run_canonical", "run_study", "run_sweep", "run_sweep_point", "scene_run",
     "scored_columns", "state_energy", "every_kth", "subsampled_rows", "subsampled_section",
-    "state_error", "study_costs", "study_learners", "study_rows",
-    "sweep_runs", "time_step_ladder", "time_step_section", "training_data", "write_report",
+    "state_error", "study_costs", "study_rows",
+    "sweep_runs", "time_step_ladder", "time_step_section", "write_report",
     "BackboneComparison", "backbone_shift", "compare_backbones",
     "ImpactTraining", "OutputRingDown", "ecsw_training", "output_ring_down", "step_cost", "with_impulse",
     "JOINTED_BEAM", "BrakeReussBeam", "CalibratedBeam", "JointedBeamModel",

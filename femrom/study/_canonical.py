@@ -26,17 +26,9 @@ from __future__ import annotations
 import numpy as np
 
 from femrom._errors import FemromValueError
-from femrom.inference import ForcePotential, HamiltonianOperators, canonical_from_second_order, learner_class
+from femrom.inference import HamiltonianOperators, registered_learners
 from femrom.rom import HamiltonianROM
 from femrom.scene import SceneError
-
-
-def is_canonical(learner: str) -> bool:
-    """Whether the registered ``learner`` fits canonical Hamiltonian models (not ``galerkin``)."""
-    from femrom.inference import registered_learners
-
-    cls = registered_learners().get(learner)
-    return cls is not None and cls.model == "canonical"
 
 
 def check_canonical_learners(system, config) -> None:
@@ -45,8 +37,9 @@ def check_canonical_learners(system, config) -> None:
     One :class:`~femrom.scene.SceneError` naming the learner and what the scene has
     that a canonical Hamiltonian ROM cannot represent.
     """
+    known = registered_learners()
     for i, spec in enumerate(config.learners):
-        if not is_canonical(spec.learner):
+        if spec.learner not in known or known[spec.learner].model != "canonical":
             continue
         where = f"[rom.learners[{i}]] {spec.learner!r} learns conservative systems (q' = dH/dp, p' = -dH/dq)"
         if system.damping is not None:
@@ -102,23 +95,6 @@ class SceneHamiltonianROM:
         q0 = self.rom.reduce(q0)                 # V^T M q0: the ROM's basis is orthonormal in M
         p0 = np.zeros_like(q0) if v0 is None else self.rom.reduce(v0)
         return self.rom.predict(times, initial=(q0, p0))
-
-
-def fit_canonical_rom(system, basis: np.ndarray, product, r: int, spec, data) -> SceneHamiltonianROM:
-    """The canonical ROM of ``spec`` (a registered canonical learner) in the first ``r`` columns of ``basis``.
-
-    ``data`` is the study's second-order training data (already truncated to ``r``,
-    with the spec's derivatives and, for a nonlinear scene, the projected force at
-    the stored snapshots); the ROM evaluates the scene's potential through the basis
-    (:class:`~femrom.inference.ForcePotential`).
-    """
-    V = basis[:, :r]
-    potential = None if system.nonlinear is None else ForcePotential(system.nonlinear)
-    # the scene's outputs are displacement probes, y = E q: E^ acts on q^ alone
-    learner = learner_class(spec.learner)(regularization=spec.regularization, outputs_of="position")
-    rom = HamiltonianROM(basis=V, potential=potential, learner=learner, scheme="midpoint")
-    rom.product = product              # reduce(x) = V^T M x (ReducedModel)
-    return SceneHamiltonianROM(rom.fit(canonical_from_second_order(data)), product)
 
 
 def canonical_operator_checks(ops: HamiltonianOperators) -> dict:

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from dataclasses import replace
 
+from femrom.inference import learner_class
 from femrom.scene import BasisSpec, Derivatives, LearnerSpec, ReportSpec, RomConfig, RunSpec, Scene
 
 #: label -> registered learner: the intrusive reference, L-OpInf and plain OpInf
@@ -26,7 +27,8 @@ def extrapolation_config(dt: float, train_window: float, t_end: float, ranks, *,
     no renders.
     """
     T = int(round(train_window / dt)) * dt
-    specs = tuple(LearnerSpec(label, name, derivatives, terms=() if name == "galerkin" else tuple(terms))
+    specs = tuple(LearnerSpec(label, name, derivatives,
+                              terms=tuple(terms) if "reduced_data" in learner_class(name).needs else ())
                   for label, name in learners.items())
     return RomConfig(
         train=(RunSpec("train", t_end=T),),

@@ -21,6 +21,7 @@ import numpy as np
 
 from femrom.integrators import Shaker, SteadyStateCriterion, SteppedSine, StepResult
 from femrom.post import linear_accelerance
+from femrom.study.experiments.stepped_sine import peak_rows
 
 
 def stepped_sine_response(system, rest_state, input: int, frequencies, levels, *, steps_per_period: int,
@@ -56,10 +57,9 @@ def compare_stepped_sines(reference, plants: dict, sweep: SteppedSine, levels, *
     Returns
     -------
     dict with ``results`` (``{name: SteppedSineResult}``, the reference under ``"reference"``),
-    ``seconds`` (per plant) and ``rows``: one per model and level with ``peak_frequency_hz``,
-    ``peak_amplitude``, ``peak_frequency_difference_hz`` (model - reference),
-    ``peak_amplitude_error`` (relative, signed) and ``amplitude_max_error`` (max over frequencies of
-    ``|A_model / A_reference - 1|``).
+    ``seconds`` (per plant) and ``rows``: one per model and level (:func:`peak_rows`: ``peak_frequency_hz``,
+    ``peak_amplitude``, ``peak_frequency_difference_hz`` (model - reference), ``peak_amplitude_error``
+    (relative, signed), ``amplitude_max_error`` (max over frequencies of ``|A_model / A_reference - 1|``)).
     """
     results, seconds = {}, {}
     for name, plant in {"reference": reference, **plants}.items():
@@ -70,18 +70,6 @@ def compare_stepped_sines(reference, plants: dict, sweep: SteppedSine, levels, *
             peaks = ", ".join(f"{level.force_n:g} N: {level.peaks()[output].frequency_hz:.3f} Hz / "
                               f"{level.peaks()[output].amplitude:.4g}" for level in results[name].levels)
             progress(f"  stepped sine {name}: {peaks} ({seconds[name]:.1f} s)")
-    rows = []
-    for name in plants:
-        for model_level, reference_level in zip(results[name].levels, results["reference"].levels):
-            peak, peak_ref = model_level.peaks()[output], reference_level.peaks()[output]
-            A, A_ref = model_level.amplitude[output], reference_level.amplitude[output]
-            rows.append({"model": name, "force_n": model_level.force_n,
-                         "peak_frequency_hz": peak.frequency_hz, "peak_amplitude": peak.amplitude,
-                         "reference_peak_frequency_hz": peak_ref.frequency_hz,
-                         "reference_peak_amplitude": peak_ref.amplitude,
-                         "peak_frequency_difference_hz": peak.frequency_hz - peak_ref.frequency_hz,
-                         "peak_amplitude_error": peak.amplitude / peak_ref.amplitude - 1.0,
-                         "amplitude_max_error": float(np.max(np.abs(A / A_ref - 1.0))),
-                         "all_converged": bool(np.all(model_level.converged)),
-                         "seconds": seconds[name]})
+    rows = [{"model": name, **row, "seconds": seconds[name]}
+            for name in plants for row in peak_rows(results[name], results["reference"], output)]
     return {"results": results, "rows": rows, "seconds": seconds}

@@ -23,7 +23,8 @@ import numpy as np
 from femrom.post import plot_accuracy_cost_groups, plot_time_series
 from femrom.study._figures import plot_error_history
 from femrom.study._metrics import invariant_drift
-from femrom.study._study import evaluate, scored_columns, study_costs
+from femrom.study._study import study_costs
+from femrom.study.experiments.unseen_input import evaluate, scored_columns
 
 
 def state_energy(system, Q: np.ndarray, Qdot: np.ndarray) -> np.ndarray:

@@ -25,84 +25,25 @@ states too, so that models of one size cost the same per step.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
 
 import numpy as np
 
 from femrom._errors import FemromValueError
-from femrom.inference import DMDc, ERA, OKID, InputOutputData
-from femrom.rom import StateSpaceROM
-from femrom.scene import Derivatives, LearnerSpec
+from femrom.inference import TrainingSet
+from femrom.scene import Derivatives
 from femrom.study._metrics import relative_error
-from femrom.study._study import fit_rom
+from femrom.study._models import ModelSpec
 from femrom._timing import repeated_costs
 
 #: a free response may exceed the driven peak by this relative margin (round-off of a marginal mode)
 GROWTH_TOLERANCE = 1e-6
 #: spectral radii up to ``1 + RADIUS_TOLERANCE`` count as stable (an undamped direction sits at 1 to round-off)
 RADIUS_TOLERANCE = 1e-9
-@dataclass(frozen=True)
-class LinearModelSpec:
-    """One kind of linear model of the comparison.
-
-    ``learner``: ``"galerkin"`` or a registered second-order learner (fitted by
-    :func:`~femrom.study.fit_rom` with stored derivatives), or ``"dmdc"`` (on the
-    phase states ``[q^; q^']``, inputs at both ends of a step: Newmark's form),
-    ``"era"`` (on the Markov parameters given to :func:`linear_model_rows`), ``"okid"``
-    (on inputs and outputs only). ``options``: keyword options of the learner as
-    ``(name, value)`` pairs (e.g. ``(("observer_order", 10),)`` for OKID).
-    """
-
-    label: str
-    learner: str
-    options: tuple = ()
-
-    def __post_init__(self):
-        if self.learner in IDENTIFIED:
-            return
-        from femrom.study._study import study_learners
-
-        if self.learner not in study_learners():
-            raise FemromValueError(f"linear model {self.label!r}: unknown learner {self.learner!r}; valid: "
-                                   f"{', '.join((*study_learners(), *IDENTIFIED))}")
-
-
-def state_space_data(data: dict, r: int, states: str = "phase") -> InputOutputData:
-    """The training runs' reduced data (by name, in the largest basis) at size ``r`` as one input-output data set."""
-    return InputOutputData.stack([InputOutputData.from_second_order(d.truncated(r), states=states)
-                                  for d in data.values()])
-
-
-def _dmdc(r, options, data, markov):
-    return DMDc(input_samples="both", **options), state_space_data(data, r)
-
-
-def _okid(r, options, data, markov):
-    return OKID(order=2 * r, **options), state_space_data(data, r, "none")
-
-
-def _era(r, options, data, markov):
-    if markov is None:
-        raise FemromValueError("ERA needs Markov parameters: pass markov=")
-    return ERA(order=2 * r, **options), markov
-
-
-#: how an identified learner is made at size ``r`` (2 r states) and what it is fitted on:
-#: ``name -> make(r, options, data, markov) -> (learner, its data)``; a new identified learner is one entry
-IDENTIFIED = {"dmdc": _dmdc, "era": _era, "okid": _okid}
-
-
-def fit_linear_model(spec: LinearModelSpec, r: int, *, system, basis, product, data: dict, dt: float,
-                     markov=None):
-    """The :class:`~femrom.rom.DiscreteStateSpace` of ``spec`` at size ``r``, and the fitted model."""
-    options = dict(spec.options)
-    if spec.learner in IDENTIFIED:
-        learner, training = IDENTIFIED[spec.learner](r, options, data, markov)
-        rom = StateSpaceROM(learner=learner).fit(training)
-        return rom.to_state_space(), rom
-    rom = fit_rom(system, basis, product, r, LearnerSpec(spec.label, spec.learner, Derivatives("stored"), **options),
-                  data)
-    return rom.to_state_space(dt), rom
+def _state_space(spec: ModelSpec, training: TrainingSet, r: int, dt: float):
+    """The :class:`~femrom.rom.DiscreteStateSpace` of ``spec`` at size ``r`` (a second-order ROM exported
+    at ``dt``, an identified model as it is)."""
+    rom = spec.fit(training, r)
+    return rom.to_state_space(dt) if spec.kind == "second_order" else rom.to_state_space()
 
 
 def _simulate(model, inputs: np.ndarray) -> np.ndarray:
@@ -117,7 +58,9 @@ def linear_model_rows(specs, ranks, runs: dict, *, system, basis, product, data:
 
     Parameters
     ----------
-    specs : sequence of LinearModelSpec
+    specs : sequence of ModelSpec
+        Registered learners of second-order models (fitted with stored derivatives and exported
+        by ``to_state_space(dt)``) or of state spaces (DMDc, ERA, OKID: 2 r states).
     ranks : sequence of int
     runs : dict of name -> FOMRun
         Each starting at rest with ``u_0 = 0`` (else ``z_0 = 0`` is not its initial state).
@@ -142,6 +85,7 @@ def linear_model_rows(specs, ranks, runs: dict, *, system, basis, product, data:
         if np.any(run.q0) or np.any(run.v0) or np.any(run.U[:, 0]):
             raise FemromValueError(f"run {name!r} does not start at rest with u_0 = 0: a model started from z_0 = 0 "
                                    "would not start where it does")
+    training = TrainingSet(system, basis, data, product=product, markov=markov, derivatives=Derivatives("stored"))
     rows, models, fits = [], {}, {}
     for r in ranks:
         for spec in specs:
@@ -150,8 +94,7 @@ def linear_model_rows(specs, ranks, runs: dict, *, system, basis, product, data:
             tic = time.perf_counter()
             try:
                 with np.errstate(over="ignore", invalid="ignore"):   # a diverging fit fails by a ValueError below
-                    model, _ = fit_linear_model(spec, r, system=system, basis=basis, product=product, data=data,
-                                                dt=dt, markov=markov)
+                    model = _state_space(spec, training, r, dt)
             except (ValueError, np.linalg.LinAlgError) as exc:
                 rows.append({"model": spec.label, "r": r, "failed": str(exc)})
                 continue

@@ -17,8 +17,8 @@ from femrom.snapshots import SnapshotStore
 from femrom.study._figures import plot_accuracy_cost, plot_energy, plot_errors, plot_outputs, render_fields
 from femrom.study._ladders import TIME_STEP_COLUMNS, ladder_table, time_step_ladder
 from femrom.study._canonical import check_canonical_learners
-from femrom.study._study import check_rom_config, fom_runs, interval_cost, pod_basis, product_matrix, reduce_runs, \
-    study_rows
+from femrom.study._study import check_rom_config, fom_runs, interval_cost, model_spec, needs_stored_derivatives, \
+    pod_basis, product_matrix, reduce_runs, study_experiments_of, study_rows
 
 ROW_COLUMNS = ["r", "learner", "derivatives", "train_output_error", "test_output_error", "test_field_error",
                "test_energy_ratio", "fit_seconds", "seconds_per_step", "speedup"]
@@ -84,7 +84,7 @@ def run_study(scene: Scene, out_dir, *, model=None, store_path=None, extend=None
     system = model.system
     check_canonical_learners(system, config)
     W = product_matrix(system, config)
-    stored = config.needs_stored_derivatives
+    stored = needs_stored_derivatives(config)
     store_path = out_dir / "snapshots.h5" if store_path is None else Path(store_path)
     store = SnapshotStore.create(store_path, model, fields=("q", "v", "a") if stored else ("q",), overwrite=True)
     try:
@@ -105,7 +105,10 @@ def run_study(scene: Scene, out_dir, *, model=None, store_path=None, extend=None
                                         nonlinear=system.nonlinear)
         timings["projection_seconds"] = time.perf_counter() - tic
         tic = time.perf_counter()
-        rows, evaluations = study_rows(system, pod.basis_, W, data, projections, runs, config, progress=say)
+        experiments = study_experiments_of(StudyState(scene, model, config, store, runs, W, pod.basis_, [], {},
+                                                      projections, out_dir, say, timings, data), config)
+        rows, evaluations = study_rows(system, pod.basis_, W, data, projections, runs, config,
+                                       experiments=experiments, progress=say)
         timings["rom_seconds"] = time.perf_counter() - tic
 
         r_show = max(config.basis.ranks)
@@ -122,7 +125,7 @@ def run_study(scene: Scene, out_dir, *, model=None, store_path=None, extend=None
         fom_cost = interval_cost(max(runs.values(), key=lambda run: run.times.size))    # as study_rows' speedups
         plot_accuracy_cost(out_dir / "accuracy_cost.png", rows, fom_cost.to_dict(),
                            f"{scene.name}: unseen-input output error vs cost")
-        show = next((s.label for s in config.learners if s.learner != "galerkin"), labels[0])
+        show = next((s.label for s in config.learners if not model_spec(s).intrusive), labels[0])
         shown = evaluations.get((r_show, show, test[0]))
         renders = {"render": None, "paraview": None, "render_backend": f"{show} r={r_show} failed"} \
             if shown is None else render_fields(out_dir, model, store, first_test, shown.solution,

@@ -7,15 +7,13 @@ hyper-reduced joint) at rest in a committed force state. :func:`reference_ring_d
 
 - POD of the training runs' displacements in the mass product (``V^T M V = I``), nested in ``r``;
 - data ``Q^ = V^T M Q`` with the stored derivatives projected the same way, and the inputs;
-- models: ``"lopinf"`` (:class:`~femrom.inference.LagrangianOpInf`, linear: a flat backbone),
-  ``"spml"`` (:class:`~femrom.inference.SpML`, a learned potential and a history-free convex
-  dissipation ``F^(q')``), both predicted with the discrete-gradient scheme, the variants of
-  ``settings.iwan`` (:class:`~femrom.inference.IwanLOpInf`, learned Jenkins sliders along the
-  leading coordinate, stepped by Newmark with their return mapping), and ``"galerkin"``,
-  the reference projected on ``V`` with its stateful force (:func:`~femrom.inference.galerkin`:
-  the force keeps its law and its state on its own coordinates), stepped by Newmark from the
-  reference's committed rest state; every model is a :class:`~femrom.rom.SecondOrderROM`
-  predicted the same way;
+- models: the :class:`~femrom.study.ModelSpec` of ``settings.models``, any registered learner
+  (by default ``galerkin``, ``lopinf`` and ``spml`` on damping and input terms; the jointed-beam
+  study adds ``iwan_lopinf`` variants), fitted by the comparison engine from one
+  :class:`~femrom.inference.TrainingSet`; ``galerkin`` is the reference projected on ``V`` with
+  its stateful force (:func:`~femrom.inference.galerkin`: the force keeps its law and its state
+  on its own coordinates) and starts in the reference's committed rest state; models with a
+  stateful force step by Newmark with its return mapping, the others by ``learned_scheme``;
 - each test run predicted from rest with the test input, over the test run's duration;
   output ``output`` (an acceleration) compared in time and through its Hilbert backbones.
 
@@ -30,12 +28,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from femrom._errors import FemromValueError
-from femrom.inference import IwanLOpInf, LagrangianOpInf, SecondOrderData, SpML, SpMLConfig, concatenate, galerkin
+from femrom.inference import SecondOrderData, SpMLConfig, TrainingSet, concatenate
 from femrom.integrators import Newmark, StepResult, Trajectory, integrate
 from femrom.post import hilbert_backbone
-from femrom.rom import SecondOrderROM
-from femrom.study._backbone_metrics import backbone_errors
+from femrom.study._compare import compare_models
+from femrom.study._models import ModelSpec
+from femrom.study.experiments.ring_down import RingDownTest
 
 #: Columns of one comparison row.
 RING_DOWN_COLUMNS = ("model", "r", "test", "frequency_shift_error", "damping_max_error", "time_domain_error",
@@ -109,46 +107,32 @@ def ring_down_data(basis, mass, runs) -> SecondOrderData:
                         for run in runs])
 
 
+def _default_models() -> tuple:
+    linear = {"terms": ("damping", "input")}
+    return (ModelSpec("galerkin"), ModelSpec("lopinf", options=linear),
+            ModelSpec("spml", options={**linear, "config": SpMLConfig()}))
+
+
 @dataclass(frozen=True)
 class RingDownComparison:
-    """Settings of :func:`compare_ring_downs`."""
+    """Settings of :func:`compare_ring_downs`: the models (:class:`~femrom.study.ModelSpec`, any
+    registered learner with its options) and the ring-down experiment's settings."""
 
     ranks: tuple = (1, 2, 3, 5)
-    models: tuple = ("galerkin", "lopinf", "spml")
-    spml: SpMLConfig = SpMLConfig()
-    #: IwanLOpInf variants: (model name, ((keyword, value), ...)) pairs
-    iwan: tuple = (("iwan", ()),)
+    models: tuple = field(default_factory=_default_models)
     output: int = 0                        #: the output row whose backbone is compared
     band: tuple = (60.0, 100.0)            #: band-pass of the Hilbert backbone [Hz]
     window: float = 0.2                    #: its window [s]
-    learned_scheme: str = "discrete_gradient"
+    learned_scheme: str = "discrete_gradient"   #: the scheme of models without a stateful force
     range_window: float | None = None      #: Hilbert window of the training runs' amplitude range (default window)
     range_trim: float | None = None        #: and its trim (default: hilbert_backbone's)
 
 
-def _learner(name: str, settings: "RingDownComparison"):
-    """The learner a model name stands for (``"lopinf"``, ``"spml"`` or a variant of ``settings.iwan``)."""
-    if name == "spml":
-        return SpML(["damping", "input"], config=settings.spml)
-    variants = dict(settings.iwan)
-    if name in variants:
-        return IwanLOpInf(["damping", "input"], **dict(variants[name]))
-    if name == "lopinf":
-        return LagrangianOpInf(["damping", "input"])
-    raise FemromValueError(f"unknown model {name!r}; valid: galerkin, lopinf, spml, {', '.join(variants)}")
-
-
-def _stable(signal: np.ndarray) -> bool:
-    """Finite, and the last tenth's peak no larger than the whole run's first tenth's (a ring-down decays)."""
-    if not np.all(np.isfinite(signal)):
-        return False
-    k = max(signal.size // 10, 1)
-    return bool(np.max(np.abs(signal[-k:])) <= np.max(np.abs(signal[:k])))
-
-
 def compare_ring_downs(system, rest_state, training, validation, tests, settings: RingDownComparison = RingDownComparison(),
                        *, amplitude_range=None, correction=None, progress=print) -> dict:
-    """Fit and predict every model at every ``r`` (module docstring).
+    """Fit and predict every model at every ``r`` (module docstring), on the comparison engine
+    (:func:`~femrom.study.compare_models`: each :class:`~femrom.study.ModelSpec` of ``settings.models``
+    through a :class:`~femrom.study.RingDownTest` per test run).
 
     Parameters
     ----------
@@ -157,7 +141,7 @@ def compare_ring_downs(system, rest_state, training, validation, tests, settings
     rest_state
         Its force state at rest.
     training, validation : list of RingDown
-        Runs of ``system`` to train on (POD and data) and to stop SpML's fit on.
+        Runs of ``system`` to train on (POD and data) and for learners that choose to judge on.
     tests : list of (RingDown, SecondOrderSystem)
         Each test run with the reference system that made it (its inputs: the test input).
     amplitude_range : (2,) optional
@@ -172,74 +156,32 @@ def compare_ring_downs(system, rest_state, training, validation, tests, settings
     (``{(model, r, test): (p, k) outputs}``), ``singular_values``, ``basis`` (n, r_max) and ``models``
     (``{(model, r): SecondOrderROM}``, the Galerkin ones too).
     """
-    correction = correction or (lambda b: b)
-    E = _dense(system.output_matrix)
     M = system.mass
-    r_max = max(settings.ranks)
-    V_all, singular_values = mass_pod(M, training, r_max)
-    data_all = ring_down_data(V_all, M, training)
-    valid_all = ring_down_data(V_all, M, validation) if validation else None
-    o = settings.output
-
-    def backbone(signal, dt):
-        return correction(hilbert_backbone(signal, 1.0 / dt, settings.band, window=settings.window))
-
+    V_all, singular_values = mass_pod(M, training, max(settings.ranks))
+    data = TrainingSet(system, V_all, {run.label: ring_down_data(V_all, M, [run]) for run in training},
+                       validation={run.label: ring_down_data(V_all, M, [run]) for run in validation} or None)
     if amplitude_range is None:     # the amplitudes the training runs' own backbones span
-        curves = [hilbert_backbone(run.outputs[o], 1.0 / run.dt, settings.band,
+        curves = [hilbert_backbone(run.outputs[settings.output], 1.0 / run.dt, settings.band,
                                    window=settings.range_window or settings.window, trim=settings.range_trim)
                   for run in training]
         amplitude_range = (float(min(np.min(c.amplitude) for c in curves)),
                            float(max(np.max(c.amplitude) for c in curves)))
+    experiments = [RingDownTest(run, reference.inputs, system.output_matrix, amplitude_range, band=settings.band,
+                                window=settings.window, output=settings.output, correction=correction,
+                                rest_state=rest_state, scheme=settings.learned_scheme) for run, reference in tests]
 
-    backbones, predictions, rows, fitted = {}, {}, [], {}
-    for run, _ in tests:
-        backbones[("reference", None, run.label)] = backbone(run.outputs[o], run.dt)
-    for r in settings.ranks:
-        V = V_all[:, :r]
-        data = data_all.truncated(r)
-        valid = None if valid_all is None else valid_all.truncated(r)
-        for name in settings.models:
-            fit_seconds = 0.0
-            if name == "galerkin":
-                rom = SecondOrderROM(galerkin(system, V), V)
-            else:
-                learner = _learner(name, settings)
-                tic = time.perf_counter()
-                rom = SecondOrderROM(basis=V, learner=learner)
-                rom = rom.fit(data, validation=valid)
-                fit_seconds = time.perf_counter() - tic
-            fitted[(name, r)] = rom
-            # a stateful model (the projected joint, learned sliders) steps by Newmark with its return
-            # mapping; the Galerkin model starts in the reference's committed rest state
-            scheme = "newmark" if rom.operators_.stateful else settings.learned_scheme
-            start = StepResult.at_rest(r, state=rest_state) if name == "galerkin" else None
-            for run, reference in tests:
-                tic = time.perf_counter()
-                solution = rom.predict(run.times, reference.inputs, initial=start, scheme=scheme)
-                seconds = time.perf_counter() - tic
-                signal = E @ (V @ np.asarray(solution.a))
-                seconds_per_step = seconds / max(run.times.size - 1, 1)
-                key = (name, r, run.label)
-                predictions[key] = signal
-                reference_signal = run.outputs
-                finite = bool(np.all(np.isfinite(signal)))
-                error = (float(np.linalg.norm(signal[o] - reference_signal[o]) / np.linalg.norm(reference_signal[o]))
-                         if finite else float("inf"))
-                row = {"model": name, "r": r, "test": run.label, "time_domain_error": error,
-                       "seconds_per_step": seconds_per_step, "fit_seconds": fit_seconds,
-                       "stable": _stable(signal[o]), "frequency_shift_error": None, "damping_max_error": None}
-                if finite:
-                    try:
-                        curve = backbone(signal[o], run.dt)
-                        backbones[key] = curve
-                        row.update(backbone_errors(curve, backbones[("reference", None, run.label)],
-                                                   amplitude_range))
-                    except ValueError as exc:      # a signal without the mode in the band
-                        row["note"] = f"no backbone: {exc}"
-                rows.append(row)
-                progress(f"  {name} r={r} {run.label}: time error {error:.3g}, shift error "
-                         f"{row['frequency_shift_error']}, damping error {row['damping_max_error']}, "
-                         f"{1e3 * seconds_per_step:.3g} ms/step, fit {fit_seconds:.1f} s, stable {row['stable']}")
-    return {"rows": rows, "backbones": backbones, "predictions": predictions,
+    def describe(row):
+        return (f"  {row['model']} r={row['r']} {row['experiment']}: time error {row['time_domain_error']:.3g}, "
+                f"shift error {row['frequency_shift_error']}, damping error {row['damping_max_error']}, "
+                f"{1e3 * row['seconds_per_step']:.3g} ms/step, fit {row['fit_seconds']:.1f} s, stable {row['stable']}")
+
+    rows, outcomes = compare_models(settings.models, data, settings.ranks, experiments, progress=progress,
+                                    describe=describe)
+    for row in rows:
+        row["test"] = row.pop("experiment")
+    backbones = {("reference", None, e.label): e.reference_backbone for e in experiments}
+    backbones.update({key: outcome["_backbone"] for key, outcome in outcomes["runs"].items() if "_backbone" in outcome})
+    return {"rows": rows, "backbones": backbones,
+            "predictions": {key: outcome["_signal"] for key, outcome in outcomes["runs"].items()},
             "singular_values": singular_values, "amplitude_range": [float(a) for a in amplitude_range],
-            "basis": V_all, "models": fitted}
+            "basis": V_all, "models": outcomes["models"]}

@@ -8,9 +8,10 @@ The steps, each a function usable on its own:
    (or Euclidean) product, by the out-of-core randomized SVD reading the store;
 3. :func:`reduce_runs`: one pass per run over the store: the training data in the
    largest basis, every run's :class:`Projection` (for exact field errors at every r);
-4. :func:`fit_rom`: the ROM of one learner at one r (``galerkin``: the intrusive
-   projection; any registered second-order learner, or canonical one on a conservative
-   scene (:mod:`femrom.study._canonical`): from reduced data only);
+4. :meth:`ModelSpec.fit`: the ROM of one registered learner at one r, from the study's
+   :class:`~femrom.inference.TrainingSet` (:func:`training_set`; ``galerkin`` reads the
+   full operators, every other learner the reduced data only; a canonical learner on a
+   conservative scene: :mod:`femrom.study._canonical`);
 5. :func:`evaluate`: output error, field error, energy over an extended window, and
    :func:`rom_costs`: the ROMs' seconds per step by interleaved repetition.
 
@@ -21,49 +22,68 @@ first training and test run's errors flattened as ``train_*`` / ``test_*``.
 
 from __future__ import annotations
 
-import time
-from dataclasses import dataclass, fields, replace
+from dataclasses import replace
 
 import numpy as np
 
 from femrom._errors import FemromValueError
 from femrom.basis import POD
-from femrom.inference import HamiltonianOperators, SecondOrderLearner, concatenate, learner_class, \
-    reduce_snapshots, registered_learners
+from femrom.inference import HamiltonianOperators, TrainingSet, learner_class, reduce_snapshots, registered_learners
 from femrom.linalg import store_source
-from femrom.rom import SecondOrderROM
 from femrom.scene import RomConfig, SceneError
-from femrom.study._canonical import canonical_operator_checks, fit_canonical_rom, is_canonical
-from femrom.study._metrics import Projection, energy_ratio, project_run, relative_error
+from femrom.study._canonical import canonical_operator_checks
+from femrom.study._experiment import EXPERIMENTS, registered_experiments
+from femrom.study._models import ModelSpec
+from femrom.study._metrics import Projection, project_run
+from femrom.study.experiments.unseen_input import Evaluation, UnseenInput
 from femrom.snapshots import FOMRun, run_fom, solver_factory
 from femrom._timing import Cost, repeated_costs
 
-GALERKIN = "galerkin"
-#: a ROM has blown up once its energy exceeds this multiple of its initial energy
-BLOWUP = 1e6
-
-
-def study_learners() -> tuple[str, ...]:
-    """The names a ``[rom]`` section may use: ``galerkin``, every registered second-order learner (a
-    :class:`SecondOrderLearner`, or any learner of second-order models with ``for_system``, as
-    :class:`~femrom.inference.SpML`) and every canonical one (``hopinf``: conservative scenes
-    without inputs, :mod:`femrom.study._canonical`)."""
-    return (GALERKIN, *(name for name, cls in registered_learners().items()
-                        if name != GALERKIN and (issubclass(cls, SecondOrderLearner) or is_canonical(name)
-                                                 or (cls.model == "second_order" and hasattr(cls, "for_system")))))
+#: the kinds of model a scene's ``[rom]`` study predicts from a full initial state
+STUDY_KINDS = ("second_order", "canonical")
 
 
 def check_rom_config(config: RomConfig) -> None:
-    """Learner names against the registry (one SceneError naming the culprit), before anything is built."""
-    valid = study_learners()
+    """Learner and experiment names against their registries (one SceneError naming the culprit), before
+    anything is built: every registered learner of second-order or canonical models may be named."""
+    known = registered_learners()
+    valid = [name for name, cls in known.items() if cls.model in STUDY_KINDS]
     for i, spec in enumerate(config.learners):
-        if spec.learner in valid:
-            continue
-        known = registered_learners()
-        if spec.learner in known:
+        if spec.learner not in known:
+            raise SceneError(f"[rom.learners[{i}]] unknown learner {spec.learner!r}; valid: {', '.join(valid)}")
+        if spec.learner not in valid:
             raise SceneError(f"[rom.learners[{i}]] {spec.learner!r} fits {known[spec.learner].model} models, "
                              f"not second-order or canonical ones; the [rom] pipeline takes: {', '.join(valid)}")
-        raise SceneError(f"[rom.learners[{i}]] unknown learner {spec.learner!r}; valid: {', '.join(valid)}")
+    experiments = registered_experiments()
+    for i, spec in enumerate(config.experiments):
+        if spec.kind not in experiments:
+            raise SceneError(f"[rom.experiments[{i}]] unknown experiment {spec.kind!r}; "
+                             f"registered: {', '.join(experiments)}")
+
+
+def needs_stored_derivatives(config: RomConfig) -> bool:
+    """Whether any learner of ``config`` reads reduced data from the runs' stored ``q'``, ``q''``
+    (else only ``q`` is stored)."""
+    return any(spec.derivatives.kind == "stored" and "reduced_data" in learner_class(spec.learner).needs
+               for spec in config.learners)
+
+
+def study_experiments_of(state, config: RomConfig) -> list:
+    """The experiments of ``[[rom.experiments]]``, each built by its class from the study's state
+    (:meth:`~femrom.study.Experiment.for_study`)."""
+    return [experiment for spec in config.experiments
+            for experiment in EXPERIMENTS.get(spec.kind).for_study(state, **dict(spec.options))]
+
+
+def model_spec(spec) -> ModelSpec:
+    """The :class:`ModelSpec` of a ``[rom]`` learner entry (a :class:`~femrom.scene.LearnerSpec`): its
+    options, its regularisation when set, its ``terms`` as terms beyond the scene's effects."""
+    options = dict(spec.options)
+    if spec.regularization:
+        options.setdefault("regularization", spec.regularization)
+    if spec.terms:
+        options.setdefault("extra_terms", spec.terms)
+    return ModelSpec(spec.learner, spec.label, tuple(options.items()), spec.derivatives)
 
 
 def product_matrix(system, config: RomConfig):
@@ -131,7 +151,7 @@ def reduce_runs(store, runs: dict[str, FOMRun], train: tuple[str, ...], basis: n
 
     Training data carry the run's stored integrator derivatives when the store has
     them (``stored_derivatives``), else finite differences of ``order`` (a learner
-    may ask for another order: :func:`training_data`). With a stateless known
+    may ask for another order: :meth:`~femrom.inference.TrainingSet.reduced`). With a stateless known
     ``nonlinear`` force, the training data carry its projection at the stored
     displacements (:func:`projected_forces`; a stateful force is evaluated by its
     reduced term along each trajectory instead).
@@ -156,112 +176,9 @@ def reduce_runs(store, runs: dict[str, FOMRun], train: tuple[str, ...], basis: n
     return data, projections
 
 
-def training_data(data: dict, r: int, derivatives):
-    """The first ``r`` coordinates of every training run's data, with the learner's derivatives, concatenated."""
-    parts = []
-    for d in data.values():
-        d = d.truncated(r)
-        if derivatives.kind == "integrator":
-            d = d.integrator_consistent()
-        elif derivatives.kind == "finite_differences" and (
-                d.diagnostics.get("derivative_source") != "finite_difference"
-                or d.diagnostics.get("order") != derivatives.order):
-            d = d.with_finite_differences(derivatives.order)
-        parts.append(d)
-    return concatenate(parts)
-
-
-def fit_rom(system, basis: np.ndarray, product, r: int, spec, data: dict) -> SecondOrderROM:
-    """The ROM of ``spec`` (a :class:`~femrom.scene.LearnerSpec`) in the first ``r`` basis columns.
-
-    ``galerkin`` projects the FOM's operators (intrusive). A learner sees only the
-    reduced data; its terms are those of the system's effects
-    (:meth:`~femrom.inference.SecondOrderLearner.for_system`) and the spec's ``terms``.
-    """
-    V = basis[:, :r]
-    if is_canonical(spec.learner):
-        return fit_canonical_rom(system, basis, product, r, spec, training_data(data, r, spec.derivatives))
-    if spec.learner == GALERKIN:
-        return SecondOrderROM.galerkin(system, V, product=product, mass_orthonormal=product is system.mass)
-    cls = learner_class(spec.learner)
-    learner = cls.for_system(system, basis=V, regularization=spec.regularization)
-    if spec.terms:   # terms the structure does not have, learned all the same (e.g. damping of an undamped beam)
-        known = [t.name for t in (*learner.learned_terms, *learner.known_terms)]
-        learner = cls([*learner.learned_terms, *learner.known_terms, *(t for t in spec.terms if t not in known)],
-                      regularization=spec.regularization)
-    return SecondOrderROM(basis=V, product=product, learner=learner).fit(training_data(data, r, spec.derivatives))
-
-
-@dataclass(frozen=True, eq=False)
-class Evaluation:
-    """A ROM on one run: errors, its solution on the run's grid, its energy over the extended window."""
-
-    output_error: float
-    field_error: float
-    projection_error: float
-    energy_ratio: float
-    energy_final_ratio: float
-    energy_growth: float
-    blowup_time: float | None
-    solution: object
-    long_times: np.ndarray
-    long_energy: np.ndarray
-
-    ERRORS = ("output_error", "field_error", "projection_error", "energy_ratio", "energy_final_ratio",
-              "energy_growth", "blowup_time")
-
-    def errors(self) -> dict:
-        return {"output_error": self.output_error, "field_error": self.field_error,
-                "projection_error": self.projection_error, "energy_ratio": self.energy_ratio,
-                "energy_final_ratio": self.energy_final_ratio, "energy_growth": self.energy_growth,
-                "blowup_time": self.blowup_time}
-
-
-def _first_steps(solution, k: int):
-    """The first ``k`` time steps of a reduced solution (its arrays sliced, the rest shared)."""
-    if solution.t.size == k:
-        return solution
-    head = {f.name: getattr(solution, f.name)[..., :k] for f in fields(solution)
-            if isinstance(getattr(solution, f.name), np.ndarray) and f.name != "basis"}
-    return replace(solution, **head)
-
-
-def scored_columns(run: FOMRun, score_after: float | None) -> slice:
-    """The columns of ``run`` its errors are scored over: all, or the steps after ``score_after``."""
-    if score_after is None:
-        return slice(None)
-    return slice(int(np.searchsorted(run.times, score_after * (1 + 1e-12), side="right")), None)
-
-
-def evaluate(rom, run: FOMRun, projection: Projection, *, extension: float,
-             score_after: float | None = None) -> Evaluation:
-    """Errors of ``rom`` on ``run`` and its reduced energy over ``extension`` times the run's window.
-
-    The ROM runs over the whole window from the run's initial state; its output and
-    field errors (and the projection error of its basis, the floor of the field error)
-    are scored over the steps after ``score_after`` (all steps by
-    default; a training window's end for a test of extrapolation in time). A ROM
-    that blows up (plain OpInf can) gets infinite errors; the overflow on the way is
-    expected and not reported as a warning. ``energy_growth`` is the ROM's largest
-    energy over its initial one on the run's window, ``blowup_time`` the first time it
-    exceeds :data:`BLOWUP` times that (``None``: never).
-    """
-    times = run.times
-    columns = scored_columns(run, score_after)
-    long_times = times[0] + run.dt * np.arange(int(round(extension * (times.size - 1))) + 1)
-    with np.errstate(all="ignore"):
-        # one integration over the extended window; the run's window is its first steps
-        long = rom.predict(long_times, run.inputs.sampled(long_times), initial=(run.q0, run.v0))
-        solution = _first_steps(long, times.size)
-        output_error = float("nan") if run.outputs is None else relative_error(
-            run.outputs[:, columns], solution.outputs[:, columns])
-        ratio, final = energy_ratio(long.energy, run.energy)
-        energy = solution.energy
-        growth = float(np.nanmax(np.abs(energy)) / abs(energy[0])) if energy[0] else float("nan")
-        big = ~np.isfinite(energy) | (np.abs(energy) > BLOWUP * abs(energy[0]))
-        return Evaluation(output_error, projection.field_error(solution.q, columns),
-                          projection.projection_error(rom.r, columns), ratio, final, growth,
-                          float(times[np.argmax(big)]) if big.any() else None, solution, long_times, long.energy)
+def training_set(system, basis: np.ndarray, product, data: dict) -> TrainingSet:
+    """What every learner of the study fits on: the training runs' data in the largest basis."""
+    return TrainingSet(system, basis, data, product=product)
 
 
 def interval_cost(run: FOMRun) -> Cost:
@@ -311,47 +228,60 @@ def operator_checks(rom) -> dict:
     return out
 
 
-def study_rows(system, basis: np.ndarray, product, data: dict, projections: dict, runs: dict[str, FOMRun],
-               config: RomConfig, *, learners=None, progress=None) -> tuple[list[dict], dict]:
-    """One row per (r, learner): fit on the training data, evaluate on every run, cost on the first test
-    (all models timed together, interleaved: :func:`study_costs`).
+def study_experiments(runs: dict[str, FOMRun], projections: dict, config: RomConfig) -> list:
+    """The study's own experiments: every run (training ones too) as an :class:`UnseenInput`, over
+    ``config.extension`` times its window, scored after its ``score_after``."""
+    score_after = {spec.name: spec.score_after for spec in (*config.train, *config.test)}
+    return [UnseenInput(run, projections[name], extension=config.extension, score_after=score_after.get(name))
+            for name, run in runs.items()]
 
-    A ROM whose prediction fails (a nonlinear model's Newton iteration) gets a
-    ``failed`` message, infinite errors and no cost, and the study goes on.
-    Returns the rows and the evaluations by ``(r, label, run)``. ``learners``
+
+def study_rows(system, basis: np.ndarray, product, data: dict, projections: dict, runs: dict[str, FOMRun],
+               config: RomConfig, *, learners=None, experiments=(), progress=None) -> tuple[list[dict], dict]:
+    """One row per (r, learner): fit on the training data (:meth:`ModelSpec.fit` of every learner of the
+    ``[rom]`` section), put through every experiment, cost on the first test (all models timed together,
+    interleaved: :func:`study_costs`).
+
+    The experiments are the study's own (:func:`study_experiments`: errors per run under
+    ``errors[run]``) and ``experiments`` (more :class:`Experiment` objects, e.g. of
+    ``[[rom.experiments]]``: their metrics under ``experiments[label]``). A ROM whose prediction fails (a
+    nonlinear model's Newton iteration) gets a ``failed`` message, infinite errors and no cost, and the
+    study goes on. Returns the rows and the evaluations by ``(r, label, run)``. ``learners``
     (specs) defaults to the config's. Speedups are the FOM's cost per step per
     snapshot interval (from its longest run, the first of equal ones; :func:`interval_cost`) over the ROM's, both minima over timed blocks measured
     in this process.
     """
     learners = config.learners if learners is None else learners
+    training = training_set(system, basis, product, data)
+    own = study_experiments(runs, projections, config)
     train = [s.name for s in config.train if s.name in data]
     test = [s.name for s in config.test]
-    score_after = {spec.name: spec.score_after for spec in (*config.train, *config.test)}
     rows, evaluations = [], {}
     for r in config.basis.ranks:
         for spec in learners:
             if progress:
                 progress(f"r = {r}: {spec.label}")
-            tic = time.perf_counter()
-            rom = fit_rom(system, basis, product, r, spec, data)
+            model = model_spec(spec)
+            rom = model.fit(training, r)
             row = {"r": r, "learner": spec.label, "method": spec.learner,
-                   "derivatives": spec.derivatives.tag if spec.learner != GALERKIN else "-",
-                   "train": train[0], "fit_seconds": time.perf_counter() - tic, "errors": {}}
-            for name, run in runs.items():
+                   "derivatives": "-" if model.intrusive else spec.derivatives.tag,
+                   "train": train[0], "fit_seconds": rom.fit_seconds_, "errors": {}}
+            for experiment in own:
                 try:
-                    ev = evaluate(rom, run, projections[name], extension=config.extension,
-                                  score_after=score_after.get(name))
+                    outcome = experiment.run(rom)
                 except (RuntimeError, np.linalg.LinAlgError) as exc:   # a nonlinear ROM's Newton failed
-                    row["failed"] = f"{name}: {exc}"
-                    row["errors"][name] = dict.fromkeys(Evaluation.ERRORS, float("inf"))
+                    row["failed"] = f"{experiment.label}: {exc}"
+                    row["errors"][experiment.label] = dict.fromkeys(Evaluation.ERRORS, float("inf"))
                     continue
-                evaluations[(r, spec.label, name)] = ev
-                row["errors"][name] = ev.errors()
+                evaluations[(r, spec.label, experiment.label)] = outcome["_evaluation"]
+                row["errors"][experiment.label] = public(outcome)
+            if experiments:
+                row["experiments"] = {experiment.label: public(experiment.run(rom)) for experiment in experiments}
             for role, names in (("train", train), ("test", test)):
                 if names:
                     for key, value in row["errors"][names[0]].items():
                         row[f"{role}_{key}"] = value
-            if spec.learner != GALERKIN:
+            if not model.intrusive:
                 row.update(operator_checks(rom))
             row["_rom"] = rom
             rows.append(row)
@@ -361,6 +291,11 @@ def study_rows(system, basis: np.ndarray, product, data: dict, projections: dict
     for i, row in enumerate(rows):      # a ROM that fails cannot be timed
         row.update(costs.get(i, {"seconds_per_step": float("nan"), "cost": None, "speedup": float("nan")}))
     return rows, evaluations
+
+
+def public(outcome: dict) -> dict:
+    """An experiment's metrics without its arrays and objects (keys starting with ``_``)."""
+    return {key: value for key, value in outcome.items() if not key.startswith("_")}
 
 
 def study_costs(roms: dict, runs: dict[str, FOMRun], config: RomConfig) -> dict:

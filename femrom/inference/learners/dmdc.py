@@ -109,6 +109,13 @@ class DMDc(Learner):
         X1 = X[:, k0 + 1]
         return float(np.linalg.norm(X1 - Ur @ (A @ (Ur.T @ X[:, k0]) + Bs @ U0)) / np.linalg.norm(X1))
 
+    @classmethod
+    def for_training(cls, training, r: int, **options):
+        """DMDc on the phase states ``[q^; q^']`` of the first ``r`` coordinates, inputs at both ends of
+        a step (Newmark's form) unless ``input_samples`` says otherwise; the validation runs alike."""
+        options.setdefault("input_samples", "both")
+        return cls(**options), training.input_output(r), training.input_output(r, validation=True)
+
     def fit(self, data: InputOutputData, *, validation=None) -> "DMDc":
         """Fit ``A, B, C, D`` from the states, inputs and outputs of ``data``; ``validation``
         (InputOutputData with states): the one-step residual there is ``validation_residual_``."""

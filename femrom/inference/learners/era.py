@@ -58,6 +58,14 @@ class ERA(Learner):
         self.output_directions, self.input_directions = output_directions, input_directions
         self.operators_ = None
 
+    needs = ("markov",)
+
+    @classmethod
+    def for_training(cls, training, r: int, **options):
+        """ERA of order ``2 r`` on the study's Markov parameters."""
+        options.setdefault("order", 2 * r)
+        return cls(**options), training.require_markov("ERA"), None
+
     def fit(self, data: MarkovParameters, *, validation=None) -> "ERA":
         """Realise the Markov parameters ``data`` (:class:`~femrom.inference.MarkovParameters`; no validation data)."""
         refuse_validation(self, validation)

@@ -2,6 +2,7 @@
 
 import numpy as np
 
+from femrom._errors import FemromValueError
 from femrom.inference._learner import Learner, refuse_validation, register_learner
 from femrom.inference._operators import galerkin
 
@@ -29,6 +30,16 @@ class GalerkinProjection(Learner):
         self.system = getattr(system, "system", system)
         self.basis = np.asarray(basis, dtype=float)
         self.mass_orthonormal = bool(mass_orthonormal)
+
+    needs = ("system",)
+
+    @classmethod
+    def for_training(cls, training, r: int, **options):
+        """The projection on the first ``r`` basis columns of the training system (intrusive: it reads
+        the full operators, no data); the identity mass when the basis is mass-orthonormal."""
+        if options:
+            raise FemromValueError(f"galerkin takes no options, got {', '.join(options)}")
+        return cls(training.system, training.basis_at(r), mass_orthonormal=training.mass_orthonormal), None, None
 
     def fit(self, data=None, *, validation=None) -> "GalerkinProjection":
         refuse_validation(self, validation)

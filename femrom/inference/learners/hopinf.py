@@ -7,6 +7,7 @@ import numpy as np
 from femrom._errors import FemromTypeError, FemromValueError
 from femrom.inference._hamiltonian import (
     CanonicalData,
+    canonical_from_second_order,
     HamiltonianErrorSplit,
     HamiltonianOperators,
     ProjectedPotential,
@@ -69,6 +70,14 @@ class HamiltonianOpInf(Learner):
         num = np.linalg.norm(Rp - Dp @ data.states_p) ** 2 + np.linalg.norm(Rq - Dq @ data.states_q) ** 2
         den = np.linalg.norm(Rp) ** 2 + np.linalg.norm(Rq) ** 2
         return float(np.sqrt(num / den)) if den > 0 else 0.0
+
+    @classmethod
+    def for_training(cls, training, r: int, **options):
+        """H-OpInf on a study's second-order runs seen canonically (``p^ = q^'`` on a mass-orthonormal
+        basis, :func:`~femrom.inference.canonical_from_second_order`); outputs of the positions
+        unless ``outputs_of`` says otherwise."""
+        options.setdefault("outputs_of", "position")
+        return cls(**options), canonical_from_second_order(training.reduced(r)), None
 
     def fit(self, data: CanonicalData, *, validation=None) -> "HamiltonianOpInf":
         """Fit from reduced data ``Q^, P^, Q^', P^'`` and the known ``F^_q, F^_p``; ``validation``

@@ -123,6 +123,16 @@ class IwanLOpInf(Learner):
             raise FemromTypeError(f"iwan_lopinf: solver must be a ConicSolver, got {solver!r}")
         self.solver = solver
 
+    @classmethod
+    def for_training(cls, training, r: int, *, terms=None, **options):
+        """``(learner, data, validation)`` at size ``r``: the given linear ``terms``, or those of the
+        training system's effects (damping when it is damped, the input map when it has inputs)."""
+        if terms is None:
+            system = training.system
+            terms = [name for name, present in (("damping", getattr(system, "damping", None) is not None),
+                                                ("input", getattr(system, "n_inputs", 0) > 0)) if present]
+        return cls(terms, **options), training.reduced(r), training.reduced(r, validation=True)
+
     # -- the regression ----------------------------------------------------------------
     def _direction(self, r: int) -> np.ndarray:
         if self.direction is None:

@@ -96,6 +96,12 @@ class OKID(Learner):
         columns = default if self.columns is None else int(self.columns)
         return hankel_blocks(rows + columns + 1, rows, columns)
 
+    @classmethod
+    def for_training(cls, training, r: int, **options):
+        """OKID of order ``2 r`` (a second-order model's state count) from the runs' inputs and outputs only."""
+        options.setdefault("order", 2 * r)
+        return cls(**options), training.input_output(r, "none"), None
+
     def fit(self, data: InputOutputData, *, validation=None) -> "OKID":
         """Identify ``A, B, C, D`` from the inputs and outputs of ``data`` (no validation data)."""
         refuse_validation(self, validation)

@@ -15,7 +15,7 @@ from femrom.inference._data import SecondOrderData, concatenate
 from femrom.inference._learner import Learner, register_learner
 from femrom.inference._networks import derivative_map, monomials, multi_indices
 from femrom.inference._operators import ReducedOperators
-from femrom.inference._second_order import system_terms
+from femrom.inference._second_order import system_terms, terms_for_training
 from femrom.inference._structured_lstsq import FastSolver
 from femrom.inference._terms import term_class
 from femrom.inference.learners.lopinf import LagrangianOpInf
@@ -247,6 +247,12 @@ class SpML(Learner):
         """
         system = getattr(system, "system", system)
         return cls(system_terms(system, basis, known_forces=known_forces), **options)
+
+    @classmethod
+    def for_training(cls, training, r: int, *, terms=None, extra_terms=(), known_forces: bool = False, **options):
+        """``(learner, data, validation)`` at size ``r`` of a study's training set: the given ``terms``, or
+        the system's learnable ones (:meth:`for_system`) and ``extra_terms``; SpML stops on the validation runs."""
+        return terms_for_training(cls, training, r, terms, extra_terms, options, {"known_forces": known_forces})
 
     # -- the regression's pieces on any data ------------------------------------------------
     def _arrays(self, data: SecondOrderData):
