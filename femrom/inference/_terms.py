@@ -107,6 +107,11 @@ class ReducedTerm:
         """``(d lhs / dq, d lhs / dv)``: (r, r) ndarrays or ``None``."""
         return None, None
 
+    def force(self, q, v=None, state: Any = None) -> np.ndarray:
+        """(r,) ndarray: a nonlinear term as the force of its model's system (:meth:`lhs`, no
+        accelerations or inputs), so that a term written with ``lhs`` and ``tangent`` alone steps."""
+        return self.lhs(q, v, state=state)
+
     def potential(self, q) -> float:
         """The term's share of the potential energy (0 for a non-conservative term)."""
         return 0.0

@@ -140,8 +140,10 @@ def build(scene: Scene, *, mesh=None) -> FullOrderModel:
         valid = [n for n, e in known.items() if e.provides == provides]
         if provides == "mass" and not listed:
             raise SceneError(f"{what} the {' or '.join(repr(v) for v in valid)} effect")
-        if len(listed) != 1:
-            raise SceneError(f"list exactly one {provides} effect of {', '.join(valid)}; got {listed}")
+        if provides == "mass" and len(listed) != 1:
+            raise SceneError(f"list exactly one mass effect of {', '.join(valid)}; got {listed}")
+        if provides == "stiffness" and not listed:
+            raise SceneError(f"list at least one stiffness effect of {', '.join(valid)}; got none")
 
     with _timed(timings, "mesh"):
         if mesh is None:

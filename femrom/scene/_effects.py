@@ -23,7 +23,8 @@ from femrom._errors import FemromValueError
 from femrom._registry import Registry
 from femrom.scene._errors import SceneError
 
-#: What an effect provides to the system (``mass`` and ``stiffness``: exactly one effect each).
+#: What an effect provides to the system (``mass``: exactly one effect; ``stiffness``: at least one, their
+#: contributions summed, :meth:`Assembly.add_stiffness`).
 PROVIDES = ("mass", "stiffness", "damping", "inputs", "load", "nonlinear")
 
 #: The effects by name, in assembly order (stage, then name).
@@ -143,6 +144,10 @@ class Assembly:
             yield
         finally:
             self.timings[name] = self.timings.get(name, 0.0) + time.perf_counter() - tic
+
+    def add_stiffness(self, K) -> None:
+        """Add ``K`` (free dofs) to the stiffness: every stiffness effect's contribution sums."""
+        self.stiffness = K if self.stiffness is None else self.stiffness + K
 
     def require(self, what: str, by: str):
         """The already assembled ``mass`` or ``stiffness`` that effect ``by`` needs."""

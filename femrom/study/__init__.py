@@ -127,6 +127,7 @@ from femrom.study._ladders import (
 )
 from femrom.study._linear_models import linear_model_rows
 from femrom.study._models import ModelSpec
+from femrom.study._compare import compare_models
 from femrom.study._metrics import Projection, energy_ratio, invariant_drift, mass_norm, project_run
 from femrom.study._pipeline import ROW_COLUMNS, StudyState, peak_rss_gb, public_rows, run_study, write_report
 from femrom.study._forced import compare_stepped_sines, stepped_sine_response
@@ -152,7 +153,7 @@ from femrom.study._jointed_beam import JOINTED_BEAM, BrakeReussBeam, CalibratedB
 from femrom.study._closed_loops import CLOSED_LOOP_COLUMNS, closed_loop_rows, open_loop_error
 from femrom.study._linear_model_figures import linear_model_table, plot_linear_model_errors
 from femrom.study._scene_run import SceneRun, scene_run
-from femrom.study._experiment import Experiment, register_experiment, registered_experiments
+from femrom.study._experiment import Experiment, register_experiment, registered_experiments, rest_start
 from femrom.study.experiments.ring_down import RingDownTest
 from femrom.study.experiments.stepped_sine import SteppedSineTest
 from femrom.study.experiments.unseen_input import Evaluation, UnseenInput, evaluate, scored_columns

@@ -10,6 +10,8 @@ learner or an experiment is never appears here by name.
 
 from __future__ import annotations
 
+import numpy as np
+
 
 def compare_models(specs, training, ranks, experiments, *, progress=None, describe=None) -> tuple[list[dict], dict]:
     """``(rows, outcomes)``: every spec fitted at every ``r`` and run through every experiment.
@@ -27,7 +29,8 @@ def compare_models(specs, training, ranks, experiments, *, progress=None, descri
     -------
     rows : list of dict
         ``model`` (the spec's label), ``r``, ``experiment`` (its label), ``fit_seconds`` and the
-        experiment's metrics (keys starting with ``_`` left out).
+        experiment's metrics (keys starting with ``_`` left out), or ``failed`` (the message) when
+        the model could not be run through it (a Newton iteration that did not converge).
     outcomes : dict
         ``{(label, r): model}`` under ``"models"`` and ``{(label, r, experiment): outcome}`` (whole,
         arrays included) under ``"runs"``.
@@ -38,10 +41,17 @@ def compare_models(specs, training, ranks, experiments, *, progress=None, descri
             model = spec.fit(training, r)
             models[(spec.label, r)] = model
             for experiment in experiments:
-                outcome = experiment.run(model)
+                row = {"model": spec.label, "r": r, "experiment": experiment.label, "fit_seconds": model.fit_seconds_}
+                try:
+                    outcome = experiment.run(model)
+                except (RuntimeError, np.linalg.LinAlgError) as exc:    # a nonlinear model's Newton failed
+                    row["failed"] = str(exc)
+                    rows.append(row)
+                    if progress is not None:
+                        progress(f"  {spec.label} r={r} {experiment.label}: failed: {exc}")
+                    continue
                 runs[(spec.label, r, experiment.label)] = outcome
-                row = {"model": spec.label, "r": r, "experiment": experiment.label, "fit_seconds": model.fit_seconds_,
-                       **{k: v for k, v in outcome.items() if not k.startswith("_")}}
+                row.update({k: v for k, v in outcome.items() if not k.startswith("_")})
                 rows.append(row)
                 if progress is not None:
                     progress(describe(row) if describe else f"  {spec.label} r={r} {experiment.label}")

@@ -124,6 +124,7 @@ class RingDownComparison:
     band: tuple = (60.0, 100.0)            #: band-pass of the Hilbert backbone [Hz]
     window: float = 0.2                    #: its window [s]
     learned_scheme: str = "discrete_gradient"   #: the scheme of models without a stateful force
+    stateful_scheme: str = "newmark"       #: and of models with one (a return mapping)
     range_window: float | None = None      #: Hilbert window of the training runs' amplitude range (default window)
     range_trim: float | None = None        #: and its trim (default: hilbert_backbone's)
 
@@ -168,7 +169,8 @@ def compare_ring_downs(system, rest_state, training, validation, tests, settings
                            float(max(np.max(c.amplitude) for c in curves)))
     experiments = [RingDownTest(run, reference.inputs, system.output_matrix, amplitude_range, band=settings.band,
                                 window=settings.window, output=settings.output, correction=correction,
-                                rest_state=rest_state, scheme=settings.learned_scheme) for run, reference in tests]
+                                rest_state=rest_state, scheme=settings.learned_scheme,
+                                stateful_scheme=settings.stateful_scheme) for run, reference in tests]
 
     def describe(row):
         return (f"  {row['model']} r={row['r']} {row['experiment']}: time error {row['time_domain_error']:.3g}, "

@@ -275,8 +275,13 @@ def study_rows(system, basis: np.ndarray, product, data: dict, projections: dict
                     continue
                 evaluations[(r, spec.label, experiment.label)] = outcome["_evaluation"]
                 row["errors"][experiment.label] = public(outcome)
-            if experiments:
-                row["experiments"] = {experiment.label: public(experiment.run(rom)) for experiment in experiments}
+            for experiment in experiments:
+                try:
+                    outcome = public(experiment.run(rom))
+                except (RuntimeError, np.linalg.LinAlgError) as exc:
+                    row.setdefault("failed", f"{experiment.label}: {exc}")
+                    outcome = {"failed": str(exc)}
+                row.setdefault("experiments", {})[experiment.label] = outcome
             for role, names in (("train", train), ("test", test)):
                 if names:
                     for key, value in row["errors"][names[0]].items():

@@ -13,4 +13,4 @@ class Elasticity(Effect):
 
     def assemble(self, build, options):
         with build.timed("stiffness"):
-            build.stiffness = build.condensation.matrix(build.space.stiffness(self.name, build.material))
+            build.add_stiffness(build.condensation.matrix(build.space.stiffness(self.name, build.material)))
