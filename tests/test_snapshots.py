@@ -5,6 +5,7 @@ import dataclasses
 import datetime
 import os
 import re
+import select
 import shutil
 import signal
 import subprocess
@@ -283,10 +284,13 @@ def _kill_once(kind, path, delay):
     process = subprocess.Popen([sys.executable, str(HELPER), kind, str(path)],
                                stdout=subprocess.PIPE, env=env)
     try:
-        assert process.stdout.readline().strip() == b"ready"
+        # a child that never says "ready" (stuck before its writer exists) fails here within a
+        # minute instead of holding the test run
+        ready, _, _ = select.select([process.stdout], [], [], 60.0)
+        assert ready and process.stdout.readline().strip() == b"ready", "the helper did not start its writer"
         time.sleep(delay)
-        os.kill(process.pid, signal.SIGKILL)
     finally:
+        os.kill(process.pid, signal.SIGKILL)
         process.wait()
         process.stdout.close()
 

@@ -72,36 +72,25 @@ What the case scripts share, for any scene (``femrom run scene.toml`` with a
   :func:`write_report`.
 """
 
-from femrom.study._learned_forces import conservative_acceleration, force_error, nonlinear_forces
+from femrom.study._learned_forces import force_error, nonlinear_forces
 from femrom.study._figures import (
     plot_accuracy_cost,
-    plot_energy,
-    plot_error_history,
-    plot_errors,
     plot_invariant_drifts,
-    plot_outputs,
-    render_fields,
 )
 from femrom.study._extrapolation import (
     EXTRAPOLATION_LEARNER_NAMES,
-    EXTRAPOLATION_LEARNERS,
     extrapolation_config,
     extrapolation_scene,
 )
 from femrom.study._hamiltonian import (
-    CanonicalRun,
     CanonicalSpec,
     canonical_rows,
     canonical_time_step_ladder,
     linear_operator,
     mass_generator,
     run_canonical,
-    state_error,
 )
 from femrom.study._histories import (
-    evaluate_runs,
-    extra_rom_rows,
-    plot_energy_error_history,
     plot_histories,
     plot_output_history,
     reconstructed_energy_error,
@@ -110,16 +99,11 @@ from femrom.study._histories import (
 )
 from femrom.study._hyper import HYPER_COLUMNS, hyper_reduced_rows
 from femrom.study._ladders import (
-    FINAL_STATE_COLUMNS,
-    FREQUENCY_COLUMNS,
-    TIME_STEP_COLUMNS,
     final_state,
     final_state_ladders,
     final_state_section,
     frequency_ladder,
     frequency_section,
-    ladder_section,
-    ladder_table,
     natural_frequencies,
     observed_order,
     time_step_ladder,
@@ -128,8 +112,8 @@ from femrom.study._ladders import (
 from femrom.study._linear_models import linear_model_rows
 from femrom.study._models import ModelSpec
 from femrom.study._compare import compare_models
-from femrom.study._metrics import Projection, energy_ratio, invariant_drift, mass_norm, project_run
-from femrom.study._pipeline import ROW_COLUMNS, StudyState, peak_rss_gb, public_rows, run_study, write_report
+from femrom.study._metrics import Projection, invariant_drift, mass_norm, project_run
+from femrom.study._pipeline import ROW_COLUMNS, StudyState, peak_rss_gb, public_rows, run_study
 from femrom.study._forced import compare_stepped_sines, stepped_sine_response
 from femrom.study._ring_downs import (
     RING_DOWN_COLUMNS,
@@ -140,66 +124,53 @@ from femrom.study._ring_downs import (
     reference_ring_down,
     ring_down_data,
 )
-from femrom.study._backbone_metrics import BackboneComparison, backbone_errors, backbone_shift, compare_backbones
+from femrom.study._backbone_metrics import backbone_errors, backbone_shift, compare_backbones
 from femrom.study._impacts import (
-    ImpactTraining,
-    OutputRingDown,
     ecsw_training,
     output_ring_down,
     step_cost,
     with_impulse,
 )
-from femrom.study._jointed_beam import JOINTED_BEAM, BrakeReussBeam, CalibratedBeam, JointedBeamModel
+from femrom.study._jointed_beam import JOINTED_BEAM, CalibratedBeam, JointedBeamModel
 from femrom.study._closed_loops import CLOSED_LOOP_COLUMNS, closed_loop_rows, open_loop_error
 from femrom.study._linear_model_figures import linear_model_table, plot_linear_model_errors
-from femrom.study._scene_run import SceneRun, scene_run
+from femrom.study._scene_run import scene_run
 from femrom.study._experiment import Experiment, register_experiment, registered_experiments, rest_start
 from femrom.study.experiments.ring_down import RingDownTest
 from femrom.study.experiments.stepped_sine import SteppedSineTest
-from femrom.study.experiments.unseen_input import Evaluation, UnseenInput, evaluate, scored_columns
+from femrom.study.experiments.unseen_input import UnseenInput, evaluate, scored_columns
 from femrom.study._study import (
     check_rom_config,
-    model_spec,
     fom_runs,
-    operator_checks,
     pod_basis,
-    product_matrix,
     projected_forces,
     reduce_runs,
-    rom_cost,
-    rom_costs,
-    study_costs,
     study_rows,
     training_set,
 )
-from femrom.study._canonical import SceneHamiltonianROM, check_canonical_learners
-from femrom.study._subsampled import every_kth, subsampled_rows, subsampled_section
-from femrom.study._sweep import SweepRun, run_sweep, run_sweep_point, sweep_runs
+from femrom.study._canonical import check_canonical_learners
+from femrom.study._subsampled import subsampled_rows, subsampled_section
+from femrom.study._sweep import run_sweep, run_sweep_point, sweep_runs
 from femrom._timing import Cost, blocked_cost, call_cost, repeated_cost, repeated_costs
 
 
 __all__ = [
-    "conservative_acceleration", "force_error", "nonlinear_forces",
-    "CanonicalRun", "CanonicalSpec", "Cost", "Evaluation", "FINAL_STATE_COLUMNS", "FREQUENCY_COLUMNS", "HYPER_COLUMNS", "EXTRAPOLATION_LEARNERS", "EXTRAPOLATION_LEARNER_NAMES",
-    "Projection", "RING_DOWN_COLUMNS", "ROW_COLUMNS", "RingDown", "RingDownComparison", "backbone_errors",
-    "compare_ring_downs", "compare_stepped_sines", "mass_pod", "reference_ring_down", "ring_down_data", "SceneHamiltonianROM", "SceneRun", "StudyState", "SweepRun", "TIME_STEP_COLUMNS", "blocked_cost",
-    "call_cost", "canonical_rows", "canonical_time_step_ladder", "check_canonical_learners",
-    "check_rom_config", "energy_ratio", "evaluate", "evaluate_runs", "extra_rom_rows", "extrapolation_config", "extrapolation_scene",
-    "final_state", "final_state_ladders", "final_state_section", "fom_runs", "frequency_ladder", "frequency_section", "hyper_reduced_rows", "invariant_drift",
-    "ladder_section", "ladder_table", "linear_model_rows", "linear_operator", "ModelSpec", "model_spec", "training_set",
-    "mass_generator", "mass_norm", "natural_frequencies",
-    "observed_order", "operator_checks", "peak_rss_gb", "plot_accuracy_cost", "plot_energy",
-    "plot_energy_error_history", "plot_error_history", "plot_errors", "plot_histories",
-    "plot_invariant_drifts", "plot_output_history", "plot_outputs", "pod_basis", "product_matrix",
-    "project_run", "projected_forces", "public_rows", "reconstructed_energy_error", "reduce_runs",
-    "render_fields", "repeated_cost", "repeated_costs", "rom_cost", "rom_costs",
-    "rom_table", "run_canonical", "run_study", "run_sweep", "run_sweep_point", "scene_run",
-    "scored_columns", "state_energy", "every_kth", "subsampled_rows", "subsampled_section",
-    "state_error", "study_costs", "study_rows",
-    "sweep_runs", "time_step_ladder", "time_step_section", "write_report",
-    "BackboneComparison", "backbone_shift", "compare_backbones",
-    "ImpactTraining", "OutputRingDown", "ecsw_training", "output_ring_down", "step_cost", "with_impulse",
-    "JOINTED_BEAM", "BrakeReussBeam", "CalibratedBeam", "JointedBeamModel",
-    "stepped_sine_response", "CLOSED_LOOP_COLUMNS", "closed_loop_rows", "open_loop_error", "linear_model_table",
-    "plot_linear_model_errors",
+    "backbone_errors", "backbone_shift", "blocked_cost", "CalibratedBeam", "call_cost", "canonical_rows",
+    "canonical_time_step_ladder", "CanonicalSpec", "check_canonical_learners", "check_rom_config",
+    "CLOSED_LOOP_COLUMNS", "closed_loop_rows", "compare_backbones", "compare_models", "compare_ring_downs",
+    "compare_stepped_sines", "Cost", "ecsw_training", "evaluate", "Experiment", "extrapolation_config",
+    "EXTRAPOLATION_LEARNER_NAMES", "extrapolation_scene", "final_state", "final_state_ladders",
+    "final_state_section", "fom_runs", "force_error", "frequency_ladder", "frequency_section",
+    "HYPER_COLUMNS", "hyper_reduced_rows", "invariant_drift", "JOINTED_BEAM", "JointedBeamModel",
+    "linear_model_rows", "linear_model_table", "linear_operator", "mass_generator", "mass_norm", "mass_pod",
+    "ModelSpec", "natural_frequencies", "nonlinear_forces", "observed_order", "open_loop_error",
+    "output_ring_down", "peak_rss_gb", "plot_accuracy_cost", "plot_histories", "plot_invariant_drifts",
+    "plot_linear_model_errors", "plot_output_history", "pod_basis", "project_run", "projected_forces",
+    "Projection", "public_rows", "reconstructed_energy_error", "reduce_runs", "reference_ring_down",
+    "register_experiment", "registered_experiments", "repeated_cost", "repeated_costs", "rest_start",
+    "RING_DOWN_COLUMNS", "ring_down_data", "RingDown", "RingDownComparison", "RingDownTest", "rom_table",
+    "ROW_COLUMNS", "run_canonical", "run_study", "run_sweep", "run_sweep_point", "scene_run",
+    "scored_columns", "state_energy", "step_cost", "stepped_sine_response", "SteppedSineTest", "study_rows",
+    "StudyState", "subsampled_rows", "subsampled_section", "sweep_runs", "time_step_ladder",
+    "time_step_section", "training_set", "UnseenInput", "with_impulse",
 ]

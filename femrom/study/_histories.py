@@ -72,7 +72,7 @@ def rom_table(system, basis: np.ndarray, run, rows: list[dict], evaluations: dic
     the run), ``energy_error_train_max`` (over the steps up to ``score_after``; only with it),
     ``energy_error_test_max`` (over the scored steps), ``rom_energy_drift`` (the ROM's own
     energy, :func:`energy_drift`), ``rom_energy_growth`` and ``blowup_time`` (of the
-    :class:`~femrom.study.Evaluation`), ``seconds_per_step``, ``online_seconds`` (the run's
+    :class:`Evaluation`), ``seconds_per_step``, ``online_seconds`` (the run's
     steps), ``speedup``, ``cost`` (the row's, with its spread), ``stiffness_asymmetry`` ``||K^ - K^T||_F / ||K^||_F``
     and the smallest eigenvalues of the symmetric parts of ``K^`` and ``C^`` (``stiffness_min_eig``,
     ``damping_min_eig``; ``None`` without a damping). A failed model
@@ -149,7 +149,7 @@ def plot_histories(out_dir, run, projection, evaluations: dict, table: list[dict
     """The pictures of a :func:`rom_table` on ``run``, into ``out_dir``, names starting with ``prefix``:
 
     - ``rom_state_error.png``: each learner's field error over time at rank ``r`` and the
-      basis's projection error (:func:`~femrom.study.plot_error_history`; ``projection`` the run's);
+      basis's projection error (:func:`plot_error_history`; ``projection`` the run's);
     - ``rom_energy_error.png``: their energy errors (:func:`plot_energy_error_history`, the FOM's
       own with ``fom_energy``);
     - ``accuracy_cost_rom.png``: test error against online seconds, one line per learner, points
@@ -182,7 +182,7 @@ def extra_rom_rows(state, roms: dict, *, alongside=()) -> tuple[list[dict], dict
 
     ``roms``: ``(r, label) -> ROM`` (labels other than the study's learners). Each ROM is
     evaluated on every run (:func:`evaluate_runs`) and timed on the first test run
-    (:func:`~femrom.study.study_costs`), interleaved with the study's ROMs of the learners
+    (:func:`study_costs`), interleaved with the study's ROMs of the learners
     ``alongside`` at the same r, timed anew in the same rounds: ``{learner}_seconds_per_step``
     and ``speedup_over_{learner}`` (that ROM's step over this one's) compare models measured
     side by side.
