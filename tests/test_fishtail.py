@@ -23,7 +23,8 @@ from femrom.basis import POD
 from femrom.inference import reduce_snapshots
 from femrom.rom import SecondOrderROM
 from femrom.scene import InputConfig, MaterialConfig, SceneError, SignalVector, build
-from femrom.study import mass_norm, project_run
+from femrom.study import mass_norm
+from femrom.study._metrics import project_run
 from femrom.cases import fishtail
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -16,7 +16,7 @@ from femrom.cases import nls
 from femrom.inference import CanonicalData, HamiltonianOpInf, ProjectedPotential
 from femrom.integrators import integrate_canonical
 from femrom.rom import FirstOrderROM, HamiltonianROM
-from femrom.study import linear_operator
+from femrom.study._hamiltonian import linear_operator
 
 
 def relative(A, B):

@@ -19,7 +19,8 @@ import scipy.sparse as sp
 from femrom.integrators import StepClock
 from femrom.post import render_available
 from femrom.scene import Scene, SceneError
-from femrom.study import Cost, blocked_cost, check_rom_config, project_run, repeated_costs
+from femrom.study import Cost, blocked_cost, check_rom_config, repeated_costs
+from femrom.study._metrics import project_run
 
 DATA = Path(__file__).parent / "data"
 BRACKET = DATA / "bracket.toml"

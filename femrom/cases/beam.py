@@ -35,10 +35,9 @@ from pathlib import Path
 
 import numpy as np
 
-from femrom.integrators import newmark_frequencies
 from femrom.post import machine_description, plot_accuracy_cost_groups, staged_output, table_section
 from femrom.scene import Derivatives, Scene
-from femrom.study import EXTRAPOLATION_LEARNER_NAMES, extrapolation_scene, frequency_ladder, frequency_section, invariant_drift, \
+from femrom.study import EXTRAPOLATION_LEARNER_NAMES, dispersion_error, extrapolation_scene, frequency_ladder, frequency_section, invariant_drift, \
     natural_frequencies, plot_histories, plot_output_history, rom_table, run_study, scene_run, scored_columns, \
     time_step_ladder, time_step_section
 
@@ -81,35 +80,6 @@ PAPER_ROM = RomStudy(dt=2.5e-5, train_window=0.15, ranks=(2, 4, 6, 8, 10, 12, 16
 # O(1) (data error), the regime in which the seed shows plain OpInf blowing up.
 COARSE_ROM = RomStudy(dt=2.0e-4, ranks=(8, 10, 12), main_rank=12)
 QUICK_COARSE_ROM = dataclasses.replace(QUICK_ROM, dt=4.0e-4, ranks=(6, 8), main_rank=8)
-
-
-def dispersion_error(system, q0: np.ndarray, dt: float, times: np.ndarray, r: int, norm: float) -> float:
-    r"""A priori test-window error of a ROM that learned the FOM's *discrete* frequencies.
-
-    Released from ``q0`` at rest, the Newmark FOM is exactly
-    ``q_n = sum_k a_k cos(Omega_k t_n) phi_k`` (``phi_k`` mass-orthonormal modes,
-    ``Omega_k`` :func:`femrom.integrators.newmark_frequencies` of ``omega_k``). Finite differences of
-    order p of ``cos(Omega t)`` return ``Omega`` up to ``O((Omega dt)^p)``, so a
-    learner that fits the data exactly learns ``Omega_k``, not ``omega_k``; the
-    ROM's own Newmark step then runs at ``Omega'_k = newmark_frequencies(Omega_k)``.
-    Over the modes 1..r (those a POD basis of this data spans) that phase error is
-
-    .. math::
-
-        d(r) = \Big(\sum_{t \in \text{test}} \sum_{k \le r}
-               a_k^2 (\cos\Omega'_k t - \cos\Omega_k t)^2\Big)^{1/2} / \|Q_{test}\|_M,
-
-    and such a ROM's error is ``sqrt(projection^2 + d(r)^2)``. ``norm`` is
-    ``||Q_test||_M``, ``times`` the test window's times.
-    """
-    import scipy.linalg as sl
-
-    omega2, modes = sl.eigh(system.stiffness.toarray(), system.mass.toarray())
-    amplitudes = modes[:, :r].T @ np.asarray(system.mass @ q0)
-    learned = newmark_frequencies(np.sqrt(omega2[:r]), dt)
-    stepped = newmark_frequencies(learned, dt)
-    phase = np.cos(np.outer(stepped, times)) - np.cos(np.outer(learned, times))
-    return float(np.sqrt(np.sum(amplitudes[:, None] ** 2 * phase**2)) / norm)
 
 
 def study_scene(scene: Scene, study: RomStudy) -> Scene:

@@ -42,8 +42,7 @@ from femrom.post import accuracy_cost_table, plot_accuracy_cost, staged_output
 from femrom.scene import BasisSpec, Derivatives, InputConfig, LearnerSpec, ReportSpec, RomConfig, RunSpec, \
     Scene, Signal, build
 from femrom.solvers import make_solver
-from femrom.study import ROW_COLUMNS, pod_basis, public_rows, reduce_runs, run_study, study_rows, subsampled_rows, \
-    subsampled_section
+from femrom.study import ROW_COLUMNS, run_study, subsampled_rows, subsampled_section, swapped_rows
 
 SCENE = Path(__file__).with_suffix(".toml")
 
@@ -135,20 +134,6 @@ def rom_config(scene: Scene, train: str, ranks, learners, *, extension: float, r
 
 
 # -- what only the fishtail does -----------------------------------------------------------
-def reverse_study(state, learners=("galerkin", "lopinf", "opinf")) -> list[dict]:
-    """The same two FOM runs; basis and ROMs trained on the test input, tested on the training one."""
-    c = state.config
-    config = dataclasses.replace(c, train=c.test, test=c.train,
-                                 learners=tuple(s for s in c.learners if s.label in learners))
-    train = tuple(s.name for s in config.train)
-    pod = pod_basis(state.store, train, state.product, config)
-    data, projections = reduce_runs(state.store, state.runs, train, pod.basis_, state.product,
-                                    stored_derivatives=True)
-    rows, _ = study_rows(state.model.system, pod.basis_, state.product, data, projections, state.runs, config,
-                         progress=state.progress)
-    return public_rows(rows)
-
-
 def mesh_ladder(scene: Scene, levels) -> list[dict]:
     """Static tip deflection under a unit pressure and the first frequency per mesh size,
     errors against the finest level of the ladder, with build + solve time."""
@@ -205,7 +190,7 @@ def run(out_dir, *, quick: bool = False, level: str = "small", train: str = "sig
     def extend(state):
         metrics = {"case": "fishtail", "level": level, "quick": quick,
                    "mesh_size": dict(scene.structure.parameters)["mesh_size"],
-                   "roms_reverse": reverse_study(state, [x for x in ("galerkin", "lopinf", "opinf")
+                   "roms_reverse": swapped_rows(state, [x for x in ("galerkin", "lopinf", "opinf")
                                                          if x in learners]) if reverse else []}
         state.progress("learning from snapshots every k-th step")
         metrics["subsampled"] = subsampled_rows(state, (1, 2, 5, 10))

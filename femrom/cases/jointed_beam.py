@@ -42,30 +42,11 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from scipy.optimize import minimize
 
-from femrom.post import (
-    Backbone,
-    hilbert_backbone,
-    measured_backbone,
-    period_corrected,
-    plot_backbones,
-    read_hammer_impact,
-    staged_output,
-    static_qsma,
-    with_linear_damping,
-    write_metrics,
-)
-from femrom.study import (
-    JOINTED_BEAM,
-    CalibratedBeam,
-    JointedBeamModel,
-    backbone_shift,
-    compare_backbones,
-    output_ring_down,
-    stepped_sine_response,
-    with_impulse,
-)
+from femrom.post import Backbone, hilbert_backbone, measured_backbone, period_corrected, plot_backbones, \
+    read_hammer_impact, staged_output, static_qsma, with_linear_damping, write_metrics
+from femrom.study import JointedBeamModel, backbone_shift, compare_backbones, modal_qsma, output_ring_down, \
+    stepped_sine_response, with_impulse
 
 SCENE = Path(__file__).with_suffix(".toml")
 BAND, WINDOW = (60.0, 100.0), 0.2
@@ -86,67 +67,6 @@ class JointedBeamCase(JointedBeamModel):
     fit_iwan: bool = True                       #: fit chi and beta on the measured backbone (when the data are there)
     fit_start: tuple = (-0.5, 0.5)              #: (chi, beta) the fit starts from
     fit_evaluations: int = 50                   #: Nelder-Mead budget of the fit (one 10-mode QSMA each)
-
-
-def reduced_qsma(reduced, z0, amplitudes, damping_ratio: float) -> Backbone:
-    """QSMA of the first reduced coordinate (mode 1: ``V^T M V = I``) at acc1, the linear damping added."""
-    phi = np.zeros(reduced.n_dofs)
-    phi[0] = 1.0
-    result = static_qsma(reduced, amplitudes, reference=np.zeros(reduced.n_dofs), state=z0, mode=phi)
-    return with_linear_damping(result.backbone(0), damping_ratio)
-
-
-def fit_iwan(setup: CalibratedBeam, config: JointedBeamCase, measured: Backbone, damping_ratio: float,
-             progress=print) -> dict:
-    """``chi`` and ``beta`` of the Iwan joint fitted on the measured backbone (``mu`` fixed).
-
-    Each evaluation re-equilibrates the full model under the law, projects it on the modes and
-    runs QSMA on the 10-mode model (a fraction of a second). The misfit at the measured windows
-    between 1 and 24 m/s^2: the frequency drop from the first window over the measured total drop,
-    and the log of the damping ratios' quotient, in one sum of squares (Nelder-Mead on
-    ``logit(chi + 1)``, ``log beta``)."""
-    a = np.asarray(measured.amplitude)
-    a = np.sort(a[(a >= 1.0) & (a <= 24.0)])
-    f_measured, z_measured = measured.at_amplitude(a)
-    drop = f_measured[0] - f_measured
-    history = []
-
-    def misfit(p):
-        chi, beta = -1.0 + 1.0 / (1.0 + np.exp(-p[0])), float(np.exp(p[1]))
-        model, q0, z0 = config.iwan_joint(setup, chi=chi, beta=beta)
-        curve = reduced_qsma(config.reduced(setup, model, q0, z0, damping_ratio), z0, config.qsma_amplitudes,
-                             damping_ratio)
-        f, z = curve.at_amplitude(a)
-        residual = np.concatenate([(f[0] - f - drop) / drop[-1], np.log(z / z_measured)])
-        value = float(residual @ residual)
-        history.append((value, chi, beta))
-        progress(f"  fit {len(history)}: chi {chi:+.3f}, beta {beta:.3f}, misfit {value:.4f}")
-        return value
-
-    tic = time.perf_counter()
-    chi0, beta0 = config.fit_start
-    start = [np.log((chi0 + 1.0) / -chi0), np.log(beta0)]
-    minimize(misfit, start, method="Nelder-Mead",
-             options={"xatol": 1e-2, "fatol": 1e-4, "maxfev": config.fit_evaluations})
-    value, chi, beta = min(history)
-    return {"chi": chi, "beta": beta, "misfit": value, "evaluations": len(history),
-            "seconds": time.perf_counter() - tic, "fitted_on": f"measured backbone at acc1, {a[0]:.3g}-{a[-1]:.3g} m/s^2"}
-
-
-def linear_part(setup: CalibratedBeam) -> dict:
-    """The elastic frequencies and shapes, and the model's modes nearest the measured next two."""
-    frequencies = setup.modes.frequencies[6:]
-    predictions = []
-    for measured in JOINTED_BEAM.measured_next:
-        j = int(np.argmin(np.abs(frequencies - measured)))
-        shape = setup.shapes[j]
-        predictions.append({"measured_hz": measured, "model_hz": float(frequencies[j]),
-                            "error": float(frequencies[j] / measured - 1),
-                            "shape": f"{shape.kind} bending, {shape.sign_changes} sign changes"
-                            if shape.kind in ("vertical", "in-plane") else shape.kind})
-    return {"linear_frequencies_hz": [float(f) for f in frequencies],
-            "mode_shapes": [f"{s.kind} {s.sign_changes}" for s in setup.shapes],
-            "predictions": predictions}
 
 
 def against_measured(model: Backbone, measured: Backbone, low: float = 1.0) -> dict | None:
@@ -175,7 +95,7 @@ def run(config: JointedBeamCase, out: Path, progress=print, data_dir=None) -> di
     setup = config.calibrated(config.scene(SCENE))
     beam, system = setup.beam, setup.system
     f1 = setup.f1
-    linear = linear_part(setup)
+    linear = setup.linear_predictions()
     progress(f"  {system.n_dofs} dofs, k_t = {setup.tangential_stiffness:.4g} Pa/m, f1 = {f1:.3f} Hz; predictions "
              + ", ".join(f"{p['measured_hz']} -> {p['model_hz']:.1f} Hz ({100 * p['error']:+.2f} %)"
                          for p in linear["predictions"]))
@@ -202,7 +122,8 @@ def run(config: JointedBeamCase, out: Path, progress=print, data_dir=None) -> di
     iwan = {"mu": config.friction_coefficient, "chi": config.iwan_chi, "beta": config.iwan_beta, "fitted": False}
     if config.fit_iwan and measured is not None:
         progress("jointed beam: fitting the Iwan joint's chi and beta on the measured backbone (10-mode QSMA) ...")
-        fit = fit_iwan(setup, config, measured, damping, progress=progress)
+        fit = config.fit_iwan_on(setup, measured, damping, config.qsma_amplitudes, start=config.fit_start,
+                                 evaluations=config.fit_evaluations, progress=progress)
         iwan.update(chi=fit["chi"], beta=fit["beta"], fitted=True, fit=fit)
         seconds["fit"] = fit["seconds"]
     model, q_iwan, z_iwan = config.iwan_joint(setup, chi=iwan["chi"], beta=iwan["beta"])
@@ -212,7 +133,7 @@ def run(config: JointedBeamCase, out: Path, progress=print, data_dir=None) -> di
     seconds["qsma_fom_iwan"] = time.perf_counter() - clock
     reduced = config.reduced(setup, model, q_iwan, z_iwan, damping)
     clock = time.perf_counter()
-    curve_reduced = reduced_qsma(reduced, z_iwan, config.qsma_amplitudes, damping)
+    curve_reduced = modal_qsma(reduced, z_iwan, config.qsma_amplitudes, damping)
     seconds["qsma_reduced_iwan"] = time.perf_counter() - clock
     # QSMA's damping is the joint's alone: the linear modal damping of the other models adds to it
     backbones["fom_qsma"] = with_linear_damping(static.backbone(0), damping)
@@ -226,12 +147,8 @@ def run(config: JointedBeamCase, out: Path, progress=print, data_dir=None) -> di
         seconds[f"training_{peak:g}_n"] = training_run.seconds
     seconds["all_pairs_ms_per_step"] = next(iter(training.runs.values())).ms_per_step
     progress(f"  {sampling.pairs.size} of {sampling.n_pairs} pairs, training residual {sampling.residual:.2g}")
-    validation = {}
-    for peak, training_run in training.runs.items():
-        acc, acc_hyper = training_run.accelerations[0], output_ring_down(
-            with_impulse(hyper, peak, config.impact_width), z_hyper, config.training_window, dt).accelerations[0]
-        validation[f"{peak:g}_n_acc1_max_error"] = float(np.max(np.abs(acc_hyper - acc)) / np.max(np.abs(acc)))
-    curve_hyper = reduced_qsma(hyper, z_hyper, config.qsma_amplitudes, damping)
+    validation = config.hyper_validation(training, hyper, z_hyper, dt)
+    curve_hyper = modal_qsma(hyper, z_hyper, config.qsma_amplitudes, damping)
     backbones["hyper_qsma_iwan"] = curve_hyper
     validation["qsma_max_frequency_difference_hz"] = float(np.max(np.abs(curve_hyper.frequency_hz
                                                                          - curve_reduced.frequency_hz)))

@@ -70,16 +70,6 @@ class JointedBeamRomCase:
     damping_ratio: float = 0.00139              #: linear modal damping (the measured lowest-amplitude ratio)
 
 
-def full_model_step_cost(model, q0, z0, dt: float, steps: int, progress=print) -> dict:
-    """Seconds per step of the full model with the joint (Newmark, condensed Newton) after a 300 N blow,
-    from the step times after the first (the factorisation and the first step excluded)."""
-    cost = step_cost(with_impulse(model, 300.0, 3e-4), q0, z0, dt, steps,
-                     scheme=Newmark(newton=Newton(method="condensed")))
-    progress(f"  full model: {cost['n_dofs']} dofs, {steps} steps in {cost['seconds_total']:.1f} s, "
-             f"{cost['seconds_per_step']:.3g} s/step after the first")
-    return cost
-
-
 def model_specs(config: JointedBeamRomCase) -> tuple:
     """The compared models as registry specs: the projection, L-OpInf and SpML on damping and input
     terms, and the ``iwan_lopinf`` variants of ``config.iwan``, in the order of ``config.models``."""
@@ -97,15 +87,8 @@ def stepped_sines(hyper, rest_state, comparison: dict, config: JointedBeamRomCas
     sweep = SteppedSine(np.asarray(config.forced_frequencies), steps_per_period=config.forced_steps_per_period,
                         steady_state=SteadyStateCriterion(tolerance=config.forced_tolerance))
     experiment = SteppedSineTest(hyper, sweep, config.forced_levels, input=1, rest_state=rest_state)
-    rows, results, seconds = [], {"reference": experiment.reference_result}, {"reference": experiment.reference_seconds}
-    for (name, rank), model in comparison["models"].items():
-        if rank == config.forced_rank:
-            outcome = experiment.run(model)
-            results[name], seconds[name] = outcome["_result"], outcome["seconds"]
-            rows += [{"model": name, **level, "seconds": outcome["seconds"]} for level in outcome["levels"]]
-            progress(f"  stepped sine {name}: " + ", ".join(f"{row['force_n']:g} N: {row['peak_frequency_hz']:.3f} Hz"
-                                                            for row in outcome["levels"]))
-    return {"results": results, "rows": rows, "seconds": seconds}
+    return experiment.compare({name: model for (name, rank), model in comparison["models"].items()
+                               if rank == config.forced_rank}, progress=progress)
 
 
 def reference_models(config: JointedBeamRomCase, progress=print) -> dict:
@@ -169,7 +152,10 @@ def run(config: JointedBeamRomCase, out: Path, progress=print) -> dict:
     full_cost = None
     if config.full_model_steps:
         progress(f"jointed beam ROMs: {config.full_model_steps} steps of the full model with the joint ...")
-        full_cost = full_model_step_cost(model, q_iwan, z_iwan, dt, config.full_model_steps, progress)
+        # seconds per step after a 300 N blow (Newmark, condensed Newton), the first step excluded
+        full_cost = step_cost(with_impulse(model, 300.0, 3e-4), q_iwan, z_iwan, dt, config.full_model_steps,
+                              scheme=Newmark(newton=Newton(method="condensed")))
+        progress(f"  full model: {full_cost['n_dofs']} dofs, {full_cost['seconds_per_step']:.3g} s/step")
 
     tic_ref = time.perf_counter()
     training, validation, tests = reference_runs(models, config, progress)

@@ -36,7 +36,7 @@ from threadpoolctl import threadpool_limits
 from femrom.fem import QuarticPotential
 from femrom.integrators import CanonicalSystem
 from femrom.post import accuracy_cost_table, machine_description, plot_accuracy_cost as plot_points, \
-    plot_time_series, pyplot, staged_output, write_metrics
+    plot_space_time, plot_time_series, staged_output, write_metrics
 from femrom.study import CanonicalSpec, canonical_rows, canonical_time_step_ladder, invariant_drift, \
     plot_accuracy_cost, plot_invariant_drifts, run_canonical
 
@@ -126,26 +126,6 @@ def invariants(cfg: NLSConfig, Q: np.ndarray, P: np.ndarray) -> dict:
     return {"mass": mass, "momentum": momentum}
 
 
-def plot_solution(path, cfg, times, Q, P, kept, r):
-    """``|psi(x, t)|`` of the FOM and of three ROMs at ``r`` (white line: end of training)."""
-    plt = pyplot()
-    panels = [("FOM", Q, P)] + [(name, kept[name]["Q"], kept[name]["P"])
-                                for name in ("H-OpInf-shared", "H-OpInf", "OpInf-Tikhonov") if name in kept]
-    fig, axes = plt.subplots(1, len(panels), figsize=(3.2 * len(panels), 3.2), sharey=True)
-    stride = max(1, times.size // 400)
-    for ax, (name, Qx, Px) in zip(np.atleast_1d(axes), panels):
-        amp = np.sqrt(Qx[:, ::stride] ** 2 + Px[:, ::stride] ** 2)
-        ax.pcolormesh(cfg.grid, times[::stride], np.nan_to_num(amp.T), shading="auto", vmin=0,
-                      vmax=np.max(np.sqrt(Q**2 + P**2)))
-        ax.axhline(cfg.t_train, color="w", lw=0.8)
-        ax.set_title(f"|psi|: {name}" + ("" if name == "FOM" else f", r = {r}"), fontsize=9)
-        ax.set_xlabel("x")
-    np.atleast_1d(axes)[0].set_ylabel("t")
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
-
-
 def run(out_dir, *, quick: bool = False, scene_path=SCENE, ranks=None) -> dict:
     """Run the case; return its metrics (also written to ``out_dir/metrics.json``)."""
     out_dir = Path(out_dir)
@@ -175,7 +155,11 @@ def run(out_dir, *, quick: bool = False, scene_path=SCENE, ranks=None) -> dict:
     plot_invariant_drifts(out_dir / "nls_invariants.png", times, fom_inv, kept,
                           {"mass": "mass", "momentum": "momentum", "H": "Hamiltonian H(Phi y^)"}, shade=shade,
                           title=f"NLS invariants, r = {cfg.rank}")
-    plot_solution(out_dir / "nls_solution.png", cfg, times, Q, P, kept, cfg.rank)
+    # |psi(x, t)| of the FOM and of three ROMs at r (white line: the end of training)
+    panels = {"FOM": (Q, P), **{f"{name}, r = {cfg.rank}": (kept[name]["Q"], kept[name]["P"])
+                                for name in ("H-OpInf-shared", "H-OpInf", "OpInf-Tikhonov") if name in kept}}
+    plot_space_time(out_dir / "nls_solution.png", cfg.grid, times,
+                    {name: np.sqrt(Qx**2 + Px**2) for name, (Qx, Px) in panels.items()}, mark=cfg.t_train, label="|psi|: ")
     plot_accuracy_cost(out_dir / "nls_accuracy_cost.png", rows, fom_run.cost.to_dict(),
                        "NLS: test-window state error vs cost per step", error="test_error")
     if dt_rows:

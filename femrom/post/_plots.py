@@ -118,6 +118,25 @@ def plot_time_series(path, times, series: dict, *, ylabel: str = "", logy: bool 
     return save_figure(fig, path, dpi=100)
 
 
+def plot_space_time(path, grid, times, panels: dict, *, mark: float | None = None, label: str = "") -> Path:
+    """One colour map per entry of ``panels`` (name -> (n_x, k) field over ``grid`` (n_x,) and ``times``
+    (k,)), side by side on one colour scale from 0 to the first panel's maximum; ``mark``: a time drawn
+    as a white line (the end of training); non-finite values drawn as 0. At most 400 time rows are drawn."""
+    plt = pyplot()
+    fig, axes = plt.subplots(1, len(panels), figsize=(3.2 * len(panels), 3.2), sharey=True)
+    stride = max(1, np.size(times) // 400)
+    top = float(np.max(next(iter(panels.values()))))
+    for ax, (name, field) in zip(np.atleast_1d(axes), panels.items()):
+        ax.pcolormesh(grid, times[::stride], np.nan_to_num(np.asarray(field)[:, ::stride].T), shading="auto",
+                      vmin=0, vmax=top)
+        if mark is not None:
+            ax.axhline(mark, color="w", lw=0.8)
+        ax.set_title(f"{label}{name}", fontsize=9)
+        ax.set_xlabel("x")
+    np.atleast_1d(axes)[0].set_ylabel("t")
+    return save_figure(fig, path, dpi=90)
+
+
 def plot_accuracy_cost(path, rows: list[dict], cost: str, error: str, label: str, title="") -> Path:
     """Log-log error against cost, one point per row, annotated with ``label``."""
     plt = pyplot()

@@ -79,6 +79,7 @@ from femrom.study._figures import (
 )
 from femrom.study._extrapolation import (
     EXTRAPOLATION_LEARNER_NAMES,
+    dispersion_error,
     extrapolation_config,
     extrapolation_scene,
 )
@@ -86,7 +87,6 @@ from femrom.study._hamiltonian import (
     CanonicalSpec,
     canonical_rows,
     canonical_time_step_ladder,
-    linear_operator,
     mass_generator,
     run_canonical,
 )
@@ -112,8 +112,8 @@ from femrom.study._ladders import (
 from femrom.study._linear_models import linear_model_rows
 from femrom.study._models import ModelSpec
 from femrom.study._compare import compare_models
-from femrom.study._metrics import Projection, invariant_drift, mass_norm, project_run
-from femrom.study._pipeline import ROW_COLUMNS, StudyState, peak_rss_gb, public_rows, run_study
+from femrom.study._metrics import Projection, invariant_drift, mass_norm
+from femrom.study._pipeline import ROW_COLUMNS, StudyState, peak_rss_gb, run_study, swapped_rows
 from femrom.study._forced import compare_stepped_sines, stepped_sine_response
 from femrom.study._ring_downs import (
     RING_DOWN_COLUMNS,
@@ -131,7 +131,7 @@ from femrom.study._impacts import (
     step_cost,
     with_impulse,
 )
-from femrom.study._jointed_beam import JOINTED_BEAM, CalibratedBeam, JointedBeamModel
+from femrom.study._jointed_beam import JOINTED_BEAM, CalibratedBeam, JointedBeamModel, modal_qsma
 from femrom.study._closed_loops import CLOSED_LOOP_COLUMNS, closed_loop_rows, open_loop_error
 from femrom.study._linear_model_figures import linear_model_table, plot_linear_model_errors
 from femrom.study._scene_run import scene_run
@@ -146,7 +146,6 @@ from femrom.study._study import (
     projected_forces,
     reduce_runs,
     study_rows,
-    training_set,
 )
 from femrom.study._canonical import check_canonical_learners
 from femrom.study._subsampled import subsampled_rows, subsampled_section
@@ -157,20 +156,20 @@ from femrom._timing import Cost, blocked_cost, call_cost, repeated_cost, repeate
 __all__ = [
     "backbone_errors", "backbone_shift", "blocked_cost", "CalibratedBeam", "call_cost", "canonical_rows",
     "canonical_time_step_ladder", "CanonicalSpec", "check_canonical_learners", "check_rom_config",
-    "CLOSED_LOOP_COLUMNS", "closed_loop_rows", "compare_backbones", "compare_models", "compare_ring_downs",
+    "CLOSED_LOOP_COLUMNS", "dispersion_error", "closed_loop_rows", "compare_backbones", "compare_models", "compare_ring_downs",
     "compare_stepped_sines", "Cost", "ecsw_training", "evaluate", "Experiment", "extrapolation_config",
     "EXTRAPOLATION_LEARNER_NAMES", "extrapolation_scene", "final_state", "final_state_ladders",
     "final_state_section", "fom_runs", "force_error", "frequency_ladder", "frequency_section",
     "HYPER_COLUMNS", "hyper_reduced_rows", "invariant_drift", "JOINTED_BEAM", "JointedBeamModel",
-    "linear_model_rows", "linear_model_table", "linear_operator", "mass_generator", "mass_norm", "mass_pod",
+    "linear_model_rows", "linear_model_table", "mass_generator", "mass_norm", "mass_pod", "modal_qsma",
     "ModelSpec", "natural_frequencies", "nonlinear_forces", "observed_order", "open_loop_error",
     "output_ring_down", "peak_rss_gb", "plot_accuracy_cost", "plot_histories", "plot_invariant_drifts",
-    "plot_linear_model_errors", "plot_output_history", "pod_basis", "project_run", "projected_forces",
-    "Projection", "public_rows", "reconstructed_energy_error", "reduce_runs", "reference_ring_down",
+    "plot_linear_model_errors", "plot_output_history", "pod_basis", "projected_forces",
+    "Projection", "reconstructed_energy_error", "reduce_runs", "reference_ring_down",
     "register_experiment", "registered_experiments", "repeated_cost", "repeated_costs", "rest_start",
     "RING_DOWN_COLUMNS", "ring_down_data", "RingDown", "RingDownComparison", "RingDownTest", "rom_table",
     "ROW_COLUMNS", "run_canonical", "run_study", "run_sweep", "run_sweep_point", "scene_run",
-    "scored_columns", "state_energy", "step_cost", "stepped_sine_response", "SteppedSineTest", "study_rows",
+    "scored_columns", "state_energy", "step_cost", "stepped_sine_response", "SteppedSineTest", "study_rows", "swapped_rows",
     "StudyState", "subsampled_rows", "subsampled_section", "sweep_runs", "time_step_ladder",
-    "time_step_section", "training_set", "UnseenInput", "with_impulse",
+    "time_step_section", "UnseenInput", "with_impulse",
 ]

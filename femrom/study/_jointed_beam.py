@@ -17,6 +17,8 @@ hyper-reduced model), each a library function and the settings here:
 4. :meth:`JointedBeamModel.reduced`: Galerkin on the ``n_modes`` elastic modes about that
    equilibrium (:func:`~femrom.inference.galerkin`, the joint on every pair), linear modal damping,
    the inputs hammer (a half-sine of ``impact_peak``, ``impact_width``) and shaker (silent);
+6. :func:`modal_qsma` (QSMA of a modal model's mode 1) and :meth:`JointedBeamModel.fit_iwan_on` (the Iwan
+   joint's ``chi``, ``beta`` fitted on a measured backbone by it);
 5. :meth:`JointedBeamModel.hyper_reduced`: ECSW trained on short all-pair ring-downs
    (:func:`ecsw_training`, :func:`~femrom.rom.ecsw_joint`): the joint's slip remainder sampled on
    a few weighted pairs (:func:`~femrom.rom.hyper_reduced_system`);
@@ -32,8 +34,10 @@ import tomllib
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.optimize import minimize
 
 from femrom.inference import galerkin
+from femrom.post import static_qsma, with_linear_damping
 from femrom.rom import ecsw_joint, hyper_reduced_system
 from femrom.scene import (
     Scene,
@@ -47,7 +51,7 @@ from femrom.scene import (
     prestressed_model,
     with_law_parameters,
 )
-from femrom.study._impacts import ImpactTraining, ecsw_training
+from femrom.study._impacts import ImpactTraining, ecsw_training, output_ring_down, with_impulse
 
 
 @dataclass(frozen=True)
@@ -127,6 +131,22 @@ class CalibratedBeam:
         """Free-dof indices of :attr:`BrakeReussBeam.left_face`."""
         return point_supports(self.beam.fom.space, self.system.condensation, JOINTED_BEAM.left_face)
 
+    def linear_predictions(self) -> dict:
+        """The elastic frequencies and shapes, and the modes nearest the measured next two
+        (:attr:`BrakeReussBeam.measured_next`) with their relative errors."""
+        frequencies = self.modes.frequencies[6:]
+        predictions = []
+        for measured in JOINTED_BEAM.measured_next:
+            j = int(np.argmin(np.abs(frequencies - measured)))
+            shape = self.shapes[j]
+            predictions.append({"measured_hz": measured, "model_hz": float(frequencies[j]),
+                                "error": float(frequencies[j] / measured - 1),
+                                "shape": f"{shape.kind} bending, {shape.sign_changes} sign changes"
+                                if shape.kind in ("vertical", "in-plane") else shape.kind})
+        return {"linear_frequencies_hz": [float(f) for f in frequencies],
+                "mode_shapes": [f"{s.kind} {s.sign_changes}" for s in self.shapes],
+                "predictions": predictions}
+
 
 @dataclass(frozen=True)
 class JointedBeamModel:
@@ -198,3 +218,59 @@ class JointedBeamModel:
         sampling = ecsw_joint(reduced, training.snapshots, z0, tolerance=self.ecsw_tolerance)
         hyper, z_hyper = hyper_reduced_system(reduced, sampling, z0)
         return training, sampling, hyper, z_hyper
+
+    def hyper_validation(self, training: ImpactTraining, hyper, z_hyper, dt: float) -> dict:
+        """The hyper-reduced model against the all-pair runs ECSW trained on: per blow, the largest
+        difference of acc1 over its largest value (``"<peak>_n_acc1_max_error"``)."""
+        out = {}
+        for peak, run in training.runs.items():
+            acc = run.accelerations[0]
+            acc_hyper = output_ring_down(with_impulse(hyper, peak, self.impact_width), z_hyper,
+                                         self.training_window, dt).accelerations[0]
+            out[f"{peak:g}_n_acc1_max_error"] = float(np.max(np.abs(acc_hyper - acc)) / np.max(np.abs(acc)))
+        return out
+
+    def fit_iwan_on(self, calibrated: CalibratedBeam, measured, damping_ratio: float, amplitudes, *,
+                    start=(-0.5, 0.5), evaluations: int = 50, progress=print) -> dict:
+        """``chi`` and ``beta`` of the Iwan joint fitted on a measured backbone (``mu`` fixed).
+
+        Each evaluation re-equilibrates the full model under the law, projects it on the modes and
+        runs QSMA on the modal model at ``amplitudes`` (:func:`modal_qsma`, a fraction of a second).
+        The misfit at the measured windows between 1 and 24 m/s^2: the frequency drop from the first
+        window over the measured total drop, and the log of the damping ratios' quotient, in one sum
+        of squares (Nelder-Mead on ``logit(chi + 1)``, ``log beta`` from ``start``, at most
+        ``evaluations`` QSMA runs)."""
+        a = np.asarray(measured.amplitude)
+        a = np.sort(a[(a >= 1.0) & (a <= 24.0)])
+        f_measured, z_measured = measured.at_amplitude(a)
+        drop = f_measured[0] - f_measured
+        history = []
+
+        def misfit(p):
+            chi, beta = -1.0 + 1.0 / (1.0 + np.exp(-p[0])), float(np.exp(p[1]))
+            model, q0, z0 = self.iwan_joint(calibrated, chi=chi, beta=beta)
+            curve = modal_qsma(self.reduced(calibrated, model, q0, z0, damping_ratio), z0, amplitudes, damping_ratio)
+            f, z = curve.at_amplitude(a)
+            residual = np.concatenate([(f[0] - f - drop) / drop[-1], np.log(z / z_measured)])
+            value = float(residual @ residual)
+            history.append((value, chi, beta))
+            progress(f"  fit {len(history)}: chi {chi:+.3f}, beta {beta:.3f}, misfit {value:.4f}")
+            return value
+
+        tic = time.perf_counter()
+        chi0, beta0 = start
+        minimize(misfit, [np.log((chi0 + 1.0) / -chi0), np.log(beta0)], method="Nelder-Mead",
+                 options={"xatol": 1e-2, "fatol": 1e-4, "maxfev": evaluations})
+        value, chi, beta = min(history)
+        return {"chi": chi, "beta": beta, "misfit": value, "evaluations": len(history),
+                "seconds": time.perf_counter() - tic,
+                "fitted_on": f"measured backbone at acc1, {a[0]:.3g}-{a[-1]:.3g} m/s^2"}
+
+
+def modal_qsma(reduced, z0, amplitudes, damping_ratio: float):
+    """QSMA (:func:`~femrom.post.static_qsma`) of the first coordinate of a modal model (mode 1:
+    ``V^T M V = I``) from its rest state ``z0``, with the linear modal damping ``damping_ratio`` added."""
+    phi = np.zeros(reduced.n_dofs)
+    phi[0] = 1.0
+    result = static_qsma(reduced, amplitudes, reference=np.zeros(reduced.n_dofs), state=z0, mode=phi)
+    return with_linear_damping(result.backbone(0), damping_ratio)

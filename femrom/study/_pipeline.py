@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import resource
 import time
 from dataclasses import dataclass
@@ -219,3 +220,19 @@ def write_report(path: Path, m: dict, energy_plot: bool = True, sections=()) -> 
     lines += [text for section in sections for text in (section, "")]
     path.write_text("\n".join(lines))
     return path
+
+
+def swapped_rows(state: StudyState, labels=None) -> list[dict]:
+    """The study again with training and test runs swapped (the same FOM runs, read from the open
+    store): a POD basis of the test runs, the learners of ``labels`` (default all) fitted on them and
+    scored on every run; its rows (:func:`study_rows`, without the in-memory objects)."""
+    c = state.config
+    config = dataclasses.replace(c, train=c.test, test=c.train,
+                                 learners=tuple(s for s in c.learners if labels is None or s.label in labels))
+    train = tuple(s.name for s in config.train)
+    pod = pod_basis(state.store, train, state.product, config)
+    data, projections = reduce_runs(state.store, state.runs, train, pod.basis_, state.product,
+                                    stored_derivatives=needs_stored_derivatives(config))
+    rows, _ = study_rows(state.model.system, pod.basis_, state.product, data, projections, state.runs, config,
+                         progress=state.progress)
+    return public_rows(rows)

@@ -93,3 +93,17 @@ class SteppedSineTest(Experiment):
         result = self.sweep.run(self.plant(model), list(self.levels))
         seconds = time.perf_counter() - tic
         return {"levels": peak_rows(result, reference, self.output), "seconds": seconds, "_result": result}
+
+    def compare(self, models: dict, *, progress=None) -> dict:
+        """Every model of ``models`` (name -> model) through :meth:`run`: ``results`` (the reference's
+        under ``"reference"``), ``seconds`` and ``rows`` (one per model and level, :func:`peak_rows`)."""
+        results, seconds = {"reference": self.reference_result}, {"reference": self.reference_seconds}
+        rows = []
+        for name, model in models.items():
+            outcome = self.run(model)
+            results[name], seconds[name] = outcome["_result"], outcome["seconds"]
+            rows += [{"model": name, **level, "seconds": outcome["seconds"]} for level in outcome["levels"]]
+            if progress is not None:
+                progress(f"  stepped sine {name}: " + ", ".join(
+                    f"{level['force_n']:g} N: {level['peak_frequency_hz']:.3f} Hz" for level in outcome["levels"]))
+        return {"results": results, "rows": rows, "seconds": seconds}
