@@ -1,7 +1,7 @@
 r"""Six additions to femrom written outside it, as a user would: one class each, joined by registries.
 
-``tests/test_extension_everywhere.py`` copies this file into a temporary folder (outside the
-repository) and imports it from there, then runs every addition through a scene's ``[rom]``
+``tests/test_extension_everywhere.py`` imports it by name (it is not part of the femrom package),
+runs every addition through a scene's ``[rom]``
 study, a ring-down comparison and a stepped sine without any femrom file knowing them:
 
 - ``user_two_slider``: an interface law, two parallel Jenkins sliders (a two-element Iwan);

@@ -1,8 +1,8 @@
 """Six additions written outside femrom run through a scene's [rom] study, a ring-down and a stepped sine.
 
 ``tests/_user_extensions.py`` (an interface law, a stiffness-adding effect, a time scheme, a reduced
-term, a learner and an experiment; one class each) is copied into a temporary folder and imported
-from there: nothing in femrom names them. The structure is two soft blocks (81 free dofs), the
+term, a learner and an experiment; one class each) is a module outside the package, imported by
+name and unregistered afterwards: nothing in femrom names them, no femrom file was edited for them. The structure is two soft blocks (81 free dofs), the
 upper one held by a joint under the user's two-slider law and by the user's ground springs, driven
 in shear at its top; every full and reduced run steps with the user's Fox-Goodwin scheme.
 
@@ -19,18 +19,18 @@ What each check shows, beyond "it ran":
   of it that diverges is reported as failed, not as a crash.
 """
 
-import importlib.util
-import shutil
+import importlib
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 from test_joint_prestress import stacked_blocks
 
-from femrom.inference import TrainingSet, registered_learners, registered_terms
+from femrom.fem import INTERFACE_LAWS
+from femrom.inference import LEARNERS, TERMS, TrainingSet, registered_learners, registered_terms
 from femrom.integrators import Scheme, SteadyStateCriterion, SteppedSine, registered_schemes
-from femrom.scene import Scene, build, registered_effects
+from femrom.integrators._scheme import SCHEMES
+from femrom.scene import EFFECTS, Scene, build, registered_effects
 from femrom.study import (
     ModelSpec,
     RingDownComparison,
@@ -44,8 +44,8 @@ from femrom.study import (
     run_study,
     with_impulse,
 )
+from femrom.study._experiment import EXPERIMENTS
 
-HERE = Path(__file__).parent
 DT = 1e-3        # omega_max dt = 0.76 < sqrt(6): inside Fox-Goodwin's stability limit (measured omega_max 760 rad/s)
 JOINT = {"between": ["upper_bottom", "lower_top"], "law": "user_two_slider",
          "parameters": {"k1": 1e7, "k2": 1e7, "tau1": 1e3, "tau2": 1e4, "normal_stiffness": 4e7}}
@@ -53,18 +53,18 @@ SPRINGS = {"at": "top", "component": "x", "stiffness": 2e6}
 
 
 @pytest.fixture(scope="module")
-def ext(tmp_path_factory):
-    """The user's module, imported from a folder outside the repository."""
-    folder = tmp_path_factory.mktemp("user_code")
-    shutil.copy(HERE / "_user_extensions.py", folder / "user_extensions.py")
-    spec = importlib.util.spec_from_file_location("user_extensions", folder / "user_extensions.py")
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module            # dataclasses resolve their module by name
+def ext():
+    """The user's module (``tests/_user_extensions.py``, outside the package), imported by name; its
+    registrations are taken back afterwards, so the other tests see femrom's registries as shipped."""
+    module = importlib.import_module("_user_extensions")
     try:
-        spec.loader.exec_module(module)
         yield module
     finally:
-        del sys.modules[spec.name]
+        for registry, name in ((INTERFACE_LAWS, "user_two_slider"), (EFFECTS, "user_ground_springs"),
+                               (SCHEMES, "fox_goodwin"), (TERMS, "user_cubic_stiffness"), (LEARNERS, "user_lstsq"),
+                               (EXPERIMENTS, "user_peak")):
+            registry.remove(name)
+        del sys.modules["_user_extensions"]
 
 
 def blocks(effects=None, rom=None, signal=None):
