@@ -42,21 +42,10 @@ from pathlib import Path
 
 import numpy as np
 
-from femrom.inference import IwanLOpInf, LagrangianOpInf, SecondOrderData, SpML, SpMLConfig
-from femrom.post import (
-    Backbone,
-    hilbert_backbone,
-    measured_backbone,
-    modal_record,
-    period_corrected,
-    plot_backbones,
-    read_hammer_impact,
-    spectral_peaks,
-    staged_output,
-    write_metrics,
-)
-from femrom.rom import SecondOrderROM
-from femrom.study import compare_backbones
+from femrom.inference import LagrangianOpInf, SecondOrderData, SpMLConfig, TrainingSet
+from femrom.post import Backbone, hilbert_backbone, measured_backbone, modal_record, period_corrected, plot_backbones, \
+    read_hammer_impact, spectral_peaks, staged_output, write_metrics
+from femrom.study import ModelSpec, compare_backbones
 
 
 @dataclass(frozen=True)
@@ -86,12 +75,6 @@ class MeasuredRomCase:
     iwan: tuple = (("thresholds", 32),)
     spml: SpMLConfig = SpMLConfig(seed=0, potential_widths=(), dissipation_widths=(), polynomial_start=True,
                                   max_iterations=400)
-
-
-def _segment(data: SecondOrderData, start: float, stop: float) -> SecondOrderData:
-    keep = (data.times >= start) & (data.times < stop)
-    return SecondOrderData(data.states[:, keep], data.velocities[:, keep], data.accelerations[:, keep],
-                           times=data.times[keep], diagnostics=dict(data.diagnostics))
 
 
 def split_time(measured: Backbone, fraction: float) -> float:
@@ -141,7 +124,7 @@ def linear_fits_by_rank(acc, rate: float, t0: float, train_span, config: "Measur
     for r in range(1, acc.shape[0] + 1):
         data = modal_record(acc, rate, config.band, rank=r, trim=config.trim, every=config.every,
                             start_time=t0).data
-        train = _segment(data, *train_span)
+        train = data.between(*train_span)
         ops = LagrangianOpInf(["damping"]).fit(train).operators_
         M, C, K = ops.mass_matrix, ops.damping, ops.stiffness
         A = np.block([[np.zeros((r, r)), np.eye(r)], [-np.linalg.solve(M, K), -np.linalg.solve(M, C)]])
@@ -155,31 +138,24 @@ def linear_fits_by_rank(acc, rate: float, t0: float, train_span, config: "Measur
     return rows
 
 
-def fit_models(train: SecondOrderData, validation: SecondOrderData, config: MeasuredRomCase, progress) -> dict:
-    models = {}
-    started = time.perf_counter()
-    models["L-OpInf"] = (LagrangianOpInf(["damping"]).fit(train), time.perf_counter() - started)
-    started = time.perf_counter()
-    learner = SpML(["damping"], config=config.spml, progress=False).fit(train, validation=validation)
-    models["SpML"] = (learner, time.perf_counter() - started)
-    progress(f"  SpML: loss {learner.loss_:.3g} (L-OpInf {learner.linear_loss_:.3g}), {models['SpML'][1]:.1f} s")
-    started = time.perf_counter()
-    learner = IwanLOpInf(["damping"], **dict(config.iwan)).fit(train, validation=validation)
-    models["Iwan-L-OpInf"] = (learner, time.perf_counter() - started)
-    progress(f"  Iwan-L-OpInf: residual {learner.residual_:.3g} (linear {learner.linear_residual_:.3g}), "
-             f"{learner.hysteresis_.describe()['active_sliders']} sliders, {models['Iwan-L-OpInf'][1]:.1f} s")
-    return models
+def fit_models(train: SecondOrderData, validation: SecondOrderData, config: MeasuredRomCase) -> dict:
+    """L-OpInf, SpML and Iwan-L-OpInf (:class:`femrom.study.ModelSpec`) on the training part, on the modal
+    coordinates themselves (identity basis); SpML and the Iwan fit judge themselves on ``validation``."""
+    training = TrainingSet(None, np.eye(config.rank), {"train": train}, validation={"validation": validation})
+    specs = (ModelSpec("lopinf", "L-OpInf", {"terms": ("damping",)}),
+             ModelSpec("spml", "SpML", {"terms": ("damping",), "config": config.spml, "progress": False}),
+             ModelSpec("iwan_lopinf", "Iwan-L-OpInf", {"terms": ("damping",), **dict(config.iwan)}))
+    return {spec.label: spec.fit(training, config.rank) for spec in specs}
 
 
-def predict_backbone(learner, record, q0, v0, start: float, duration: float, config: MeasuredRomCase,
+def predict_backbone(rom, record, q0, v0, start: float, duration: float, config: MeasuredRomCase,
                      rate: float) -> tuple[Backbone, dict]:
     dt = config.predict_every / rate
     times = start + np.arange(int(duration / dt)) * dt
-    rom = SecondOrderROM(learner.operators_, np.eye(config.rank))
     started = time.perf_counter()
     # the sliders' return mapping steps with Newmark (the same period error as the midpoint rule)
     solution = rom.predict(times, initial=(q0, v0),
-                           scheme="newmark" if learner.operators_.stateful else "discrete_gradient")
+                           scheme="newmark" if rom.operators_.stateful else "discrete_gradient")
     seconds = time.perf_counter() - started
     acc1 = record.channel_acceleration(solution.a, 0)
     backbone = hilbert_backbone(acc1, 1 / dt, config.band, window=config.window, start_time=start)
@@ -227,20 +203,20 @@ def run(config: MeasuredRomCase, out: Path, progress=print, data_dir=None) -> di
                "split_time_s": t_split, "split_amplitude_m_s2": a_split, "measured": measured.rows(), "splits": {}}
     for name, (train_span, test_span) in splits.items():
         progress(f"{name}: train {train_span[0]:.2f}-{train_span[1]:.2f} s, test {test_span[0]:.2f}-{test_span[1]:.2f} s")
-        train = _segment(data, train_span[0], train_span[1] - config.validation)
-        validation = _segment(data, train_span[1] - config.validation, train_span[1])
-        models = fit_models(train, validation, config, progress)
-        test = _segment(data, *test_span)
+        train = data.between(train_span[0], train_span[1] - config.validation)
+        validation = data.between(train_span[1] - config.validation, train_span[1])
+        models = fit_models(train, validation, config)
+        test = data.between(*test_span)
         q0, v0 = test.states[:, 0], test.velocities[:, 0]
         in_test = (measured.time >= test_span[0]) & (measured.time <= test_span[1])
         low, high = float(measured.amplitude[in_test].min()), float(measured.amplitude[in_test].max())
         entry, curves = {"train_s": list(train_span), "test_s": list(test_span),
                          "test_amplitudes_m_s2": [low, high], "models": {}}, {"measured": measured}
-        for model, (learner, fit_seconds) in models.items():
-            backbone, info = predict_backbone(learner, record, q0, v0, test_span[0], test_span[1] - test_span[0],
+        for model, rom in models.items():
+            backbone, info = predict_backbone(rom, record, q0, v0, test_span[0], test_span[1] - test_span[0],
                                               config, rate)
             result = compare(backbone, measured, low, high)
-            result.update(info, fit_seconds=fit_seconds, **_linear_summary(learner),
+            result.update(info, fit_seconds=rom.fit_seconds_, **_linear_summary(rom),
                           predicted=backbone.rows())
             entry["models"][model] = result
             curves[model] = backbone
@@ -250,8 +226,8 @@ def run(config: MeasuredRomCase, out: Path, progress=print, data_dir=None) -> di
                          f"damping error max {100 * result['damping_relative_error_max']:.0f} %, "
                          f"offset {result['frequency_offset_hz']:+.4f} Hz")
             if config.in_sample:
-                first = _segment(data, *train_span)
-                fitted, _ = predict_backbone(learner, record, first.states[:, 0], first.velocities[:, 0],
+                first = data.between(*train_span)
+                fitted, _ = predict_backbone(rom, record, first.states[:, 0], first.velocities[:, 0],
                                              train_span[0], train_span[1] - train_span[0], config, rate)
                 in_train = (measured.time >= train_span[0]) & (measured.time <= train_span[1])
                 result["in_sample"] = compare(fitted, measured, float(measured.amplitude[in_train].min()),

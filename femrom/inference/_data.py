@@ -118,6 +118,19 @@ class SecondOrderData:
     def n_inputs(self) -> int:
         return 0 if self.inputs is None else self.inputs.shape[0]
 
+    def between(self, start: float, stop: float) -> "SecondOrderData":
+        """The columns with ``start <= t < stop`` (the times must be given), diagnostics kept."""
+        if self.times is None:
+            raise FemromValueError("between needs the data's times")
+        if len(self.starts) > 1:
+            raise FemromValueError("take a time window of each trajectory before concatenating them")
+        keep = (self.times >= start) & (self.times < stop)
+        pick = lambda A: None if A is None else A[..., keep]  # noqa: E731
+        return replace(self, states=pick(self.states), velocities=pick(self.velocities),
+                       accelerations=pick(self.accelerations), inputs=pick(self.inputs),
+                       nonlinear_forces=pick(self.nonlinear_forces), outputs=pick(self.outputs),
+                       times=pick(self.times), starts=(0,), diagnostics=dict(self.diagnostics))
+
     def without_boundary(self, count: int) -> "SecondOrderData":
         """Drop ``count`` columns at each end (e.g. the one-sided stencils)."""
         if count <= 0:
