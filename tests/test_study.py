@@ -172,6 +172,23 @@ def test_learner_names_are_checked_against_the_registry():
     scene = Scene.from_dict(_bracket_dict(learners=["galerkin", "lopinf_typo"]))
     with pytest.raises(SceneError, match=r"unknown learner 'lopinf_typo'; valid: galerkin, hopinf, iwan_lopinf, lopinf, opinf, spml"):
         check_rom_config(scene.rom)
+    # any registered learner of second-order models, with its own options (one table per learner)
+    config = Scene.from_dict(_bracket_dict(learners=["galerkin", {"learner": "iwan_lopinf", "label": "iwan",
+                                                                  "options": {"thresholds": 8,
+                                                                              "threshold_span": [1e-3, 0.5]}}])).rom
+    check_rom_config(config)
+    assert config.learners[1].options == (("thresholds", 8), ("threshold_span", (1e-3, 0.5)))
+    with pytest.raises(SceneError, match=r"\[rom.learners\[1\]\] options must be a table"):
+        Scene.from_dict(_bracket_dict(learners=["galerkin", {"learner": "lopinf", "options": [1]}]))
+    with pytest.raises(SceneError, match=r"\[rom.learners\[1\]\] 'iwan_lopinf' has no option 'thresholdz'; valid: "
+                                         r"band, direction, monotone, regularization, solver, stiffness_margin, terms"):
+        check_rom_config(Scene.from_dict(_bracket_dict(learners=["galerkin", {"learner": "iwan_lopinf",
+                                                                              "options": {"thresholdz": 8}}])).rom)
+    with pytest.raises(SceneError, match=r"\[rom.experiments\[0\]\] unknown experiment 'peak'; registered: "
+                                         r"ring_down, stepped_sine, unseen_input"):
+        check_rom_config(Scene.from_dict(_bracket_dict(experiments=[{"kind": "peak"}])).rom)
+    with pytest.raises(SceneError, match=r"\[rom.experiments\[0\]\] must be a table with a kind"):
+        Scene.from_dict(_bracket_dict(experiments=[{"run": "step"}]))
     check_rom_config(Scene.from_dict(_bracket_dict(learners=["galerkin", "hopinf"])).rom)   # a valid name:
     # whether the scene is conservative is checked once it is built (tests/test_study_canonical.py)
 

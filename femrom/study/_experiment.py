@@ -27,7 +27,7 @@ from femrom._registry import Registry
 from femrom.integrators import StepResult
 
 #: The experiments by name.
-EXPERIMENTS = Registry("experiment", "femrom.study.experiments", valid="registered")
+EXPERIMENTS = Registry("experiment", "femrom.study.experiments", order=lambda name, cls: name, valid="registered")
 
 
 def register_experiment(name: str):

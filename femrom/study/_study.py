@@ -22,6 +22,7 @@ first training and test run's errors flattened as ``train_*`` / ``test_*``.
 
 from __future__ import annotations
 
+import inspect
 from dataclasses import replace
 
 import numpy as np
@@ -54,11 +55,26 @@ def check_rom_config(config: RomConfig) -> None:
         if spec.learner not in valid:
             raise SceneError(f"[rom.learners[{i}]] {spec.learner!r} fits {known[spec.learner].model} models, "
                              f"not second-order or canonical ones; the [rom] pipeline takes: {', '.join(valid)}")
+        if spec.terms and "extra_terms" not in _keywords(known[spec.learner]):
+            raise SceneError(f"[rom.learners[{i}]] {spec.learner!r} learns no terms beyond its own: remove 'terms'")
+        unknown = [name for name, _ in spec.options if name not in _keywords(known[spec.learner])]
+        if unknown:
+            raise SceneError(f"[rom.learners[{i}]] {spec.learner!r} has no option {unknown[0]!r}; valid: "
+                             f"{', '.join(sorted(_keywords(known[spec.learner])))}")
     experiments = registered_experiments()
     for i, spec in enumerate(config.experiments):
         if spec.kind not in experiments:
             raise SceneError(f"[rom.experiments[{i}]] unknown experiment {spec.kind!r}; "
                              f"registered: {', '.join(experiments)}")
+
+
+def _keywords(cls) -> set[str]:
+    """The keyword options a learner class takes (its constructor's and its ``for_training``'s)."""
+    names = set()
+    for function in (cls.__init__, cls.for_training):
+        names |= {p.name for p in inspect.signature(function).parameters.values()
+                  if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY) and p.name not in ("self", "cls", "training", "r")}
+    return names
 
 
 def needs_stored_derivatives(config: RomConfig) -> bool:
@@ -79,7 +95,8 @@ def model_spec(spec) -> ModelSpec:
     """The :class:`ModelSpec` of a ``[rom]`` learner entry (a :class:`~femrom.scene.LearnerSpec`): its
     options, its regularisation when set, its ``terms`` as terms beyond the scene's effects."""
     options = dict(spec.options)
-    if spec.regularization:
+    keywords = _keywords(learner_class(spec.learner))
+    if spec.regularization and "regularization" in keywords:    # the section's default: for learners that regularise
         options.setdefault("regularization", spec.regularization)
     if spec.terms:
         options.setdefault("extra_terms", spec.terms)
