@@ -7,7 +7,7 @@ For ``q' = dH/dp``, ``p' = -dH/dq`` (:class:`~femrom.integrators.CanonicalSystem
 2. :func:`canonical_rows`: for every r a cotangent-lift basis ``Phi`` of the training
    window (:class:`~femrom.basis.CotangentLiftPSD`), reduced data with finite-difference
    derivatives and the projected known gradient, and the models of a list of
-   :class:`CanonicalSpec`: ``galerkin`` (``Phi^T D Phi``, intrusive), ``hopinf``
+   :class:`CanonicalSpec` (each built through the learner registry): ``galerkin`` (``Phi^T D Phi``, intrusive), ``hopinf``
    (symmetric ``D^_q``, ``D^_p``; :class:`~femrom.rom.HamiltonianROM`), ``canonical_opinf``
    (an unconstrained ``A^``; :class:`~femrom.rom.FirstOrderROM`), the last two with a
    Tikhonov weight or one chosen from a grid by the training window alone;
@@ -30,21 +30,22 @@ import numpy as np
 
 from femrom._errors import FemromValueError
 from femrom.basis import CotangentLiftPSD
-from femrom.inference import CanonicalOpInf, HamiltonianOpInf, reduce_canonical_snapshots
+from femrom.inference import HamiltonianOperators, learner_class, reduce_canonical_snapshots, registered_learners
 from femrom.integrators import integrate_canonical
 from femrom.rom import FirstOrderROM, HamiltonianROM
 from femrom.study._metrics import invariant_drift
 from femrom._timing import Cost, repeated_cost, repeated_costs
 
-#: The models a :class:`CanonicalSpec` can name.
-CANONICAL_LEARNERS = ("galerkin", "hopinf", "canonical_opinf")
+#: The kinds of learned model a canonical study runs (besides the intrusive projection).
+CANONICAL_KINDS = ("canonical", "first_order")
 
 
 @dataclass(frozen=True)
 class CanonicalSpec:
     """One reduced model of a canonical study, reported under ``label``.
 
-    ``learner``: one of :data:`CANONICAL_LEARNERS`; ``scheme``: the ROM's integrator
+    ``learner``: a registered learner, the intrusive ``galerkin`` or one of canonical or first-order
+    models (:data:`CANONICAL_KINDS`: ``hopinf``, ``canonical_opinf``); ``scheme``: the ROM's integrator
     (``"midpoint"``; ``"rk4"`` for ``canonical_opinf``); ``shared``: one ``D^`` for both
     blocks (``hopinf``); ``regularization``: a relative Tikhonov weight, or a tuple of
     them from which the one whose prediction fits the training window best is chosen
@@ -58,9 +59,16 @@ class CanonicalSpec:
     regularization: float | tuple = 0.0
 
     def __post_init__(self):
-        if self.learner not in CANONICAL_LEARNERS:
-            raise FemromValueError(f"unknown canonical learner {self.learner!r}; "
-                                   f"valid: {', '.join(CANONICAL_LEARNERS)}")
+        cls = learner_class(self.learner)
+        if not self.intrusive and cls.model not in CANONICAL_KINDS:
+            valid = [name for name, c in registered_learners().items() if c.model in CANONICAL_KINDS]
+            raise FemromValueError(f"learner {self.learner!r} fits {cls.model} models; a canonical study takes "
+                                   f"galerkin and {', '.join(valid)}")
+
+    @property
+    def intrusive(self) -> bool:
+        """Whether the learner reads the full operators (the Galerkin projection)."""
+        return "system" in learner_class(self.learner).needs
 
     @property
     def selects(self) -> bool:
@@ -160,15 +168,13 @@ class _Models:
         self.galerkin = HamiltonianROM.galerkin(system, V)      # projected once per basis
 
     def fit(self, spec: CanonicalSpec, regularization: float):
-        if spec.learner == "galerkin":
+        """The model of ``spec`` (by the registry: the projection, or the learner's kind of ROM)."""
+        if spec.intrusive:
             return HamiltonianROM(self.galerkin.operators_, self.V, self.potential, scheme=spec.scheme)
-        if spec.learner == "hopinf":
-            learner = HamiltonianOpInf(regularization, shared=spec.shared).fit(self.data)
-            rom = HamiltonianROM(learner.operators_, self.V, self.potential, scheme=spec.scheme)
-            rom.learner = learner
-            return rom
-        learner = CanonicalOpInf(regularization).fit(self.data)
-        return FirstOrderROM(learner.operators_, self.V, self.potential, learner=learner, scheme=spec.scheme)
+        cls = learner_class(spec.learner)
+        learner = cls(regularization, **({"shared": True} if spec.shared else {})).fit(self.data)
+        rom_class = HamiltonianROM if cls.model == "canonical" else FirstOrderROM
+        return rom_class(learner.operators_, self.V, self.potential, learner=learner, scheme=spec.scheme)
 
 
 def _predict(model, y0, times):
@@ -272,14 +278,14 @@ def canonical_rows(system, run: CanonicalRun, specs, *, ranks, train_window: flo
             Qf, Pf = V @ solution.q, V @ solution.p
             A = linear_operator(model)
             row = {"method": spec.label, "learner": spec.label, "r": r, "integrator": spec.scheme,
-                   "regularization": None if spec.learner == "galerkin" else weight,
+                   "regularization": None if spec.intrusive else weight,
                    "basis_seconds": basis_seconds,
-                   "fit_seconds": float("nan") if spec.learner == "galerkin" else fit_seconds,
-                   "offline_seconds": basis_seconds + (0.0 if spec.learner == "galerkin" else fit_seconds),
+                   "fit_seconds": float("nan") if spec.intrusive else fit_seconds,
+                   "offline_seconds": basis_seconds + (0.0 if spec.intrusive else fit_seconds),
                    **window_metrics(system, Q, P, Qf, Pf, train, test, dt, invariants),
                    "projection_error_test": projection, "mass_generator": mass_generator(A),
                    "max_real_eigenvalue": float(np.max(np.linalg.eigvals(A).real))}
-            if spec.learner == "hopinf":
+            if not spec.intrusive and isinstance(model.operators_, HamiltonianOperators):   # learned D^_q, D^_p
                 ops, learner = model.operators_, model.learner
                 Qh, Ph = data.states_q, data.states_p
                 row.update(residual=learner.residual_,
