@@ -1,28 +1,15 @@
 """SERPENT-like soft robot: L-OpInf against DMDc, ERA, OKID and Galerkin; MPC closed loops on the FOM.
 
-The eel-like robot of ``soft_robot.toml`` (``docs/soft_robot.md``: P2 elastodynamics, head
-clamped, six chamber pressures, 40 centreline outputs), end to end:
-
-1. **Inputs.** The six chambers act in antagonistic pairs, ``u_{2i} = -u_{2i+1}``: the case
-   drives the three pairs (``v_i``: ``+v_i`` in segment i's left chamber, ``-v_i`` in its
-   right one, 100 kPa per unit). Training: phased sinusoids (segment i lagging by 120
-   degrees) at several frequencies in 0.1-1.5 Hz summed in one run, and a band-limited
-   random run; tests on unseen inputs: phased sines at another frequency and phase lag, a
-   chirp, and another band-limited random input. Every input starts at zero through a
-   raised-cosine onset (every run starts at rest, where a state-space model from rest starts).
-2. **The study** (:func:`femrom.study.run_study`): the FOM runs (one factorisation), a
-   mass-orthonormal POD basis of the training runs, Galerkin and L-OpInf ROMs at every r,
-   the render of the FOM against L-OpInf.
-3. **The comparison** (:func:`femrom.study.linear_model_rows`): Galerkin, L-OpInf, DMDc (on
-   ``[q^; q^']``), ERA (on the FOM's impulse response, one run per pair) and OKID (on inputs
-   and outputs) at sizes r (2 r states each) as discrete state spaces: output error on every
-   unseen input, spectral radius and a long window for stability, fit time, cost per step.
-4. **MPC** (:mod:`femrom.control`) on the state space of chosen models: horizon 50,
-   ``|v| <= 0.1``, a Kalman observer from the 40 outputs, closed loops on the FOM (stepping
-   with its own Newmark integrator) tracking a feasible reference (the FOM's response to
-   the unseen phased sines) and an eel-like travelling wave ``y(x, t) = a(x) sin(k x - omega t)``.
-5. ``metrics.json`` (one row per (model, r, test input) and per (controller, reference)),
-   ``report.md``, ``comparison.png``, ``control.png``, ``render.png``, ``control_render.png``.
+The eel-like robot of ``soft_robot.toml`` (``docs/soft_robot.md``; the study and its numbers:
+``docs/cases/soft_robot.md``), end to end: the six chambers driven as three antagonistic pairs
+(``v_i``: ``+v_i`` left, ``-v_i`` right, 100 kPa per unit), trained on phased sinusoids and a
+band-limited random run, tested on unseen phased sines, a chirp and another random input (every
+input from rest through a raised-cosine onset); the study (:func:`femrom.study.run_study`:
+Galerkin and L-OpInf at every r); the linear models as discrete state spaces
+(:func:`femrom.study.linear_model_rows`: Galerkin, L-OpInf, DMDc, ERA on the FOM's impulse
+response, OKID), and MPC (horizon 50, ``|v| <= 0.1``, a Kalman observer) in closed loops on
+the FOM, tracking a feasible reference and an eel-like travelling wave
+``y(x, t) = a(x) sin(k x - omega t)``.
 
 Run ``python -m femrom run soft_robot [--out DIR] [--quick] [--full]``; tests import :func:`run`.
 """
@@ -41,12 +28,11 @@ import numpy as np
 
 from femrom import FemromValueError
 from femrom.control import travelling_wave
-from femrom.inference import system_impulse_response
-from femrom.post import accuracy_cost_table, plot_closed_loops, render_closed_loop, staged_output
+from femrom.post import staged_output
 from femrom.scene import BasisSpec, Derivatives, InputConfig, LearnerSpec, ReportSpec, RomConfig, RunSpec, Scene, \
     TimingSpec, band_limited_noise, chirp, multisine, onset
-from femrom.study import CLOSED_LOOP_COLUMNS, ModelSpec, closed_loop_rows, linear_model_rows, \
-    linear_model_table, plot_linear_model_errors, run_study
+from femrom.study import ModelSpec, closed_loop_rows, closed_loop_section, linear_model_rows, linear_model_section, \
+    run_study
 
 SCENE = Path(__file__).with_suffix(".toml")
 SEGMENTS = 3
@@ -163,35 +149,22 @@ def rom_config(config: SoftRobotCase, dt: float) -> RomConfig:
                      timing=TimingSpec(config.timing_repeats, config.timing_block_seconds))
 
 
-def output_positions(scene: Scene) -> np.ndarray:
-    """(20,) x of the centreline points (the outputs are x, z of each point in turn)."""
-    line = scene.outputs.lines[0]
-    start, end = (np.asarray(p, dtype=float) for p in (line.path[0], line.path[-1]))
-    return np.linspace(start[0], end[0], line.points)
-
-
 # -- control ----------------------------------------------------------------------------------
-def wave_reference(config: SoftRobotCase, scene: Scene, times: np.ndarray) -> np.ndarray:
-    """(40, K) the travelling wave on the z outputs (x outputs zero), with the inputs' onset."""
-    x = output_positions(scene)
-    length = float(x[-1])
-    z = travelling_wave(x, times, lambda s: config.wave_tip_amplitude * (s / length) ** 2,
-                        2 * np.pi / config.wave_length, 2 * np.pi * config.wave_frequency)
-    reference = np.zeros((2 * x.size, times.size))
-    reference[1::2] = z * onset(times, config.ramp)[None, :]
-    return reference
-
-
 def control_rows(state, config: SoftRobotCase, models: dict, progress) -> tuple[list[dict], dict]:
     """Closed loops on the FOM (:func:`femrom.study.closed_loop_rows`): each controller model on the
     feasible reference (the FOM's response to the unseen phased sines) and the travelling wave; the
-    first controller's wave loop keeps the FOM's displacements for the render."""
+    first controller's wave loop keeps the FOM's displacements for the render. The wave is on the z
+    outputs (x outputs zero: they alternate x, z along the centreline), with the inputs' onset."""
     dt = state.scene.time.dt
     n_steps = int(round(config.control_window / dt))
     K = n_steps + 1 + config.horizon
     times = dt * np.arange(K)
-    references = {"feasible": state.runs["test_sines"].outputs[:, :K],
-                  "travelling_wave": wave_reference(config, state.scene, times)}
+    x = state.scene.outputs.lines[0].locations()[:, 0]
+    wave = np.zeros((2 * x.size, K))
+    wave[1::2] = onset(times, config.ramp)[None, :] * travelling_wave(
+        x, times, lambda s: config.wave_tip_amplitude * (s / x[-1]) ** 2, 2 * np.pi / config.wave_length,
+        2 * np.pi * config.wave_frequency)
+    references = {"feasible": state.runs["test_sines"].outputs[:, :K], "travelling_wave": wave}
     return closed_loop_rows(state.model, dt, models, config.controllers, references, n_steps, horizon=config.horizon,
                             input_bound=config.amplitude, rate_weight=config.rate_weight,
                             measurement_noise=config.measurement_noise, disturbance=config.disturbance,
@@ -200,11 +173,6 @@ def control_rows(state, config: SoftRobotCase, models: dict, progress) -> tuple[
 
 
 # -- the case ---------------------------------------------------------------------------------
-#: the report's table of the linear models: one line per (model, r), the unseen inputs side by side
-COMPARISON_COLUMNS = ["model", "r", "state_order", "test_sines", "test_chirp", "test_random", "stable",
-                      "spectral_radius", "fit_seconds", "seconds_per_step"]
-
-
 def run(out_dir, config: SoftRobotCase = SoftRobotCase(), *, progress=None, scene_path=SCENE) -> dict:
     """Run the case; return its metrics (also written to ``out_dir/metrics.json``)."""
     out_dir = Path(out_dir)
@@ -226,52 +194,27 @@ def run(out_dir, config: SoftRobotCase = SoftRobotCase(), *, progress=None, scen
     def extend(state):
         metrics, sections = {"case": "soft_robot", "case_config": dataclasses.asdict(config)}, []
         system, dt = state.model.system, scene.time.dt
-        markov = None
-        if "era" in config.models:
-            say(f"ERA data: the FOM's impulse response, {system.n_inputs} runs of {config.era_samples} steps")
-            tic = time.perf_counter()
-            markov = system_impulse_response(system, dt, config.era_samples, progress=False)
-            metrics["era_impulse_seconds"] = time.perf_counter() - tic
         tests = {s.name: state.runs[s.name] for s in state.config.test}
         say(f"linear models {', '.join(config.models)} at r = {', '.join(map(str, config.ranks))}")
         tic = time.perf_counter()
-        rows, models = linear_model_rows([MODELS[m] for m in config.models], config.ranks, tests,
-                                         system=system, basis=state.basis, product=state.product,
-                                         data=state.data, markov=markov, extension=config.extension,
-                                         repeats=config.timing_repeats,
-                                         min_block_seconds=config.timing_block_seconds, progress=say)
-        metrics["comparison"] = rows
-        metrics["linear_models_seconds"] = time.perf_counter() - tic
-        title = f"soft robot: {system.n_dofs} dofs, unseen inputs"
-        plot_linear_model_errors(out_dir / "comparison.png", rows, list(tests), title)
-        table = linear_model_table(rows)
-        sections.append("## Linear models as discrete state spaces (output error on unseen inputs)\n\n"
-                        "Every model run from rest on each test input; stable: spectral radius <= 1 and, over "
-                        f"{config.extension:g}x the test window (the input zero after it), the free response in the "
-                        "second half no larger than the driven peak. "
-                        "Seconds per step: the state-space step, all models timed together.\n\n"
-                        + accuracy_cost_table(table, COMPARISON_COLUMNS) + "\n\n![comparison](comparison.png)")
+        rows, models = linear_model_rows(
+            [MODELS[m] for m in config.models], config.ranks, tests, system=system, basis=state.basis,
+            product=state.product, data=state.data, markov_samples=config.era_samples, extension=config.extension,
+            repeats=config.timing_repeats, min_block_seconds=config.timing_block_seconds, progress=say)
+        metrics.update(comparison=rows, linear_models_seconds=time.perf_counter() - tic)
+        sections.append(linear_model_section(out_dir, rows, tests, extension=config.extension,
+                                             title=f"soft robot: {system.n_dofs} dofs, unseen inputs"))
         tic = time.perf_counter()
         control, results = control_rows(state, config, models, say)
-        metrics["control_seconds"] = time.perf_counter() - tic
-        metrics["control"] = control
-        plot_closed_loops(out_dir / "control.png", results, dt, config.amplitude,
-                          title=f"MPC on the FOM, horizon {config.horizon}", output=-1, output_label="tail tip z",
-                          scale=1e3, unit="mm", input_label="pair inputs v_i")
-        sections.append("## MPC closed loops on the FOM\n\n" + accuracy_cost_table(control, CLOSED_LOOP_COLUMNS)
-                        + "\n\n![control](control.png)")
-        label, r = config.controllers[0]
-        shown = results.get((label, r, "travelling_wave"))
-        metrics["renders_control"] = {"control_render": None}
-        if config.render and shown is not None:
-            metrics["renders_control"] = render_closed_loop(out_dir / "control_render.png", state.model, shown,
-                                                            f"{label} r={r}, travelling wave", dt)
-            if metrics["renders_control"]["control_render"]:
-                sections.append("![controlled motion](control_render.png)")
+        metrics.update(control_seconds=time.perf_counter() - tic, control=control)
+        section, metrics["renders_control"] = closed_loop_section(
+            out_dir, control, results, state.model, dt, bound=config.amplitude, horizon=config.horizon,
+            shown=(*config.controllers[0], "travelling_wave") if config.controllers else None, render=config.render,
+            output=-1, output_label="tail tip z", scale=1e3, unit="mm", input_label="pair inputs v_i")
+        sections.append(section)
         return metrics, sections
 
     from threadpoolctl import threadpool_limits
-
     # one MKL / BLAS thread: on the shared 2-core machine a PARDISO solve at 9.4e3 dofs took 12 ms on
     # one thread and 61 ms on two under load (the threads wait on each other), the small dense fits alike
     with threadpool_limits(1):
@@ -287,20 +230,15 @@ def main(argv=None) -> int:
     parser.add_argument("--ranks", type=int, nargs="+", help="sizes r (default 2 4 6 10 16 20)")
     parser.add_argument("--no-render", action="store_true", help="skip the PyVista renders")
     args = parser.parse_args(argv)
-    config = SoftRobotCase.quick() if args.quick else SoftRobotCase()
-    if args.full:
-        config = dataclasses.replace(config, controllers=SoftRobotCase.full().controllers)
-    if args.ranks:
-        config = dataclasses.replace(config, ranks=tuple(args.ranks))
-    if args.no_render:
-        config = dataclasses.replace(config, render=False)
+    changes = {"controllers": SoftRobotCase.full().controllers} if args.full else {}
+    changes |= ({"ranks": tuple(args.ranks)} if args.ranks else {}) | ({"render": False} if args.no_render else {})
+    config = dataclasses.replace(SoftRobotCase.quick() if args.quick else SoftRobotCase(), **changes)
     with staged_output(args.out) as out:    # the results appear whole, or the old ones stay
         metrics = run(out, config)
     rows = [row for row in metrics["comparison"] if row.get("r") == 10 and "failed" not in row]
-    for model in config.models:
-        errors = [row["test_output_error"] for row in rows if row["model"] == model]
-        if errors:
-            print(f"soft robot r=10 {model}: unseen-input output errors " + ", ".join(f"{e:.2e}" for e in errors))
+    for model in (m for m in config.models if any(row["model"] == m for row in rows)):
+        print(f"soft robot r=10 {model}: unseen-input output errors "
+              + ", ".join(f"{row['test_output_error']:.2e}" for row in rows if row["model"] == model))
     for row in (row for row in metrics["control"] if "failed" not in row):
         print(f"MPC {row['controller']} r={row['r']} on {row['reference']}: tracking {row['tracking_error']:.3f}, "
               f"QP {row['qp_seconds_per_step'] * 1e3:.1f} ms/step")

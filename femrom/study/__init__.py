@@ -132,8 +132,8 @@ from femrom.study._impacts import (
     with_impulse,
 )
 from femrom.study._jointed_beam import JOINTED_BEAM, CalibratedBeam, JointedBeamModel, modal_qsma
-from femrom.study._closed_loops import CLOSED_LOOP_COLUMNS, closed_loop_rows, open_loop_error
-from femrom.study._linear_model_figures import linear_model_table, plot_linear_model_errors
+from femrom.study._closed_loops import CLOSED_LOOP_COLUMNS, closed_loop_rows, closed_loop_section, open_loop_error
+from femrom.study._linear_model_figures import linear_model_section, linear_model_table
 from femrom.study._scene_run import scene_run
 from femrom.study._experiment import Experiment, register_experiment, registered_experiments, rest_start
 from femrom.study.experiments.ring_down import RingDownTest
@@ -156,15 +156,15 @@ from femrom._timing import Cost, blocked_cost, call_cost, repeated_cost, repeate
 __all__ = [
     "backbone_errors", "backbone_shift", "blocked_cost", "CalibratedBeam", "call_cost", "canonical_rows",
     "canonical_time_step_ladder", "CanonicalSpec", "check_canonical_learners", "check_rom_config",
-    "CLOSED_LOOP_COLUMNS", "dispersion_error", "closed_loop_rows", "compare_backbones", "compare_models", "compare_ring_downs",
+    "CLOSED_LOOP_COLUMNS", "dispersion_error", "closed_loop_rows", "closed_loop_section", "compare_backbones", "compare_models", "compare_ring_downs",
     "compare_stepped_sines", "Cost", "ecsw_training", "evaluate", "Experiment", "extrapolation_config",
     "EXTRAPOLATION_LEARNER_NAMES", "extrapolation_scene", "final_state", "final_state_ladders",
     "final_state_section", "fom_runs", "force_error", "frequency_ladder", "frequency_section",
     "HYPER_COLUMNS", "hyper_reduced_rows", "invariant_drift", "JOINTED_BEAM", "JointedBeamModel",
-    "linear_model_rows", "linear_model_table", "mass_generator", "mass_norm", "mass_pod", "modal_qsma",
+    "linear_model_rows", "linear_model_section", "linear_model_table", "mass_generator", "mass_norm", "mass_pod", "modal_qsma",
     "ModelSpec", "natural_frequencies", "nonlinear_forces", "observed_order", "open_loop_error",
     "output_ring_down", "peak_rss_gb", "plot_accuracy_cost", "plot_histories", "plot_invariant_drifts",
-    "plot_linear_model_errors", "plot_output_history", "pod_basis", "projected_forces",
+    "plot_output_history", "pod_basis", "projected_forces",
     "Projection", "reconstructed_energy_error", "reduce_runs", "reference_ring_down",
     "register_experiment", "registered_experiments", "repeated_cost", "repeated_costs", "rest_start",
     "RING_DOWN_COLUMNS", "ring_down_data", "RingDown", "RingDownComparison", "RingDownTest", "rom_table",

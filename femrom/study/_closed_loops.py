@@ -23,6 +23,7 @@ import time
 import numpy as np
 
 from femrom.control import FullOrderPlant, KalmanObserver, LinearMPC, closed_loop
+from femrom.post import accuracy_cost_table, plot_closed_loops, render_closed_loop
 from femrom.study._metrics import relative_error
 from femrom.snapshots import solver_factory
 
@@ -102,3 +103,26 @@ def closed_loop_rows(fom, dt: float, models: dict, controllers, references: dict
     finally:
         solver.cache.clear()
     return rows, results
+
+
+def closed_loop_section(out_dir, rows: list[dict], results: dict, fom, dt: float, *, bound: float, horizon: int,
+                        shown=None, render: bool = True, **figure) -> tuple[str, dict]:
+    """``(section, renders)``: the report section of :func:`closed_loop_rows` (``control.png``: outputs and
+    applied inputs of every loop, :func:`~femrom.post.plot_closed_loops` with ``figure``'s labels and
+    scale; the table), and with ``render`` a render of the loop ``shown`` (``(label, r, reference)``,
+    recorded with its FOM displacements) as ``control_render.png``."""
+    from pathlib import Path
+
+    out_dir = Path(out_dir)
+    plot_closed_loops(out_dir / "control.png", results, dt, bound, title=f"MPC on the FOM, horizon {horizon}",
+                      **figure)
+    section = ("## MPC closed loops on the FOM\n\n" + accuracy_cost_table(rows, CLOSED_LOOP_COLUMNS)
+               + "\n\n![control](control.png)")
+    renders = {"control_render": None}
+    result = None if shown is None else results.get(shown)
+    if render and result is not None:
+        renders = render_closed_loop(out_dir / "control_render.png", fom, result,
+                                     f"{shown[0]} r={shown[1]}, {shown[2].replace('_', ' ')}", dt)
+        if renders["control_render"]:
+            section += "\n\n![controlled motion](control_render.png)"
+    return section, renders

@@ -5,7 +5,10 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from femrom.post import pyplot, save_figure
+from femrom.post import accuracy_cost_table, pyplot, save_figure
+
+#: the report's table of the linear models: one line per (model, r), the test runs' errors side by side
+LINEAR_MODEL_COLUMNS = ["model", "r", "state_order", "stable", "spectral_radius", "fit_seconds", "seconds_per_step"]
 
 
 def linear_model_table(rows: list[dict]) -> list[dict]:
@@ -48,3 +51,17 @@ def plot_linear_model_errors(path, rows: list[dict], runs, title: str = "") -> P
     axes[0, 0].legend(fontsize=8)
     fig.suptitle(title, fontsize=10)
     return save_figure(fig, path, dpi=110)
+
+
+def linear_model_section(out_dir, rows: list[dict], runs, *, title: str, extension: float) -> str:
+    """The report section of :func:`femrom.study.linear_model_rows`: ``comparison.png``
+    (:func:`plot_linear_model_errors`) in ``out_dir`` and the table (:func:`linear_model_table`, the runs'
+    errors after the model and size), with what "stable" and the costs mean."""
+    plot_linear_model_errors(Path(out_dir) / "comparison.png", rows, list(runs), title)
+    columns = LINEAR_MODEL_COLUMNS[:3] + list(runs) + LINEAR_MODEL_COLUMNS[3:]
+    return ("## Linear models as discrete state spaces (output error on unseen inputs)\n\n"
+            "Every model run from rest on each test input; stable: spectral radius <= 1 and, over "
+            f"{extension:g}x the test window (the input zero after it), the free response in the "
+            "second half no larger than the driven peak. "
+            "Seconds per step: the state-space step, all models timed together.\n\n"
+            + accuracy_cost_table(linear_model_table(rows), columns) + "\n\n![comparison](comparison.png)")

@@ -29,7 +29,7 @@ import time
 import numpy as np
 
 from femrom._errors import FemromValueError
-from femrom.inference import TrainingSet
+from femrom.inference import TrainingSet, learner_class, system_impulse_response
 from femrom.scene import Derivatives
 from femrom.study._metrics import relative_error
 from femrom.study._models import ModelSpec
@@ -52,8 +52,8 @@ def _simulate(model, inputs: np.ndarray) -> np.ndarray:
 
 
 def linear_model_rows(specs, ranks, runs: dict, *, system, basis, product, data: dict, markov=None,
-                      extension: float = 10.0, repeats: int = 5, min_block_seconds: float = 0.05,
-                      progress=None) -> tuple[list[dict], dict]:
+                      markov_samples: int | None = None, extension: float = 10.0, repeats: int = 5,
+                      min_block_seconds: float = 0.05, progress=None) -> tuple[list[dict], dict]:
     """One row per (model, r, run): fit every spec at every r, run it on every run, time all together.
 
     Parameters
@@ -67,7 +67,9 @@ def linear_model_rows(specs, ranks, runs: dict, *, system, basis, product, data:
     system, basis, product, data
         The study's FOM system, basis (n, R), basis product and training data by run.
     markov : MarkovParameters, optional
-        For ERA.
+        For a learner that needs them (ERA); without them, ``markov_samples`` of the system's own
+        impulse response (:func:`~femrom.inference.system_impulse_response`, one run per input, timed:
+        ``markov_seconds`` in those learners' rows).
     extension : float
         The long window in multiples of each run's.
 
@@ -85,8 +87,19 @@ def linear_model_rows(specs, ranks, runs: dict, *, system, basis, product, data:
         if np.any(run.q0) or np.any(run.v0) or np.any(run.U[:, 0]):
             raise FemromValueError(f"run {name!r} does not start at rest with u_0 = 0: a model started from z_0 = 0 "
                                    "would not start where it does")
+    markov_seconds = None
+    if markov is None and any("markov" in learner_class(spec.learner).needs for spec in specs):
+        if markov_samples is None:
+            raise FemromValueError("a model needs Markov parameters: give markov= or markov_samples=")
+        if progress:
+            progress(f"Markov parameters: the system's impulse response, {system.n_inputs} runs of "
+                     f"{markov_samples} steps")
+        tic = time.perf_counter()
+        markov = system_impulse_response(system, dt, markov_samples, progress=False)
+        markov_seconds = time.perf_counter() - tic
     training = TrainingSet(system, basis, data, product=product, markov=markov, derivatives=Derivatives("stored"))
     rows, models, fits = [], {}, {}
+    by_label = {spec.label: spec for spec in specs}
     for r in ranks:
         for spec in specs:
             if progress:
@@ -113,6 +126,8 @@ def linear_model_rows(specs, ranks, runs: dict, *, system, basis, product, data:
             ratio = float(np.max(np.abs(late))) / driven if np.all(np.isfinite(outputs)) and driven > 0 \
                 else float("inf")
             rows.append({"model": label, "r": r, "state_order": model.n_states, "run": name,
+                         **({"markov_seconds": markov_seconds} if markov_seconds is not None
+                            and "markov" in learner_class(by_label[label].learner).needs else {}),
                          "test_output_error": relative_error(run.outputs, outputs[:, :run.times.size]),
                          "spectral_radius": radius, "long_output_ratio": ratio,
                          "stable": bool(radius <= 1 + RADIUS_TOLERANCE and ratio <= 1 + GROWTH_TOLERANCE),
