@@ -1,32 +1,23 @@
 """Jointed beam from its measured ring-down: a data-only ROM predicting the backbone at untrained amplitudes.
 
-Issue 17, part 4. The hammer-impact record of the half Brake-Reuss beam
-(``hammer_impact.npz``, three accelerometers; read from ``femrom.post.brb_data_dir()``
-or ``--data``) is the only input:
+The hammer-impact record of the half Brake-Reuss beam (``hammer_impact.npz``, three accelerometers;
+read from ``femrom.post.brb_data_dir()`` or ``--data``) is the only input (``docs/cases/jointed_beam_measured.md``):
 
-1. **Modal coordinates** (:func:`femrom.post.modal_record`): the post-trigger
-   accelerations integrated in the mode-1 band (60-100 Hz, exact in the band), the
-   band's transients trimmed (0.25 s at each end), the three displacements' singular
-   values (how many coordinates the sensors support) and the coordinate ``q`` on the
-   leading shape, with ``q'`` and ``q''`` from the same band integrals.
-2. **Split by amplitude**: acc1's measured backbone (``femrom.post.measured_backbone``)
-   falls from about 24 to 0.65 m/s^2; the split is where the envelope has fallen by
-   ``split`` of its log range. Forward: train on the high amplitudes (the start of the
-   decay), predict the low ones; reverse: train on the low amplitudes, predict the high.
-3. **Models**, both fitted on ``SecondOrderData`` without input (the last
-   ``validation`` seconds of the training part are SpML's validation trajectory):
-   L-OpInf (``LagrangianOpInf``: linear, a flat backbone by construction) and SpML
-   (learned mass, potential, convex dissipation; by default the monomials alone,
-   started at their least-squares solution: see ``docs/cases/jointed_beam_measured.md``).
-4. **Prediction**: each ROM released from the test part's first state ``(q, q')``,
-   stepped by the discrete-gradient scheme at ``predict_every`` samples; acc1's predicted
-   signal (the coordinate's acceleration times acc1's entry of the shape) through the
-   same Hilbert processing (band, 0.2 s windows, default trim), the midpoint rule's
-   period error removed (:func:`femrom.post.period_corrected`: ``f = tan(pi f_h dt) / (pi dt)``).
-5. **Errors** over the test amplitudes covered by both the prediction and the measured
-   test windows: the frequency shift between the highest and the lowest of them
-   (relative to the measured shift), the damping ratio per window (relative), the
-   frequency offset.
+1. **Modal coordinates** (:func:`femrom.post.modal_record`): the post-trigger accelerations
+   integrated in the mode-1 band (60-100 Hz), the band's transients trimmed, the displacements'
+   singular values (how many coordinates the sensors support), ``q``, ``q'``, ``q''`` on the leading shape.
+2. **Split by amplitude** where acc1's measured backbone (``femrom.post.measured_backbone``) has fallen
+   by ``split`` of its log range. Forward: train on the high amplitudes, predict the low ones; reverse:
+   the other way round.
+3. **Models** from the learner registry (:class:`femrom.study.ModelSpec`) on ``SecondOrderData`` without
+   input: L-OpInf (linear, a flat backbone by construction), SpML (learned mass, potential, convex
+   dissipation) and Iwan-L-OpInf (learned sliders); the last ``validation`` seconds of the training part
+   are what SpML and the Iwan fit judge themselves on.
+4. **Prediction** from the test part's first state ``(q, q')`` at ``predict_every`` samples (Newmark
+   for the sliders, the discrete-gradient scheme otherwise); acc1's predicted signal through the same
+   Hilbert processing, the period error removed (:func:`femrom.post.period_corrected`).
+5. **Errors** over the test amplitudes both cover: the frequency shift between the highest and the
+   lowest (relative to the measured shift), the damping ratio per window, the frequency offset.
 
 Run ``python -m femrom run jointed_beam_measured [-o results/jointed_beam_measured] [--data DIR]``.
 """
@@ -110,13 +101,6 @@ def compare(predicted: Backbone, measured: Backbone, low: float, high: float) ->
     }
 
 
-def rank_check(record, coordinates, rate: float) -> dict:
-    """Singular values of the band displacements and the spectral peak of each coordinate."""
-    s = record.singular_values
-    peaks = [spectral_peaks(q, rate, min_frequency=40.0, max_frequency=140.0).tolist() for q in coordinates]
-    return {"singular_values": s.tolist(), "relative": (s / s[0]).tolist(), "coordinate_peaks_hz": peaks}
-
-
 def linear_fits_by_rank(acc, rate: float, t0: float, train_span, config: "MeasuredRomCase") -> list[dict]:
     """L-OpInf at every rank 1..c on the training part: its modes (frequency, damping) and the
     relative residual of each coordinate's equation (how well a linear oscillator explains it)."""
@@ -179,7 +163,9 @@ def run(config: MeasuredRomCase, out: Path, progress=print, data_dir=None) -> di
     rate = record_file.sample_rate
     t0 = float(record_file.time[keep][0])
     full = modal_record(acc, rate, config.band, rank=acc.shape[0], trim=config.trim, start_time=t0)
-    ranks = rank_check(full, full.data.states, rate)
+    s = full.singular_values     # how many coordinates the sensors support, and each one's spectral peak
+    ranks = {"singular_values": s.tolist(), "relative": (s / s[0]).tolist(), "coordinate_peaks_hz": [
+        spectral_peaks(q, rate, min_frequency=40.0, max_frequency=140.0).tolist() for q in full.data.states]}
     progress("singular values of the band displacements (relative): "
              + ", ".join(f"{x:.2e}" for x in ranks["relative"])
              + "; coordinate peaks in 40-140 Hz [Hz]: " + "; ".join(", ".join(f"{p:.2f}" for p in peaks) or "-"
