@@ -10,7 +10,9 @@ import scipy.linalg as sla
 from _control_chain import chain as control_chain
 from femrom.control import FullOrderPlant, KalmanObserver, LinearMPC, closed_loop, open_loop
 from femrom.rom import SecondOrderROM
-from femrom.study import closed_loop_rows, linear_model_table, open_loop_error
+from femrom.study import closed_loop_rows
+from femrom.study._closed_loops import open_loop_error
+from femrom.study._linear_model_figures import linear_model_table
 
 DT = 0.01
 

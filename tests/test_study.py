@@ -446,7 +446,8 @@ def test_a_nonlinear_scene_runs_the_pipeline_with_its_known_force(tmp_path):
     the linear one at 0.1 mm): the learners get the known force projected, ``V^T f(Q)`` of
     the stored snapshots as their target, and learn the rest."""
     from femrom.linalg import as_block_source
-    from femrom.study import projected_forces, run_study
+    from femrom.study import run_study
+    from femrom.study._study import projected_forces
 
     data = _bracket_dict(learners=["galerkin", "lopinf"], basis={"ranks": [4, 8]},
                          report={"render": False, "paraview": False})

@@ -13,7 +13,8 @@ import pytest
 from femrom.cases import scene_file
 from femrom.inference import ForcePotential
 from femrom.scene import Scene, SceneError, build
-from femrom.study import check_canonical_learners, run_study
+from femrom.study import run_study
+from femrom.study._canonical import check_canonical_learners
 
 DATA = Path(__file__).parent / "data"
 
