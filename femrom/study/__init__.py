@@ -7,7 +7,7 @@ The comparison engine (``docs/architecture.md``, "One comparison engine"):
 - experiments: :class:`Experiment` (``run(model) -> metrics``), registered by
   :func:`register_experiment` (:func:`registered_experiments`): :class:`UnseenInput` (a run the
   model was not trained on, :func:`evaluate`, :func:`scored_columns`), :class:`RingDownTest`,
-  :class:`SteppedSineTest` (``.compare(models)``); :func:`rest_start` (a projection of a stateful
+  :class:`SteppedSineTest` (``.compare(models)``), :class:`ClosedLoopTest` (MPC on the FOM); :func:`rest_start` (a projection of a stateful
   reference starts in its committed state);
 - :func:`compare_models`: every spec at every r through every experiment, a row each.
 
@@ -116,6 +116,7 @@ from femrom.study._closed_loops import CLOSED_LOOP_COLUMNS, closed_loop_rows, cl
 from femrom.study._linear_model_figures import linear_model_section
 from femrom.study._scene_run import scene_run
 from femrom.study._experiment import Experiment, register_experiment, registered_experiments, rest_start
+from femrom.study.experiments.closed_loop import ClosedLoopTest
 from femrom.study.experiments.ring_down import RingDownTest
 from femrom.study.experiments.stepped_sine import SteppedSineTest
 from femrom.study.experiments.unseen_input import UnseenInput, evaluate, scored_columns
@@ -134,7 +135,7 @@ from femrom._timing import Cost, blocked_cost, call_cost, repeated_cost, repeate
 __all__ = [
     "backbone_errors", "backbone_shift", "blocked_cost", "CalibratedBeam", "call_cost", "canonical_rows",
     "canonical_time_step_ladder", "CanonicalSpec", "check_rom_config",
-    "CLOSED_LOOP_COLUMNS", "dispersion_error", "closed_loop_rows", "closed_loop_section", "compare_backbones", "compare_models", "compare_ring_downs",
+    "CLOSED_LOOP_COLUMNS", "dispersion_error", "ClosedLoopTest", "closed_loop_rows", "closed_loop_section", "compare_backbones", "compare_models", "compare_ring_downs",
     "compare_stepped_sines", "Cost", "ecsw_training", "evaluate", "Experiment", "extrapolation_config",
     "EXTRAPOLATION_LEARNER_NAMES", "extrapolation_scene", "final_state", "final_state_ladders",
     "final_state_section", "fom_runs", "force_error", "frequency_ladder", "frequency_section",

@@ -11,33 +11,22 @@ Newmark integrator, one factorisation for all loops) with
 - :class:`~femrom.control.KalmanObserver` with process noise ``I`` and measurement noise
   ``w_meas s^2 I`` (optionally a constant output disturbance per output: offset-free tracking).
 
-Each row: the loop's metrics (:meth:`~femrom.control.ClosedLoopResult.metrics`), the controller
+Each loop is a :class:`~femrom.study.ClosedLoopTest` (a registered experiment) run on the controller
+model; each row: the loop's metrics (:meth:`~femrom.control.ClosedLoopResult.metrics`), the controller
 model's open-loop error on the inputs the loop applied (:func:`open_loop_error`: what feedback
 had to correct), ``s`` and the loop's wall time.
 """
 
 from __future__ import annotations
 
-import time
-
-import numpy as np
-
-from femrom.control import FullOrderPlant, KalmanObserver, LinearMPC, closed_loop
 from femrom.post import accuracy_cost_table, plot_closed_loops, render_closed_loop
-from femrom.study._metrics import relative_error
 from femrom.snapshots import solver_factory
+from femrom.study.experiments.closed_loop import ClosedLoopTest, open_loop_error  # noqa: F401 (open_loop_error: here too)
 
 #: Columns of a report table of :func:`closed_loop_rows`.
 CLOSED_LOOP_COLUMNS = ["controller", "r", "reference", "tracking_error", "model_error_on_applied_inputs",
                        "input_effort", "max_constraint_violation", "qp_seconds_per_step", "qp_seconds_max",
                        "n_fallbacks"]
-
-
-def open_loop_error(model, result) -> float:
-    """``||y_model - y||_F / ||y||_F``: ``model`` (a discrete state space) run from rest on the inputs the
-    closed loop ``result`` applied, against the plant's outputs."""
-    predicted = model.simulate(result.inputs, np.zeros(model.n_states))[0]
-    return relative_error(result.outputs, predicted)
 
 
 def closed_loop_rows(fom, dt: float, models: dict, controllers, references: dict, n_steps: int, *, horizon: int,
@@ -74,32 +63,23 @@ def closed_loop_rows(fom, dt: float, models: dict, controllers, references: dict
     results : dict
         ``{(label, r, name): ClosedLoopResult}``.
     """
-    system = fom.system
     solver = solver_factory(fom)
+    tests = {name: ClosedLoopTest(fom, dt, reference, n_steps, horizon=horizon, input_bound=input_bound,
+                                  rate_weight=rate_weight, measurement_noise=measurement_noise,
+                                  disturbance=disturbance, solver=solver, label=name)
+             for name, reference in references.items()}
     rows, results = [], {}
     try:
         for label, r in controllers:
             if (label, r) not in models:
                 rows.append({"controller": label, "r": r, "reference": "-", "failed": "the model did not fit"})
                 continue
-            model = models[(label, r)]
-            for name, reference in references.items():
+            for name, test in tests.items():
                 if progress is not None:
                     progress(f"closed loop on the FOM: {label} r = {r}, {name} reference ({n_steps} steps)")
-                size = float(np.sqrt(np.mean(reference ** 2)))
-                mpc = LinearMPC(model, horizon=horizon, output_weight=1.0 / size ** 2, input_weight=0.0,
-                                input_rate_weight=rate_weight / input_bound ** 2, input_bound=input_bound)
-                observer = KalmanObserver(model, measurement_noise=measurement_noise * size ** 2,
-                                          disturbance=disturbance)
-                plant = FullOrderPlant(system, dt, solver=solver)
-                keep = (lambda p: p.last.q) if (label, r, name) == record else None
-                tic = time.perf_counter()
-                result = closed_loop(plant, mpc, observer, reference, n_steps, record_state=keep, progress=False)
-                seconds = time.perf_counter() - tic
-                rows.append({"controller": label, "r": r, "reference": name, **result.metrics(),
-                             "model_error_on_applied_inputs": open_loop_error(model, result),
-                             "reference_rms": size, "loop_seconds": seconds})
-                results[(label, r, name)] = result
+                outcome = test.run(models[(label, r)], record_state=(label, r, name) == record)
+                results[(label, r, name)] = outcome.pop("_result")
+                rows.append({"controller": label, "r": r, "reference": name, **outcome})
     finally:
         solver.cache.clear()
     return rows, results
