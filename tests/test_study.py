@@ -185,7 +185,7 @@ def test_learner_names_are_checked_against_the_registry():
         check_rom_config(Scene.from_dict(_bracket_dict(learners=["galerkin", {"learner": "iwan_lopinf",
                                                                               "options": {"thresholdz": 8}}])).rom)
     with pytest.raises(SceneError, match=r"\[rom.experiments\[0\]\] unknown experiment 'peak'; registered: "
-                                         r"closed_loop, ring_down, stepped_sine, unseen_input"):
+                                         r"canonical_window, closed_loop, ring_down, stepped_sine, unseen_input"):
         check_rom_config(Scene.from_dict(_bracket_dict(experiments=[{"kind": "peak"}])).rom)
     with pytest.raises(SceneError, match=r"\[rom.experiments\[0\]\] must be a table with a kind"):
         Scene.from_dict(_bracket_dict(experiments=[{"run": "step"}]))

@@ -7,8 +7,9 @@ The comparison engine (``docs/architecture.md``, "One comparison engine"):
 - experiments: :class:`Experiment` (``run(model) -> metrics``), registered by
   :func:`register_experiment` (:func:`registered_experiments`): :class:`UnseenInput` (a run the
   model was not trained on, :func:`evaluate`, :func:`scored_columns`), :class:`RingDownTest`,
-  :class:`SteppedSineTest` (``.compare(models)``), :class:`ClosedLoopTest` (MPC on the FOM); :func:`rest_start` (a projection of a stateful
-  reference starts in its committed state);
+  :class:`SteppedSineTest` (``.compare(models)``), :class:`ClosedLoopTest` (MPC on the FOM), and
+  ``canonical_window`` (a canonical FOM run's two windows, :func:`canonical_rows`' experiment);
+  :func:`rest_start` (a projection of a stateful reference starts in its committed state);
 - :func:`compare_models`: every spec at every r through every experiment, a row each.
 
 What the case scripts share, for any scene (``femrom run scene.toml`` with a ``[rom]`` section

@@ -34,6 +34,8 @@ from femrom.inference import HamiltonianOperators, learner_class, reduce_canonic
 from femrom.integrators import integrate_canonical
 from femrom.rom import FirstOrderROM, HamiltonianROM
 from femrom.study._metrics import invariant_drift
+from femrom.study.experiments.canonical_window import CanonicalWindow, linear_operator, mass_generator, state_error, \
+    window_metrics
 from femrom._timing import Cost, repeated_cost, repeated_costs
 
 #: The kinds of learned model a canonical study runs (besides the intrusive projection).
@@ -108,55 +110,10 @@ def run_canonical(system, q0, p0, dt: float, n_steps: int, *, scheme: str = "mid
     return CanonicalRun(dt * np.arange(n_steps + 1), tr.q, tr.p, tr.hamiltonian, tr.iterations, tr.seconds, cost)
 
 
-def state_error(Q, P, Qr, Pr, window: slice = slice(None)) -> float:
-    """``||[Qr - Q; Pr - P]||_F / ||[Q; P]||_F`` over ``window`` (``inf`` if not finite)."""
-    num = np.linalg.norm(Qr[:, window] - Q[:, window]) ** 2 + np.linalg.norm(Pr[:, window] - P[:, window]) ** 2
-    den = np.linalg.norm(Q[:, window]) ** 2 + np.linalg.norm(P[:, window]) ** 2
-    return float(np.sqrt(num / den)) if np.isfinite(num) else float("inf")
-
-
 def pointwise_error(Q, P, Qr, Pr) -> np.ndarray:
     """(k,) ``||[qr - q; pr - p]|| / ||[q; p]||`` at every time."""
     num = np.sum((Qr - Q) ** 2 + (Pr - P) ** 2, axis=0)
     return np.sqrt(num / np.sum(Q * Q + P * P, axis=0))
-
-
-def mass_generator(A: np.ndarray) -> float:
-    """``||A + A^T||_F / (2 ||A||_F)``: the part of ``y' = A y`` that changes ``|y|^2`` (0: skew, |y| kept)."""
-    return float(np.linalg.norm(A + A.T) / (2 * np.linalg.norm(A)))
-
-
-def linear_operator(model) -> np.ndarray:
-    """(2r, 2r) linear part of a canonical ROM: ``[[0, D^_p], [-D^_q, 0]]``, or a first-order model's ``A^``."""
-    ops = model.operators_
-    if isinstance(ops, np.ndarray):
-        return ops
-    Z = np.zeros_like(ops.position)
-    return np.block([[Z, ops.momentum], [-ops.position, Z]])
-
-
-def window_metrics(system, Q, P, Qr, Pr, train: slice, test: slice, dt: float, invariants=None) -> dict:
-    """Errors, blow-up time and drifts of a reconstructed trajectory ``(Qr, Pr)`` (n, k) against the FOM's.
-
-    ``invariants(Q, P) -> {name: (k,) values}`` adds ``<name>_drift_train`` and
-    ``<name>_drift_test``; the FOM's ``H`` of the reconstruction gives
-    ``hamiltonian_drift_test``. Anything over a window where the trajectory is not
-    finite is ``inf``.
-    """
-    finite_at = np.all(np.isfinite(Qr), axis=0) & np.all(np.isfinite(Pr), axis=0)
-    finite, finite_train = bool(np.all(finite_at)), bool(np.all(finite_at[train]))
-    bad = np.flatnonzero(~finite_at)
-    out = {"train_error": state_error(Q, P, Qr, Pr, train) if finite_train else float("inf"),
-           "test_error": state_error(Q, P, Qr, Pr, test) if finite else float("inf"),
-           "finite": finite, "blowup_time": float(dt * bad[0]) if bad.size else None}
-    with np.errstate(all="ignore"):
-        values = {} if invariants is None else invariants(Qr, Pr)
-        H = system.hamiltonian(Qr, Pr)
-    for name, v in values.items():
-        out[f"{name}_drift_train"] = invariant_drift(v, train) if finite_train else float("inf")
-        out[f"{name}_drift_test"] = invariant_drift(v, test) if finite else float("inf")
-    out["hamiltonian_drift_test"] = invariant_drift(H, test) if finite else float("inf")
-    return out
 
 
 class _Models:
@@ -232,6 +189,7 @@ def canonical_rows(system, run: CanonicalRun, specs, *, ranks, train_window: flo
     times = run.times
     Qt, Pt = Q[:, train], P[:, train]
     rows, kept, sweep_rows, timed = [], {}, [], {}
+    window = CanonicalWindow(system, run, train_window, invariants=invariants)   # every model's experiment
     for r in ranks:
         if progress:
             progress(f"r = {r}")
@@ -257,7 +215,7 @@ def canonical_rows(system, run: CanonicalRun, specs, *, ranks, train_window: flo
                     Yt = np.vstack([sol.q[:, :k_train], sol.p[:, :k_train]])
                     train_error = state_error(Qt, Pt, V @ Yt[:r], V @ Yt[r:]) if np.all(np.isfinite(Yt)) \
                         else float("inf")
-                    candidates.append((train_error, rho, model, sol if full else None))
+                    candidates.append((train_error, rho, model))
                     if full:
                         A = linear_operator(model)
                         sweep_rows.append({"method": spec.label, "r": r, "regularization": rho,
@@ -266,25 +224,19 @@ def canonical_rows(system, run: CanonicalRun, specs, *, ranks, train_window: flo
                                                             invariants),
                                            "mass_generator": mass_generator(A),
                                            "max_real_eigenvalue": float(np.max(np.linalg.eigvals(A).real))})
-                _, weight, model, solution = min(candidates, key=lambda c: c[0])
-                if solution is None:
-                    solution = _predict(model, y0, times)
+                _, weight, model = min(candidates, key=lambda c: c[0])
             else:
                 model = models.fit(spec, weight)
-                solution = None
             fit_seconds = time.perf_counter() - tic
-            if solution is None:
-                solution = _predict(model, y0, times)
-            Qf, Pf = V @ solution.q, V @ solution.p
-            A = linear_operator(model)
+            outcome = window.run(model)
+            solution, Qf, Pf = outcome.pop("_solution"), outcome.pop("_Q"), outcome.pop("_P")
+            metrics = {k: outcome.pop(k) for k in ("mass_generator", "max_real_eigenvalue")}
             row = {"method": spec.label, "learner": spec.label, "r": r, "integrator": spec.scheme,
                    "regularization": None if spec.intrusive else weight,
                    "basis_seconds": basis_seconds,
                    "fit_seconds": float("nan") if spec.intrusive else fit_seconds,
                    "offline_seconds": basis_seconds + (0.0 if spec.intrusive else fit_seconds),
-                   **window_metrics(system, Q, P, Qf, Pf, train, test, dt, invariants),
-                   "projection_error_test": projection, "mass_generator": mass_generator(A),
-                   "max_real_eigenvalue": float(np.max(np.linalg.eigvals(A).real))}
+                   **outcome, "projection_error_test": projection, **metrics}
             if not spec.intrusive and isinstance(model.operators_, HamiltonianOperators):   # learned D^_q, D^_p
                 ops, learner = model.operators_, model.learner
                 Qh, Ph = data.states_q, data.states_p
