@@ -56,6 +56,16 @@ def scored_columns(run: FOMRun, score_after: float | None) -> slice:
     return slice(int(np.searchsorted(run.times, score_after * (1 + 1e-12), side="right")), None)
 
 
+def energy_scale(energy, reference=None) -> float:
+    """What a model's energy history (k,) is measured against: its initial value, or for a run from
+    rest (initial energy 0) the largest ``|E|`` of the ``reference`` (the FOM's, (k,)); 0 without either."""
+    if energy[0] and np.isfinite(energy[0]):
+        return abs(float(energy[0]))
+    if reference is not None and np.size(reference) and np.all(np.isfinite(reference)):
+        return float(np.max(np.abs(reference)))
+    return 0.0
+
+
 def evaluate(rom, run: FOMRun, projection: Projection, *, extension: float,
              score_after: float | None = None) -> Evaluation:
     """Errors of ``rom`` on ``run`` and its reduced energy over ``extension`` times the run's window.
@@ -66,8 +76,11 @@ def evaluate(rom, run: FOMRun, projection: Projection, *, extension: float,
     default; a training window's end for a test of extrapolation in time). A ROM
     that blows up (plain OpInf can) gets infinite errors; the overflow on the way is
     expected and not reported as a warning. ``energy_growth`` is the ROM's largest
-    energy over its initial one on the run's window, ``blowup_time`` the first time it
-    exceeds :data:`BLOWUP` times that (``None``: never).
+    energy on the run's window over its energy scale, ``blowup_time`` the first time its
+    energy exceeds :data:`BLOWUP` times that scale (``None``: never) or stops being finite.
+    The scale is the ROM's initial energy, or, for a run from rest (initial energy 0: a
+    driven structure), the FOM's largest energy on the run (:func:`energy_scale`); without
+    either, ``energy_growth`` is ``nan`` and only a non-finite energy counts as a blow-up.
     """
     times = run.times
     columns = scored_columns(run, score_after)
@@ -80,8 +93,9 @@ def evaluate(rom, run: FOMRun, projection: Projection, *, extension: float,
             run.outputs[:, columns], solution.outputs[:, columns])
         ratio, final = energy_ratio(long.energy, run.energy)
         energy = solution.energy
-        growth = float(np.nanmax(np.abs(energy)) / abs(energy[0])) if energy[0] else float("nan")
-        big = ~np.isfinite(energy) | (np.abs(energy) > BLOWUP * abs(energy[0]))
+        scale = energy_scale(energy, run.energy)
+        growth = float(np.nanmax(np.abs(energy)) / scale) if scale else float("nan")
+        big = ~np.isfinite(energy) | ((np.abs(energy) > BLOWUP * scale) if scale else False)
         return Evaluation(output_error, projection.field_error(solution.q, columns),
                           projection.projection_error(rom.r, columns), ratio, final, growth,
                           float(times[np.argmax(big)]) if big.any() else None, solution, long_times, long.energy)
