@@ -126,10 +126,38 @@ def test_state_space_save_load_and_checks(tmp_path):
     assert loaded.dt == 0.02 and loaded.metadata["scheme"] == "newmark"
     # Newmark with C > 0, K > 0: every pole strictly inside the unit circle
     assert np.max(np.abs(ss.poles())) < 1.0
-    with pytest.raises(ValueError, match="dt must be positive"):
+    with pytest.raises(ValueError, match="dt must be a finite number > 0, got 0.0"):
         DiscreteStateSpace(np.eye(2), np.zeros((2, 1)), np.eye(2), np.zeros((2, 1)), dt=0.0)
     with pytest.raises(ValueError, match="input has 3 entries, expected 2"):
         ss.stepper(initial=np.zeros(16)).step(np.ones(3))
+    with pytest.raises(ValueError, match="dt must be a finite number > 0, got nan"):
+        rom.to_state_space(float("nan"))
+
+
+def test_a_discrete_state_space_refuses_misshapen_or_non_finite_matrices():
+    """n = 4 states, m = 2 inputs, p = 3 outputs: every matrix in its place or one error naming it
+    (a transposed B, C or D used to be reshaped silently into another matrix)."""
+    from femrom import FemromValueError
+
+    rng = np.random.default_rng(0)
+    A, B, C, D = 0.5 * np.eye(4), rng.standard_normal((4, 2)), rng.standard_normal((3, 4)), np.zeros((3, 2))
+    model = DiscreteStateSpace(A, B, C, D, dt=0.1)
+    assert (model.n_states, model.n_inputs, model.n_outputs) == (4, 2, 3)
+    for args, message in [((A, B.T, C, D), r"B has shape \(2, 4\), expected \(n_states, n_inputs\) = \(4, m\) "
+                                            r"\(a transposed B\?\)"),
+                          ((A, B, C.T, D), r"C has shape \(4, 3\), expected \(n_outputs, n_states\) = \(p, 4\) "
+                                           r"\(a transposed C\?\)"),
+                          ((A, B, C, D.T), r"D has shape \(2, 3\), expected \(n_outputs, n_inputs\) = \(3, 2\)"),
+                          ((np.where(np.eye(4) > 0, np.nan, 0.0), B, C, D), "A has non-finite entries"),
+                          ((A[:, :3], B, C, D), r"A has shape \(4, 3\), expected square"),
+                          ((A, "b", C, D), "B must be a numeric array, got str")]:
+        with pytest.raises(FemromValueError, match=message):
+            DiscreteStateSpace(*args, dt=0.1)
+    # vectors are one input column and one output row; a scalar D is every entry
+    single = DiscreteStateSpace(A, B[:, 0], C[0], 0.0, dt=0.1)
+    assert single.B.shape == (4, 1) and single.C.shape == (1, 4) and single.D.shape == (1, 1)
+    with pytest.raises(FemromValueError, match="z0 must be a finite state of 4 entries, got 3"):
+        model.simulate(np.zeros((2, 5)), np.zeros(3))
 
 
 def test_hamiltonian_rom_steps_like_it_predicts():

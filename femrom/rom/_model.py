@@ -205,6 +205,8 @@ class SecondOrderROM(ReducedModel):
             raise FemromValueError(f"scheme {step.name!r} has no [q; v] state space: it samples the forcing at "
                                    f"t + {step.input_time:g} h and carries an algorithmic acceleration; use "
                                    "newmark, implicit_midpoint, central_difference or discrete_gradient")
+        if not (isinstance(dt, (int, float, np.floating, np.integer)) and np.isfinite(dt) and dt > 0):
+            raise FemromValueError(f"dt must be a finite number > 0, got {dt!r}")
         r, h = ops.r, float(dt)
         parts = LinearParts(ops.mass_matrix, ops.damping, ops.stiffness)
         step.check_step(parts, h)

@@ -30,6 +30,19 @@ from femrom.integrators import input_sample
 from femrom.rom._base import Solution
 
 
+def _matrix(value, name: str) -> np.ndarray:
+    """``value`` as a finite float array, or one FemromValueError naming ``name``."""
+    try:
+        X = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise FemromValueError(f"{name} must be a numeric array, got {type(value).__name__}") from None
+    if X.ndim > 2:
+        raise FemromValueError(f"{name} must be a matrix, got shape {X.shape}")
+    if not np.all(np.isfinite(X)):
+        raise FemromValueError(f"{name} has non-finite entries")
+    return X
+
+
 @dataclass(frozen=True, eq=False)
 class StateSpaceSolution(Solution):
     """A trajectory of a discrete state space (an identified model, a linear ROM's export).
@@ -76,19 +89,39 @@ class DiscreteStateSpace:
     metadata: dict = field(default_factory=dict)
 
     def __post_init__(self):
-        A = np.atleast_2d(np.asarray(self.A, dtype=float))
+        A = np.atleast_2d(_matrix(self.A, "A"))
         n = A.shape[0]
-        B = np.asarray(self.B, dtype=float).reshape(n, -1)
-        C = np.asarray(self.C, dtype=float).reshape(-1, n)
-        D = np.asarray(self.D, dtype=float).reshape(C.shape[0], B.shape[1])
-        if A.shape != (n, n):
-            raise FemromValueError(f"A has shape {A.shape}, expected square")
-        if not self.dt > 0:
-            raise FemromValueError(f"dt must be positive, got {self.dt}")
+        if A.ndim != 2 or A.shape != (n, n):
+            raise FemromValueError(f"A has shape {np.shape(self.A)}, expected square (n_states, n_states)")
+        # a vector is one column of B (one input) or one row of C (one output); a matrix must have
+        # the state dimension where it belongs: a transposed B or C is refused, never reshaped
+        B = _matrix(self.B, "B")
+        B = B.reshape(n, 1) if B.ndim == 1 and B.size == n else B
+        if B.ndim != 2 or B.shape[0] != n:
+            raise FemromValueError(f"B has shape {np.shape(self.B)}, expected (n_states, n_inputs) = ({n}, m)"
+                                   + (" (a transposed B?)" if B.ndim == 2 and B.shape[1] == n else ""))
+        C = _matrix(self.C, "C")
+        C = C.reshape(1, n) if C.ndim == 1 and C.size == n else C
+        if C.ndim != 2 or C.shape[1] != n:
+            raise FemromValueError(f"C has shape {np.shape(self.C)}, expected (n_outputs, n_states) = (p, {n})"
+                                   + (" (a transposed C?)" if C.ndim == 2 and C.shape[0] == n else ""))
+        p, m = C.shape[0], B.shape[1]
+        D = _matrix(self.D, "D")
+        if D.ndim == 0:
+            D = np.full((p, m), float(D))
+        elif D.ndim == 1 and D.size == p * m and min(p, m) == 1:
+            D = D.reshape(p, m)
+        if D.shape != (p, m):
+            raise FemromValueError(f"D has shape {np.shape(self.D)}, expected (n_outputs, n_inputs) = ({p}, {m})")
+        if not (isinstance(self.dt, (int, float, np.floating, np.integer)) and np.isfinite(self.dt) and self.dt > 0):
+            raise FemromValueError(f"dt must be a finite number > 0, got {self.dt!r}")
         for name, value in (("A", A), ("B", B), ("C", C), ("D", D)):
             object.__setattr__(self, name, value)
         if self.input_offset is not None:
-            E = np.asarray(self.input_offset, dtype=float).reshape(n, B.shape[1])
+            E = _matrix(self.input_offset, "input_offset")
+            E = E.reshape(n, 1) if E.ndim == 1 and E.size == n and m == 1 else E
+            if E.shape != (n, m):
+                raise FemromValueError(f"input_offset has shape {np.shape(self.input_offset)}, expected ({n}, {m})")
             object.__setattr__(self, "input_offset", E)
 
     # -- sizes ---------------------------------------------------------------------------
@@ -136,8 +169,11 @@ class DiscreteStateSpace:
             if U.shape[0] != m:
                 raise FemromValueError(f"inputs have {U.shape[0]} rows, expected m = {m}")
         K = U.shape[1]
+        z0 = np.asarray(z0, dtype=float).ravel()
+        if z0.size != self.n_states or not np.all(np.isfinite(z0)):
+            raise FemromValueError(f"z0 must be a finite state of {self.n_states} entries, got {z0.size}")
         Z = np.empty((self.n_states, K))
-        Z[:, 0] = np.asarray(z0, dtype=float).ravel()
+        Z[:, 0] = z0
         BU = self.B @ U
         for k in range(K - 1):
             Z[:, k + 1] = self.A @ Z[:, k] + BU[:, k]
