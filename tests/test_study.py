@@ -5,6 +5,7 @@ goes through ``python -m femrom run scene.toml``; its section is validated key
 by key; costs are timed blocks; field errors from one projection pass are exact.
 """
 
+import dataclasses
 import json
 import os
 import subprocess
@@ -439,8 +440,18 @@ def test_a_failing_reduced_model_is_reported_and_the_study_goes_on(monkeypatch):
             raise RuntimeError("Newton did not converge in 50 iterations")
         return real(rom, run, projection, **options)
 
-    monkeypatch.setattr(study_module, "evaluate", flaky)
+    def unstable(rom, run, projection, **options):       # r = 2 L-OpInf "blows up" on the unseen step
+        out = real(rom, run, projection, **options)
+        if rom.r == 2 and rom.learner.method != "galerkin" and run.name == "step":
+            out = dataclasses.replace(out, blowup_time=0.0125)
+        return out
+
+    monkeypatch.setattr(study_module, "evaluate", lambda *a, **o: unstable(*a, **o) if a[0].r == 2 else flaky(*a, **o))
     rows, evaluations = study_rows(model.system, pod.basis_, model.system.mass, data, projections, runs, scene.rom)
+    # a diverged model says so (which run, when, why), beside its errors
+    diverged = {(row["r"], row["learner"]): row.get("diverged") for row in rows}
+    assert diverged[(2, "lopinf")] == "step at t = 0.0125 s (energy non-finite or above 1e+06 x its scale)"
+    assert diverged[(2, "galerkin")] is None and diverged[(3, "galerkin")] is None
     failed = [row for row in rows if "failed" in row]
     assert [(row["r"], row["learner"]) for row in failed] == [(3, "lopinf")]
     assert "Newton did not converge" in failed[0]["failed"] and failed[0]["test_output_error"] == np.inf
@@ -481,3 +492,17 @@ def test_a_nonlinear_scene_runs_the_pipeline_with_its_known_force(tmp_path):
     np.testing.assert_allclose(blocks, direct, rtol=1e-13, atol=1e-13 * np.abs(direct).max())
     f = model.system.nonlinear.force(Q[:, 0])
     assert np.linalg.norm(f) > 0 and not np.allclose(model.system.nonlinear.force(2 * Q[:, 0]), 2 * f)  # nonlinear
+
+
+def test_divergence_is_the_first_time_a_model_leaves_the_reference_scale():
+    from femrom.study._metrics import diverged_at
+
+    times = 0.1 * np.arange(6)
+    reference = np.array([[0.0, 1.0, -2.0, 1.0, 0.5, 0.0]])
+    assert diverged_at(1.1 * reference, reference, times) is None
+    grows = reference * np.array([1.0, 1.0, 1.0, 1e5, 1e7, 1e9])       # above 1e6 x max|ref| = 2e6 from t = 0.4
+    assert diverged_at(grows, reference, times) == pytest.approx(0.4)
+    assert diverged_at(np.where(times > 0.25, np.inf, reference), reference, times) == pytest.approx(0.3)
+    with np.errstate(all="raise"):                                       # no overflow on the way
+        assert diverged_at(np.full((1, 6), 1e308), reference, times) == 0.0
+        assert diverged_at(np.full((1, 6), -np.inf), reference, times) == 0.0

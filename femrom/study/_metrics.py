@@ -99,3 +99,15 @@ def energy_ratio(rom_energy: np.ndarray, fom_energy: np.ndarray | None) -> tuple
     if not np.all(np.isfinite(rom_energy)):
         return float("inf"), float("inf")
     return float(np.max(np.abs(rom_energy)) / peak), float(abs(rom_energy[-1]) / peak)
+
+
+def diverged_at(values, reference, times, factor: float = 1e6):
+    """The first of ``times`` (k,) at which a model's ``values`` (p, k) are not finite or exceed ``factor``
+    times the largest ``|reference|`` (p, k); ``None`` when they never do."""
+    values = np.asarray(values, dtype=float)
+    with np.errstate(all="ignore"):
+        scale = float(np.max(np.abs(reference))) if np.size(reference) else 0.0
+        bad = ~np.all(np.isfinite(values), axis=0)
+        if scale > 0:
+            bad |= np.max(np.abs(values), axis=0) > factor * scale
+    return float(np.asarray(times)[np.argmax(bad)]) if bad.any() else None

@@ -22,7 +22,7 @@ from femrom.study._study import check_rom_config, fom_runs, interval_cost, model
     pod_basis, product_matrix, reduce_runs, study_experiments_of, study_rows
 
 ROW_COLUMNS = ["r", "learner", "derivatives", "train_output_error", "test_output_error", "test_field_error",
-               "test_energy_ratio", "fit_seconds", "seconds_per_step", "speedup"]
+               "test_energy_ratio", "fit_seconds", "seconds_per_step", "speedup", "diverged"]
 
 
 def peak_rss_gb() -> float:

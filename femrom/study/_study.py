@@ -36,7 +36,7 @@ from femrom.study._canonical import canonical_operator_checks
 from femrom.study._experiment import EXPERIMENTS, registered_experiments
 from femrom.study._models import ModelSpec
 from femrom.study._metrics import Projection, project_run
-from femrom.study.experiments.unseen_input import Evaluation, UnseenInput
+from femrom.study.experiments.unseen_input import BLOWUP, Evaluation, UnseenInput
 from femrom.snapshots import FOMRun, run_fom, solver_factory
 from femrom._timing import Cost, repeated_costs
 
@@ -303,6 +303,10 @@ def study_rows(system, basis: np.ndarray, product, data: dict, projections: dict
                 if names:
                     for key, value in row["errors"][names[0]].items():
                         row[f"{role}_{key}"] = value
+            blown = {name: e["blowup_time"] for name, e in row["errors"].items() if e.get("blowup_time") is not None}
+            if blown:      # when, and why: not only a large number in the error columns
+                row["diverged"] = "; ".join(f"{name} at t = {t:.4g} s (energy non-finite or above {BLOWUP:g} "
+                                            "x its scale)" for name, t in blown.items())
             if not model.intrusive:
                 row.update(operator_checks(rom))
             row["_rom"] = rom

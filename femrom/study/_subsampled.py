@@ -33,7 +33,7 @@ from femrom._errors import FemromValueError
 from femrom.inference import alternating_fill, learner_class, reduce_snapshots
 from femrom.linalg import as_block_source, store_source
 from femrom.rom import SecondOrderROM
-from femrom.study._metrics import Projection, relative_error
+from femrom.study._metrics import Projection, diverged_at, relative_error
 from femrom.study._study import projected_forces
 
 #: The derivative data compared, by label (``integrator_dt``, ``refined_dt``: only for k > 1).
@@ -129,10 +129,15 @@ def subsampled_rows(state, every=(1, 2, 5, 10), *, r: int | None = None, learner
                 rows.append(row | {"failed": str(exc), "train_output_error": float("inf"),
                                    "test_output_error": float("inf"), "test_field_error": float("inf")})
                 continue
-            row |= {"train_output_error": float("nan") if outputs is None else relative_error(outputs, fit.outputs),
-                    "test_output_error": float("nan") if test.outputs is None else relative_error(
-                        test.outputs[:, keep], prediction.outputs),
-                    "test_field_error": floor.field_error(prediction.q)}
+            with np.errstate(all="ignore"):       # a diverged model's errors overflow on the way to inf
+                row |= {"train_output_error": float("nan") if outputs is None else relative_error(outputs, fit.outputs),
+                        "test_output_error": float("nan") if test.outputs is None else relative_error(
+                            test.outputs[:, keep], prediction.outputs),
+                        "test_field_error": floor.field_error(prediction.q)}
+            if test.outputs is not None:
+                t = diverged_at(prediction.outputs, test.outputs[:, keep], test.times[keep])
+                if t is not None:
+                    row["diverged"] = f"test at t = {t:.4g} s (outputs non-finite or above 1e6 x the FOM's largest)"
             rows.append(row)
     return rows
 
@@ -159,4 +164,4 @@ def subsampled_section(rows: list[dict], train: str, test: str) -> str:
             "steps h).\n\n"
             + accuracy_cost_table(rows, ["every", "h", "rom_step", "r", "derivatives", "train_output_error", "test_output_error",
                                          "test_field_error", "test_projection_error", "fill_sweeps",
-                                         "fit_seconds"]))
+                                         "fit_seconds", "diverged"]))
