@@ -346,7 +346,7 @@ def _main(argv: list[str]) -> int:
         print("cases: " + ", ".join(available_cases()))
         return 0 if args.target else 2
     target = Path(args.target)
-    if target.suffix == ".toml":
+    if target.suffix.lower() == ".toml" or target.is_file() or target.is_dir():   # a path, never a case name
         opts = argparse.ArgumentParser(prog="femrom run SCENE.toml")
         opts.add_argument("-o", "--out", type=Path, default=Path("results") / target.stem)
         opts.add_argument("--yes", action="store_true",

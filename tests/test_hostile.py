@@ -186,6 +186,23 @@ def test_cli_errors_are_one_line_and_debug_shows_the_traceback(tmp_path):
     assert proc.returncode == 2 and len(proc.stderr.strip().splitlines()) == 1
 
 
+def test_a_scene_that_is_not_a_text_file_or_not_a_file_is_one_line_naming_it(tmp_path):
+    """Random bytes, a directory and an upper-case suffix: each is a scene path (never a case name),
+    and what is wrong with it is one line that names it (it was a bare codec error, "[Errno 21] Is a
+    directory", and "unknown case 'scene.TOML'")."""
+    noise = tmp_path / "noise.toml"
+    noise.write_bytes(bytes([0x81, 0xE1, 0x00, 0xFF]) * 50)
+    upper = tmp_path / "BEAM.TOML"
+    upper.write_text(scene_file("beam").read_text().replace("density = 7850.0", "density = -1.0"))
+    for target, fragment in ((noise, f"{noise}: not a text (UTF-8) scene file: byte 0 is 0x81"),
+                             (tmp_path, f"{tmp_path}: is a directory, not a scene file"),
+                             (upper, f"{upper}: [material] density must be a finite positive number")):
+        proc = _femrom("run", str(target), "-o", str(tmp_path / "out"))
+        lines = proc.stderr.strip().splitlines()
+        assert proc.returncode == 2 and len(lines) == 1 and fragment in lines[0], proc.stderr
+    assert not (tmp_path / "out").exists()
+
+
 # -- reduced models: non-finite initial states -------------------------------------------------
 def test_a_nan_initial_state_is_refused_by_name():
     from femrom.inference import ReducedOperators

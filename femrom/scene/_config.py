@@ -175,10 +175,17 @@ class Scene:
         scene file first (then in the working directory and ``meshes/``).
         """
         path = Path(path)
+        if path.is_dir():
+            raise SceneError(f"{path}: is a directory, not a scene file")
         try:
-            text = path.read_text()
+            text = path.read_text(encoding="utf-8")
         except FileNotFoundError:
             raise SceneError(f"scene file not found: {path}") from None
+        except UnicodeDecodeError as exc:
+            raise SceneError(f"{path}: not a text (UTF-8) scene file: byte {exc.start} is {exc.object[exc.start]:#04x}") \
+                from None
+        except OSError as exc:
+            raise SceneError(f"{path}: cannot be read: {exc.strerror}") from None
         try:
             data = tomllib.loads(text)
         except tomllib.TOMLDecodeError as exc:
