@@ -16,6 +16,8 @@ derive from one of them.
 
 from __future__ import annotations
 
+import numbers
+
 
 class FemromError(Exception):
     """Base of every error femrom raises for a user; the message is one line naming the culprit."""
@@ -31,3 +33,14 @@ class FemromTypeError(FemromError, TypeError):
 
 class FemromRuntimeError(FemromError, RuntimeError):
     """A computation that could not be completed (no convergence, a failed solve, divergence)."""
+
+
+def positive_integer(value, name: str, *, optional: bool = False):
+    """``value`` as an int >= 1, or one FemromValueError naming ``name`` (the one rule for integer
+    arguments: an int or a numpy integer, never a float such as ``2.5`` or ``20.0``, never a bool);
+    ``None`` passes through when ``optional``."""
+    if value is None and optional:
+        return None
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < 1:
+        raise FemromValueError(f"{name} must be a positive integer, got {value!r}")
+    return int(value)

@@ -7,6 +7,7 @@ python-control's ``eigensys_realization`` and ``markov``.
 from __future__ import annotations
 
 import dataclasses
+import re
 
 import numpy as np
 import pytest
@@ -496,3 +497,21 @@ def test_state_space_rom_refuses_other_learners_and_unfitted_use():
         StateSpaceROM().predict(DT * np.arange(3), np.zeros((1, 3)))
     with pytest.raises(ValueError, match="no learner"):
         StateSpaceROM().fit(None)
+
+
+@pytest.mark.parametrize("make, message", [
+    (lambda: ERA(4, rows=2.5), "rows must be a positive integer, got 2.5"),
+    (lambda: ERA(4.0), "order must be a positive integer, got 4.0"),
+    (lambda: ERA(4, input_directions=0), "input_directions must be a positive integer, got 0"),
+    (lambda: DMDc(rank=20.0), "rank must be a positive integer, got 20.0"),
+    (lambda: DMDc(output_rank=True), "output_rank must be a positive integer, got True"),
+    (lambda: OKID(4, 10, columns="5"), "columns must be a positive integer, got '5'"),
+    (lambda: OKID(4, 2.0), "observer_order must be a positive integer, got 2.0"),
+])
+def test_integer_arguments_follow_one_rule(make, message):
+    """An integer argument is an int or a numpy integer (2.5 was truncated, 20.0 accepted, True taken as 1)."""
+    from femrom import FemromValueError
+
+    with pytest.raises(FemromValueError, match=re.escape(message)):
+        make()
+    assert ERA(np.int64(4), rows=np.int32(3)).rows == 3 and DMDc(rank=np.int64(2)).rank == 2

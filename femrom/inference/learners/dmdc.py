@@ -6,7 +6,7 @@ import time
 
 import numpy as np
 
-from femrom._errors import FemromTypeError, FemromValueError
+from femrom._errors import FemromTypeError, FemromValueError, positive_integer
 
 from femrom.inference._io_data import InputOutputData
 from femrom.inference._learner import Learner, register_learner
@@ -90,9 +90,8 @@ class DMDc(Learner):
 
     def __init__(self, rank: int | None = None, output_rank: int | None = None, *, feedthrough: bool = False,
                  input_samples: str = "start"):
-        for name, value in (("rank", rank), ("output_rank", output_rank)):
-            if value is not None and (int(value) != value or value < 1):
-                raise FemromValueError(f"{name} must be a positive integer, got {value}")
+        rank, output_rank = positive_integer(rank, "rank", optional=True), positive_integer(output_rank, "output_rank",
+                                                                                             optional=True)
         if rank is not None and output_rank is not None and output_rank > rank:
             raise FemromValueError(f"output_rank {output_rank} exceeds rank {rank}: the model's order r must be <= p")
         if input_samples not in INPUT_SAMPLES:

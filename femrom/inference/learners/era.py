@@ -2,7 +2,7 @@ r"""The eigensystem realisation algorithm (ERA): a balanced first-order model fr
 
 from __future__ import annotations
 
-from femrom._errors import FemromTypeError, FemromValueError
+from femrom._errors import FemromTypeError, positive_integer
 from femrom.inference._io_data import InputOutputData, MarkovParameters
 from femrom.inference._learner import Learner, refuse_validation, register_learner
 from femrom.inference._realization import era_realization
@@ -52,10 +52,10 @@ class ERA(Learner):
 
     def __init__(self, order: int, *, rows: int | None = None, columns: int | None = None,
                  output_directions: int | None = None, input_directions: int | None = None):
-        if int(order) != order or order < 1:
-            raise FemromValueError(f"order must be a positive integer, got {order}")
-        self.order, self.rows, self.columns = int(order), rows, columns
-        self.output_directions, self.input_directions = output_directions, input_directions
+        self.order = positive_integer(order, "order")
+        self.rows, self.columns = (positive_integer(v, n, optional=True) for v, n in ((rows, "rows"), (columns, "columns")))
+        self.output_directions, self.input_directions = (positive_integer(v, n, optional=True) for v, n in (
+            (output_directions, "output_directions"), (input_directions, "input_directions")))
         self.operators_ = None
 
     needs = ("markov",)

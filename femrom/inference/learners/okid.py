@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 import time
 
-from femrom._errors import FemromTypeError, FemromValueError
+from femrom._errors import FemromTypeError, FemromValueError, positive_integer
 from femrom.inference._io_data import InputOutputData
 from femrom.inference._learner import Learner, refuse_validation, register_learner
 from dataclasses import replace
@@ -81,12 +81,11 @@ class OKID(Learner):
 
     def __init__(self, order: int, observer_order: int, *, rows: int | None = None, columns: int | None = None,
                  feedthrough: bool = True, at_rest: bool = False, output_directions: int | None = None):
-        for name, value in (("order", order), ("observer_order", observer_order)):
-            if int(value) != value or value < 1:
-                raise FemromValueError(f"{name} must be a positive integer, got {value}")
-        self.order, self.observer_order = int(order), int(observer_order)
-        self.rows, self.columns = rows, columns
-        self.feedthrough, self.at_rest, self.output_directions = bool(feedthrough), bool(at_rest), output_directions
+        self.order, self.observer_order = positive_integer(order, "order"), positive_integer(observer_order,
+                                                                                               "observer_order")
+        self.rows, self.columns = (positive_integer(v, n, optional=True) for v, n in ((rows, "rows"), (columns, "columns")))
+        self.feedthrough, self.at_rest = bool(feedthrough), bool(at_rest)
+        self.output_directions = positive_integer(output_directions, "output_directions", optional=True)
         self.operators_ = None
 
     def blocks(self, n_outputs: int, n_inputs: int, shortest: int) -> tuple[int, int]:
