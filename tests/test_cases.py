@@ -181,6 +181,15 @@ def test_cli_imports_a_case_by_name_and_names_the_valid_ones_otherwise(capsys):
     assert err.count("\n") == 0 and err.startswith("femrom: unknown case 'wobble'; available: beam")
 
 
+def test_every_case_takes_the_same_output_option(capsys):
+    """``-o DIR`` and ``--out DIR`` for every case (``femrom run fishtail -o DIR`` was refused)."""
+    for name in available_cases():
+        with pytest.raises(SystemExit) as info:
+            load_case(name).main(["--help"])
+        assert info.value.code == 0
+        assert "-o OUT, --out OUT" in capsys.readouterr().out, name
+
+
 def test_every_case_ships_its_scene_file_beside_it():
     from femrom.cases import scene_file
     from femrom.scene import Scene

@@ -202,7 +202,7 @@ def run(out_dir, *, quick: bool = False, scene_path=SCENE, rom: RomStudy | None 
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="femrom run beam", description=__doc__.split("\n")[0])
-    parser.add_argument("--out", type=Path, default=Path("results") / "beam")
+    parser.add_argument("-o", "--out", type=Path, default=Path("results") / "beam")
     parser.add_argument("--quick", action="store_true", help="short window and ladders (tests)")
     parser.add_argument("--paper", action="store_true",
                         help="finer mesh (h = 0.01, 200 dofs), dt = 2.5e-5, r up to 20")

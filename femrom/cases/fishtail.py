@@ -217,7 +217,7 @@ def run(out_dir, *, quick: bool = False, level: str = "small", train: str = "sig
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="femrom run fishtail", description=__doc__.split("\n")[0])
-    parser.add_argument("--out", type=Path, default=Path("results") / "fishtail")
+    parser.add_argument("-o", "--out", type=Path, default=Path("results") / "fishtail")
     parser.add_argument("--quick", action="store_true", help="short window, coarse mesh ladder (tests)")
     parser.add_argument("--level", default="small", choices=tuple(LEVELS),
                         help="mesh level: tiny 4.8e3, small 2e4 (default), medium 9e4, large 7.6e5 dofs")

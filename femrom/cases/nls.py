@@ -222,7 +222,7 @@ def report(cfg: NLSConfig, m: dict) -> list[str]:
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="femrom run nls", description=__doc__.split("\n")[0])
-    parser.add_argument("--out", type=Path, default=Path("results") / "nls")
+    parser.add_argument("-o", "--out", type=Path, default=Path("results") / "nls")
     parser.add_argument("--quick", action="store_true",
                         help="same windows, 2x coarser step (dt = 4e-3), headline rank only, no Tikhonov "
                              "sweep or FOM time-step ladder (tests)")

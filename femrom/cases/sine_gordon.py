@@ -228,7 +228,7 @@ def _plot_profiles(path, model, Q, times, V, curves: dict, at):
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="femrom run sine_gordon", description=__doc__.split("\n")[0])
-    parser.add_argument("--out", type=Path, default=Path("results") / "sine_gordon")
+    parser.add_argument("-o", "--out", type=Path, default=Path("results") / "sine_gordon")
     parser.add_argument("--quick", action="store_true", help="n = 400, dt = 0.02, r = 3, 4 (tests)")
     parser.add_argument("--paper", action="store_true", help="dt = 0.005, r up to 12")
     parser.add_argument("--ranks", type=int, nargs="+", help="basis sizes r")

@@ -223,7 +223,7 @@ def run(out_dir, config: SoftRobotCase = SoftRobotCase(), *, progress=None, scen
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="femrom run soft_robot", description=__doc__.split("\n")[0])
-    parser.add_argument("--out", "-o", type=Path, default=Path("results") / "soft_robot")
+    parser.add_argument("-o", "--out", type=Path, default=Path("results") / "soft_robot")
     parser.add_argument("--quick", action="store_true", help="coarse mesh, short windows (tests; about a minute)")
     parser.add_argument("--full", action="store_true",
                         help="every model as an MPC controller at r = 10 and 20 (20 closed loops on the FOM)")
