@@ -383,6 +383,25 @@ def test_travelling_wave_reference():
 
 # -- failures and bad input ------------------------------------------------------------------
 
+def test_an_inaccurate_solve_is_a_failure_under_raise(monkeypatch):
+    """A solve the solver flags as inaccurate (OSQP stopped short of its tolerance) is applied under
+    "shift" and "hold", and raises under "raise" (its move had been applied, up to 60 % off the optimum)."""
+    from femrom.control._formulation import QPSolution
+
+    model = exact_model(chain())
+    window = 1e-4 * np.ones((3, 10))
+    for policy in ("shift", "raise"):
+        mpc = LinearMPC(model, horizon=10, output_weight=1e8, input_weight=1.0, input_bound=0.1, on_failure=policy)
+        exact = mpc.formulation.solve
+        monkeypatch.setattr(mpc.formulation, "solve", lambda: QPSolution("optimal_inaccurate", exact().plan, 0.0, 1))
+        if policy == "raise":
+            with pytest.raises(MPCError, match="status 'optimal_inaccurate'"):
+                mpc.control(np.zeros(16), window)
+            continue
+        u = mpc.control(np.zeros(16), window)
+        assert np.all(np.isfinite(u)) and mpc.n_fallbacks == 0 and mpc.statuses == ["optimal_inaccurate"]
+
+
 def test_failed_solves_follow_the_stated_policy(monkeypatch):
     """A solver that raises (cvxpy) and one that stops at its iteration limit (OSQP directly):
     "shift" applies the next input of the last plan, "hold" the previous input, "raise" raises."""

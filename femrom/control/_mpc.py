@@ -154,6 +154,8 @@ class LinearMPC:
         status, plan = solution.status, solution.plan
         if plan is not None and not np.all(np.isfinite(plan)):
             plan, status = None, f"{status} (non-finite)"
+        elif plan is not None and "inaccurate" in status and self.config.on_failure == "raise":
+            plan = None           # a solver that stopped short of its tolerance failed, for "raise"
         self.statuses.append(status)
         self.solver_seconds.append(solution.solver_seconds)
         self.iterations.append(solution.iterations)

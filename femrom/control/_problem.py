@@ -72,7 +72,8 @@ class MPCConfig:
         ``"shift"`` applies the next input of the last successful plan (the
         tail of a plan satisfies the bounds), ``"hold"`` repeats the previous
         input, ``"raise"`` raises :class:`~femrom.control.MPCError`. A solve
-        the solver flags as inaccurate but finite is used and counted.
+        the solver flags as inaccurate but finite is used and counted, except under
+        ``"raise"``, where it is a failure.
     """
 
     horizon: int = 50
