@@ -80,5 +80,10 @@ def rest_start(model, rest_state):
     return None
 
 
+def dense(A) -> np.ndarray:
+    """``A`` (sparse or array) as a dense float array."""
+    return A.toarray() if hasattr(A, "toarray") else np.asarray(A, dtype=float)
+
+
 def finite(signal) -> bool:
     return bool(np.all(np.isfinite(signal)))

@@ -32,6 +32,7 @@ from femrom.inference import SecondOrderData, SpMLConfig, TrainingSet, concatena
 from femrom.integrators import Newmark, StepResult, Trajectory, integrate
 from femrom.post import hilbert_backbone
 from femrom.study._compare import compare_models
+from femrom.study._experiment import dense
 from femrom.study._models import ModelSpec
 from femrom.study.experiments.ring_down import RingDownTest
 
@@ -63,9 +64,6 @@ class RingDown:
         return self.seconds / max(self.times.size - 1, 1)
 
 
-def _dense(A):
-    return A.toarray() if hasattr(A, "toarray") else np.asarray(A, dtype=float)
-
 
 def reference_ring_down(system, rest_state, duration: float, dt: float, *, label: str = "",
                         scheme=None) -> RingDown:
@@ -92,7 +90,7 @@ def reference_ring_down(system, rest_state, duration: float, dt: float, *, label
 
 def mass_pod(mass, runs, r: int) -> tuple[np.ndarray, np.ndarray]:
     """The ``r`` leading POD vectors of the runs' displacements in the ``mass`` product, and all singular values."""
-    M = _dense(mass)
+    M = dense(mass)
     L = np.linalg.cholesky(0.5 * (M + M.T))
     Q = np.concatenate([run.q for run in runs], axis=1)
     U, s, _ = np.linalg.svd(L.T @ Q, full_matrices=False)
@@ -102,7 +100,7 @@ def mass_pod(mass, runs, r: int) -> tuple[np.ndarray, np.ndarray]:
 
 def ring_down_data(basis, mass, runs) -> SecondOrderData:
     """Reduced data of the runs (``V^T M`` of the stored ``q, q', q''``), inputs kept, one trajectory each."""
-    P = basis.T @ _dense(mass)
+    P = basis.T @ dense(mass)
     return concatenate([SecondOrderData(P @ run.q, P @ run.v, P @ run.a, inputs=run.inputs, times=run.times)
                         for run in runs])
 

@@ -55,12 +55,13 @@ def check_rom_config(config: RomConfig) -> None:
         if spec.learner not in valid:
             raise SceneError(f"[rom.learners[{i}]] {spec.learner!r} fits {known[spec.learner].model} models, "
                              f"not second-order or canonical ones; the [rom] pipeline takes: {', '.join(valid)}")
-        if spec.terms and "extra_terms" not in _keywords(known[spec.learner]):
+        keywords = _keywords(known[spec.learner])
+        if spec.terms and "extra_terms" not in keywords:
             raise SceneError(f"[rom.learners[{i}]] {spec.learner!r} learns no terms beyond its own: remove 'terms'")
-        unknown = [name for name, _ in spec.options if name not in _keywords(known[spec.learner])]
+        unknown = [name for name, _ in spec.options if name not in keywords]
         if unknown:
             raise SceneError(f"[rom.learners[{i}]] {spec.learner!r} has no option {unknown[0]!r}; valid: "
-                             f"{', '.join(sorted(_keywords(known[spec.learner])))}")
+                             f"{', '.join(sorted(keywords))}")
     experiments = registered_experiments()
     for i, spec in enumerate(config.experiments):
         if spec.kind not in experiments:

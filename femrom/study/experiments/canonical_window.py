@@ -70,12 +70,12 @@ class CanonicalWindow(Experiment):
     reduced solution come back under ``_Q``, ``_P``, ``_solution``."""
 
     def __init__(self, system, run, train_window: float, *, invariants=None, label: str = "extrapolation"):
-        self.system, self.run_, self.invariants, self.label = system, run, invariants, label
+        self.system, self.reference, self.invariants, self.label = system, run, invariants, label
         k_train = int(round(train_window / run.dt)) + 1
         self.train, self.test = slice(0, k_train), slice(k_train, None)
 
     def run(self, model) -> dict:
-        fom = self.run_
+        fom = self.reference
         solution = predict_from(model, fom.q[:, 0], fom.p[:, 0], fom.times)
         Qf, Pf = model.basis @ solution.q, model.basis @ solution.p
         A = linear_operator(model)

@@ -8,11 +8,8 @@ import numpy as np
 
 from femrom.post import hilbert_backbone
 from femrom.study._backbone_metrics import backbone_errors
-from femrom.study._experiment import Experiment, finite, register_experiment, rest_start
+from femrom.study._experiment import Experiment, dense, finite, register_experiment, rest_start
 
-
-def _dense(A):
-    return A.toarray() if hasattr(A, "toarray") else np.asarray(A, dtype=float)
 
 
 def decays(signal: np.ndarray) -> bool:
@@ -56,7 +53,7 @@ class RingDownTest(Experiment):
     def __init__(self, reference, inputs, sensors, amplitude_range, *, band, window, output: int = 0,
                  correction=None, rest_state=None, scheme: str = "discrete_gradient",
                  stateful_scheme: str = "newmark"):
-        self.reference, self.inputs, self.E = reference, inputs, _dense(sensors)
+        self.reference, self.inputs, self.E = reference, inputs, dense(sensors)
         self.amplitude_range = tuple(float(a) for a in amplitude_range)
         self.band, self.window, self.output = band, window, int(output)
         self.correction = correction or (lambda backbone: backbone)

@@ -9,11 +9,8 @@ import numpy as np
 from femrom.inference import Output
 from femrom.integrators import Shaker, StepResult
 from femrom.rom import SecondOrderROM
-from femrom.study._experiment import Experiment, register_experiment, rest_start
+from femrom.study._experiment import Experiment, dense, register_experiment, rest_start
 
-
-def _dense(A):
-    return A.toarray() if hasattr(A, "toarray") else np.asarray(A, dtype=float)
 
 
 def peak_rows(result, reference, output: int = 0) -> list[dict]:
@@ -82,7 +79,7 @@ class SteppedSineTest(Experiment):
 
     def plant(self, model) -> Shaker:
         """``model`` on the shaker, seen through the reference's sensors on its basis."""
-        E = _dense(self.reference.output_matrix)
+        E = dense(self.reference.output_matrix)
         sensed = SecondOrderROM(model.operators_.with_terms(Output(E @ model.basis)), model.basis)
         return Shaker(sensed, self.input, rest=rest_start(model, self.rest_state), scheme=self.scheme,
                       output_names=self.reference.output_names)
