@@ -19,7 +19,8 @@ import numpy as np
 
 from femrom._errors import FemromRuntimeError, FemromValueError
 from femrom.control._formulation import QP_FORMULATIONS
-from femrom.control._problem import MPCConfig, MPCProblem, vector
+from femrom.control._certificate import PlanCertificate
+from femrom.control._problem import CondensedQP, MPCConfig, MPCProblem, vector
 from femrom.control._qp_solver import QPSolver
 from femrom.rom import DiscreteStateSpace
 
@@ -77,6 +78,10 @@ class LinearMPC:
         Solver iterations of every solve (-1 where it reports none).
     n_fallbacks : int
         Solves that failed and were replaced by the ``on_failure`` policy.
+    n_repaired : int
+        Plans that failed the accuracy certificate and were repaired (``config.accuracy``).
+    error_bounds : list of float
+        The certified bound of ``||U - U*||`` of every plan checked (``config.accuracy``).
     """
 
     def __init__(self, model: DiscreteStateSpace, config: MPCConfig | None = None, **settings):
@@ -85,6 +90,16 @@ class LinearMPC:
         self.model, self.config = model, config
         self.qp = MPCProblem.from_model(model, config)
         self.formulation = QP_FORMULATIONS.get(config.formulation_name)(self.qp, config)
+        self._condensed = self._certificate = None
+        if config.accuracy is not None:
+            self._condensed = getattr(self.formulation, "qp", None) or CondensedQP.from_problem(self.qp)
+            self._certificate = PlanCertificate.from_hessian(self._condensed.hessian, self.qp.bound, self.qp.horizon)
+            reach = self._certificate.round_off_bound()
+            if not reach < config.accuracy:
+                warnings.warn(f"the QP's Hessian has condition {self._certificate.condition:.2g}: a plan cannot be "
+                              f"certified to accuracy {config.accuracy:g} in double precision (round-off alone "
+                              f"allows {reach:.2g}); rescale the weights, or give a larger accuracy or None",
+                              MPCWarning, stacklevel=2)
         self.plan_: np.ndarray | None = None
         self._plan_age = 0
         self.solve_seconds: list[float] = []
@@ -92,6 +107,8 @@ class LinearMPC:
         self.statuses: list[str] = []
         self.iterations: list[int] = []
         self.n_fallbacks = 0
+        self.n_repaired = 0
+        self.error_bounds: list[float] = []
         self._warned = False
 
     # -- sizes -----------------------------------------------------------------------------
@@ -156,6 +173,8 @@ class LinearMPC:
             plan, status = None, f"{status} (non-finite)"
         elif plan is not None and "inaccurate" in status and self.config.on_failure == "raise":
             plan = None           # a solver that stopped short of its tolerance failed, for "raise"
+        elif plan is not None and self._certificate is not None:
+            plan, status = self._certified(plan, status, (z, R, u_prev, w_z, w_y, z_T))
         self.statuses.append(status)
         self.solver_seconds.append(solution.solver_seconds)
         self.iterations.append(solution.iterations)
@@ -166,6 +185,31 @@ class LinearMPC:
             u = self._fallback(status, u_prev)
         self.solve_seconds.append(time.perf_counter() - tic)
         return u
+
+    def _certified(self, plan: np.ndarray, status: str, parameters: tuple) -> tuple[np.ndarray | None, str]:
+        """``(plan, status)``: the plan as solved if certified, else repaired (``" (repaired)"``) or
+        ``None`` (``" (uncertified)"``); the bound is logged in :attr:`error_bounds`."""
+        gradient = self._condensed.gradient(*parameters)
+        certificate = self._certificate
+        # into the bounds first (a solver's plan may leave them by its tolerance): the projection
+        # onto the box is never farther from the optimum, which lies inside it
+        U = np.clip(plan.T.ravel(), certificate.lower, certificate.upper)
+        tolerance = self.config.accuracy * max(float(np.linalg.norm(U)),
+                                               float(np.linalg.norm(gradient)) / certificate.largest)
+        bound = certificate.error_bound(U, gradient)
+        if bound <= tolerance:
+            self.error_bounds.append(bound)
+            return U.reshape(self.horizon, self.n_inputs).T.copy(), status
+        repaired = certificate.repair(U, gradient)
+        if repaired is not None:
+            tolerance = self.config.accuracy * max(float(np.linalg.norm(repaired)),
+                                                   float(np.linalg.norm(gradient)) / certificate.largest)
+            bound = certificate.error_bound(repaired, gradient)
+        self.error_bounds.append(bound)
+        if repaired is None or not bound <= tolerance:
+            return None, f"{status} (uncertified)"
+        self.n_repaired += 1
+        return repaired.reshape(self.horizon, self.n_inputs).T.copy(), f"{status} (repaired)"
 
     def _fallback(self, status: str, u_previous: np.ndarray) -> np.ndarray:
         policy = self.config.on_failure
@@ -187,8 +231,8 @@ class LinearMPC:
         """Forget the timings, statuses and the last plan (the compiled QP stays)."""
         self.plan_, self._plan_age = None, 0
         self.solve_seconds.clear(), self.solver_seconds.clear(), self.statuses.clear()
-        self.iterations.clear()
-        self.n_fallbacks, self._warned = 0, False
+        self.iterations.clear(), self.error_bounds.clear()
+        self.n_fallbacks, self.n_repaired, self._warned = 0, 0, False
 
     def describe(self) -> dict:
         """The configuration and sizes as plain JSON values."""

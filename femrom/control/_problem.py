@@ -74,6 +74,14 @@ class MPCConfig:
         input, ``"raise"`` raises :class:`~femrom.control.MPCError`. A solve
         the solver flags as inaccurate but finite is used and counted, except under
         ``"raise"``, where it is a failure.
+    accuracy : float or None
+        Every plan the solver calls optimal is certified to be within
+        ``accuracy * max(||U||, ||g|| / L)`` of the QP's optimum (2-norm over the plan;
+        ``g`` the QP's gradient term and ``L`` its Hessian's largest eigenvalue, the
+        problem's own input scale), by the projected-gradient bound of
+        :mod:`femrom.control._certificate`; a plan that fails is repaired by an
+        active-set solve and certified again, and one that still fails counts as a
+        failed solve. ``None``: plans are used as the solver returns them.
     """
 
     horizon: int = 50
@@ -85,8 +93,12 @@ class MPCConfig:
     formulation: str | None = None
     solver: QPSolver = QPSolver()
     on_failure: str = "shift"
+    accuracy: float | None = 1e-4
 
     def __post_init__(self):
+        if self.accuracy is not None and not (isinstance(self.accuracy, (int, float, np.floating))
+                                              and not isinstance(self.accuracy, bool) and 0 < self.accuracy < 1):
+            raise FemromValueError(f"accuracy must be None or a number in (0, 1), got {self.accuracy!r}")
         if not (isinstance(self.horizon, (int, np.integer)) and self.horizon >= 1):
             raise FemromValueError(f"horizon must be a positive integer, got {self.horizon!r}")
         if self.on_failure not in FAILURE_POLICIES:
