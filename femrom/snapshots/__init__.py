@@ -26,8 +26,8 @@ A kill at any moment is covered: a new store is written under a temporary
 name and renamed into place; adding a trajectory (or trimming one for
 ``resume``) happens under an undo journal (``<store>.journal``) that the next
 writer (or :func:`recover`) rolls back if the process died, also for a copy of
-the store taken with its journal; a reader reads the store as it was before and
-never modifies the file. After that the file is in HDF5's SWMR mode, where every
+the store taken with its journal; a reader reads the store as it was before,
+says so (:class:`PendingChangeWarning`) and never modifies the file. After that the file is in HDF5's SWMR mode, where every
 committed chunk stays readable.
 
 Fields are named by key or by name: ``q`` / ``displacement``, ``v`` /
@@ -54,7 +54,7 @@ from femrom.snapshots._format import DEFAULT_UNITS, FORMAT_NAME, FORMAT_VERSION
 from femrom.snapshots._resume import model_solver, resume
 from femrom.snapshots._runs import FOMRun, run_fom, solver_factory
 from femrom.snapshots._reading import read_rows
-from femrom.snapshots._recovery import recover
+from femrom.snapshots._recovery import PendingChangeWarning, recover
 from femrom.snapshots._store import SnapshotStore
 from femrom.snapshots._writer import SnapshotWriter, default_chunk_steps
 
@@ -66,6 +66,7 @@ __all__ = [
     "FORMAT_VERSION",
     "FOMRun",
     "SnapshotStore",
+    "PendingChangeWarning",
     "recover",
     "run_fom",
     "solver_factory",

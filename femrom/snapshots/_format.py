@@ -140,11 +140,18 @@ def text(value) -> str:
     return value.decode() if isinstance(value, bytes) else str(value)
 
 
+def _dtype_name(dtype) -> str:
+    kinds = {"S": "byte strings", "U": "text", "O": "objects (variable-length strings)", "b": "booleans",
+             "c": "complex numbers", "V": "compound records", "M": "dates", "m": "time spans"}
+    return f"{kinds.get(dtype.kind, 'values')} ({dtype})"
+
+
 def check_store(f: h5py.File, path: Path) -> None:
     """Raise :class:`SnapshotStoreError` unless ``f`` is a consistent femrom store.
 
     Checked: the format attributes, the dof map, and for every trajectory the
-    dataset shapes and that its declared length does not exceed its data.
+    dataset shapes and types (floating point; integer steps) and that its declared
+    length does not exceed its data.
     """
     fmt = f.attrs.get("format")
     if fmt is None:
@@ -186,6 +193,11 @@ def check_store(f: h5py.File, path: Path) -> None:
             if chunks is None or chunks[1] != shape[1]:
                 raise SnapshotStoreError(f"{path}: dataset {where}/{key} has chunks {chunks}, "
                                          f"expected (c, {shape[1]}) (whole snapshot columns)")
+        for key in (*fields, "t", "step", "checkpoint/q", "checkpoint/v", "checkpoint/a"):
+            kind = group[key].dtype.kind
+            if kind not in ("f", "i", "u") or (key != "step" and kind != "f"):
+                raise SnapshotStoreError(f"{path}: dataset {where}/{key} holds {_dtype_name(group[key].dtype)}, "
+                                         f"expected {'integers' if key == 'step' else 'floating-point numbers'}")
         for key in ("t", "step"):
             if group[key].ndim != 1:
                 raise SnapshotStoreError(f"{path}: dataset {where}/{key} has shape "

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import os
 import socket
+import warnings
 import weakref
 from pathlib import Path
 
@@ -22,6 +23,11 @@ import h5py
 from femrom.snapshots import _format, _journal
 from femrom.snapshots._errors import SnapshotStoreError
 from femrom.snapshots._superblock import SuperblockError, clear_write_flags, read_superblock
+
+
+class PendingChangeWarning(UserWarning):
+    """A store is read as it was before a killed writer's unfinished change (its undo journal is
+    still beside it)."""
 
 
 def open_committed(path: Path) -> tuple[h5py.File, bool]:
@@ -33,6 +39,10 @@ def open_committed(path: Path) -> tuple[h5py.File, bool]:
     change = _journal.pending_change(path, _process_alive)
     if change is None:
         return _format.open_for_reading(path)
+    warnings.warn(f"{path}: a writer (process {change.header.pid}) was killed while changing the store's "
+                  f"layout; reading the store as it was before that change (the next writer, or "
+                  f"femrom.snapshots.recover, undoes it and deletes {change.journal.name})",
+                  PendingChangeWarning, stacklevel=3)
     try:
         return h5py.File(change.view(), "r"), False
     except (OSError, ValueError) as exc:
