@@ -35,6 +35,14 @@ class FemromRuntimeError(FemromError, RuntimeError):
     """A computation that could not be completed (no convergence, a failed solve, divergence)."""
 
 
+def nonnegative_integer(value, name: str):
+    """``value`` as an int >= 0, or one FemromValueError naming ``name`` (the rule of
+    :func:`positive_integer` with 0 allowed: counts of extra columns, passes, seeds)."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < 0:
+        raise FemromValueError(f"{name} must be a non-negative integer, got {value!r}")
+    return int(value)
+
+
 def positive_integer(value, name: str, *, optional: bool = False):
     """``value`` as an int >= 1, or one FemromValueError naming ``name`` (the one rule for integer
     arguments: an int or a numpy integer, never a float such as ``2.5`` or ``20.0``, never a bool);

@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 import scipy.linalg as sla
 
-from femrom._errors import FemromTypeError, FemromValueError
+from femrom._errors import FemromTypeError, FemromValueError, positive_integer
 from femrom.linalg import (
     InnerProduct,
     LowRankSVD,
@@ -95,7 +95,8 @@ def truncation_rank(singular_values: np.ndarray, total_energy: float, *, rank: i
         raise FemromValueError(f"give exactly one of rank, energy, tolerance (got {given or 'none'})")
     available = singular_values.size
     if rank is not None:
-        if not 1 <= int(rank) <= available:
+        rank = positive_integer(rank, "rank")
+        if not rank <= available:
             raise FemromValueError(f"rank {rank} is not in 1..{available} (singular values available)")
         return int(rank)
     if energy is not None:
@@ -186,8 +187,7 @@ class POD:
         given = [v for v in (rank, energy, tolerance) if v is not None]
         if len(given) != 1:
             raise FemromValueError("give exactly one of rank, energy, tolerance")
-        if rank is not None and (isinstance(rank, bool) or not isinstance(rank, (int, np.integer))):
-            raise FemromValueError(f"rank must be a whole number, got {rank!r}")
+        positive_integer(rank, "rank", optional=True)
         for name, value in (("energy", energy), ("tolerance", tolerance)):
             if value is not None and (isinstance(value, bool) or not isinstance(value, (int, float))
                                       or not np.isfinite(value)):

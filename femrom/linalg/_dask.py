@@ -52,7 +52,7 @@ from typing import Any, Iterator
 
 import numpy as np
 
-from femrom._errors import FemromValueError
+from femrom._errors import FemromValueError, nonnegative_integer, positive_integer
 from femrom.linalg._blocks import default_block_columns
 from femrom.linalg._lowrank import LowRankSVD
 from femrom.linalg._product import InnerProduct
@@ -357,8 +357,9 @@ def randomized_svd_dask(data: Any, rank: int, *, oversampling: int = 10, power_i
     """
     import dask.array as da
 
-    if int(rank) < 1:
-        raise FemromValueError(f"rank must be >= 1, got {rank}")
+    rank = positive_integer(rank, "rank")
+    oversampling = nonnegative_integer(oversampling, "oversampling")
+    power_iterations = nonnegative_integer(power_iterations, "power_iterations")
     inner = InnerProduct(product)
     array = as_dask_array(data, field=field, trajectories=trajectories,
                           block_columns=block_columns, dataset=dataset, chunks=chunks)

@@ -78,7 +78,7 @@ from typing import Any
 
 import numpy as np
 
-from femrom._errors import FemromValueError
+from femrom._errors import FemromValueError, nonnegative_integer, positive_integer
 from femrom._progress import Progress
 from femrom.linalg._blocks import as_block_source
 from femrom.linalg._lowrank import LowRankSVD
@@ -140,12 +140,9 @@ def _check_same_columns(source, seen: int, expected: int) -> None:
 
 
 def _check_rank(rank: int, oversampling: int, power_iterations: int, scheme: str) -> None:
-    if int(rank) < 1:
-        raise FemromValueError(f"rank must be >= 1, got {rank}")
-    if int(oversampling) < 0:
-        raise FemromValueError(f"oversampling must be >= 0, got {oversampling}")
-    if int(power_iterations) < 0:
-        raise FemromValueError(f"power_iterations must be >= 0, got {power_iterations}")
+    positive_integer(rank, "rank")
+    nonnegative_integer(oversampling, "oversampling")
+    nonnegative_integer(power_iterations, "power_iterations")
     if scheme not in SCHEMES:
         raise FemromValueError(f"unknown randomized SVD scheme {scheme!r}; valid: {', '.join(SCHEMES)}")
 

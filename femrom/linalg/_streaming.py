@@ -39,7 +39,7 @@ from typing import Any
 
 import numpy as np
 
-from femrom._errors import FemromValueError
+from femrom._errors import FemromValueError, positive_integer
 from femrom.linalg._blocks import as_block_source, as_column_block
 from femrom.linalg._lowrank import LowRankSVD
 from femrom.linalg._product import InnerProduct, householder_qr
@@ -88,11 +88,9 @@ class StreamingSketch:
     def __init__(self, n: int, rank: int, *, range_size: int | None = None,
                  core_size: int | None = None, seed: int = 0, product: Any = None,
                  test_matrix: str = "gaussian", buffer_columns: int = 32):
-        self.n, self.rank = int(n), int(rank)
-        if self.rank < 1:
-            raise FemromValueError(f"rank must be >= 1, got {rank}")
-        self.range_size = 4 * self.rank + 1 if range_size is None else int(range_size)
-        self.core_size = 2 * self.range_size + 1 if core_size is None else int(core_size)
+        self.n, self.rank = positive_integer(n, "n"), positive_integer(rank, "rank")
+        self.range_size = 4 * self.rank + 1 if range_size is None else positive_integer(range_size, "range_size")
+        self.core_size = 2 * self.range_size + 1 if core_size is None else positive_integer(core_size, "core_size")
         if self.range_size < self.rank + 2:
             raise FemromValueError(f"range_size must be >= rank + 2 = {self.rank + 2} "
                                    f"(TYUC2019 needs k > r + 1 for real data), got {self.range_size}")
@@ -191,7 +189,7 @@ class StreamingSketch:
         LowRankSVD
             ``U`` (n, r) with U^T W U = I, ``s`` (r,), ``Vt`` (r, K), ``passes = 1``.
         """
-        rank = self.rank if rank is None else int(rank)
+        rank = self.rank if rank is None else positive_integer(rank, "rank")
         self.flush()
         n_columns = self.n_columns
         if n_columns == 0:
