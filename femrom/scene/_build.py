@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import ast
 import contextlib
 import time
 from dataclasses import dataclass, field
@@ -230,6 +231,9 @@ def _mode_shape(system, index):
     """Eigenvector ``index`` (1-based) of ``K phi = omega^2 M phi`` by shift-invert Lanczos."""
     from scipy.sparse.linalg import eigsh
 
+    if index > system.n_dofs - 1:
+        raise SceneError(f"[initial_conditions] mode index {index} exceeds the {system.n_dofs - 1} modes "
+                         f"computable on this model ({system.n_dofs} free dofs)")
     k = min(index + 2, system.n_dofs - 1)
     values, vectors = eigsh(system.stiffness.tocsc(), k=k, M=system.mass.tocsc(), sigma=0.0, which="LM")
     order = np.argsort(values)
@@ -241,21 +245,64 @@ _EXPRESSION_NAMES = {name: getattr(np, name) for name in
                       "abs", "where", "pi")}
 
 
+#: The syntax an initial-condition expression may use: arithmetic, comparisons and calls of
+#: :data:`_EXPRESSION_NAMES` on numbers and ``x, y, z`` (no attributes, subscripts, strings or
+#: collections: nothing that can build a huge object or reach outside numpy).
+_EXPRESSION_NODES = (ast.Expression, ast.BinOp, ast.UnaryOp, ast.BoolOp, ast.Compare, ast.IfExp, ast.Call,
+                     ast.Name, ast.Load, ast.Constant, ast.operator, ast.unaryop, ast.boolop, ast.cmpop)
+
+
+class _FloatLiterals(ast.NodeTransformer):
+    """Integer literals as floats, so that ``9 ** 9 ** 9`` overflows to inf at once instead of
+    computing an integer of 370 million digits."""
+
+    def visit_Constant(self, node):
+        if isinstance(node.value, int) and not isinstance(node.value, bool):
+            return ast.copy_location(ast.Constant(float(node.value)), node)
+        return node
+
+
 def _expression(text: str):
-    """A numpy expression of ``x, y, z`` (scene files are trusted code, like a script)."""
+    """A numpy expression of ``x, y, z`` built from :data:`_EXPRESSION_NAMES` and numbers."""
+    if not isinstance(text, str):
+        raise SceneError(f"[initial_conditions] an expression must be a string, got {text!r}")
     try:
-        code = compile(text, "<initial condition>", "eval")
+        tree = ast.parse(text, "<initial condition>", mode="eval")
     except SyntaxError as exc:
         raise SceneError(f"[initial_conditions] cannot parse expression {text!r}: {exc.msg}") from None
     allowed = set(_EXPRESSION_NAMES) | {"x", "y", "z"}
-    unknown = sorted(set(code.co_names) - allowed)
-    if unknown:
-        raise SceneError(f"[initial_conditions] unknown name {unknown[0]!r} in {text!r}; "
-                         f"valid: x, y, z, {', '.join(_EXPRESSION_NAMES)}")
+    for node in ast.walk(tree):
+        if not isinstance(node, _EXPRESSION_NODES) or (
+                isinstance(node, ast.Constant) and not isinstance(node.value, (int, float))) or (
+                isinstance(node, ast.Call) and (node.keywords or not isinstance(node.func, ast.Name))):
+            what = repr(node.value) if isinstance(node, ast.Constant) else type(node).__name__.lower()
+            raise SceneError(f"[initial_conditions] {what} is not allowed in {text!r}; an expression uses "
+                             "numbers, x, y, z, arithmetic, comparisons and the functions "
+                             f"{', '.join(n for n in _EXPRESSION_NAMES if n != 'pi')}")
+        if isinstance(node, ast.Name) and node.id not in allowed:
+            raise SceneError(f"[initial_conditions] unknown name {node.id!r} in {text!r}; "
+                             f"valid: x, y, z, {', '.join(_EXPRESSION_NAMES)}")
+    code = compile(ast.fix_missing_locations(_FloatLiterals().visit(tree)), "<initial condition>", "eval")
 
     def evaluate(x, y, z):
-        value = eval(code, {"__builtins__": {}}, {**_EXPRESSION_NAMES, "x": x, "y": y, "z": z})
-        return np.broadcast_to(np.asarray(value, dtype=float), np.shape(x)).copy()
+        with np.errstate(all="ignore"):
+            try:
+                value = eval(code, {"__builtins__": {}}, {**_EXPRESSION_NAMES, "x": x, "y": y, "z": z})
+            except OverflowError:
+                raise SceneError(f"[initial_conditions] expression {text!r} overflows (a value beyond "
+                                 "1.8e308)") from None
+            except (ArithmeticError, TypeError, ValueError) as exc:
+                raise SceneError(f"[initial_conditions] expression {text!r} cannot be evaluated: {exc}") from None
+        try:
+            value = np.broadcast_to(np.asarray(value, dtype=float), np.shape(x)).copy()
+        except (TypeError, ValueError):
+            raise SceneError(f"[initial_conditions] expression {text!r} does not give one number per "
+                             "node") from None
+        bad = ~np.isfinite(value)
+        if bad.any():
+            raise SceneError(f"[initial_conditions] expression {text!r} is not finite at {int(bad.sum())} of "
+                             f"{value.size} nodes (first at x={np.ravel(x)[np.argmax(np.ravel(bad))]:.6g})")
+        return value
 
     return evaluate
 
