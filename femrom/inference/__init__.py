@@ -84,6 +84,7 @@ from femrom.inference._operators import ReducedForces, ReducedOperators, galerki
 from femrom.inference._training import TrainingSet
 from femrom.inference._problem import Block, GramProblem
 from femrom.inference._realization import (
+    LargeHankelWarning,
     block_hankel,
     era_realization,
     markov_from_observer,
@@ -141,7 +142,7 @@ __all__ = [
     "register_learner", "register_term", "registered_learners", "registered_terms", "solve_conic", "solve_fast", "stencil_weights",
     "symmetric_lyapunov_fit", "term_class",
     "DMDc", "ERA", "InputOutputData", "MarkovParameters", "OKID", "STATE_LAYOUTS", "StateSpaceOperators",
-    "block_hankel", "era_realization", "impulse_response", "markov_parameters", "observer_markov_parameters",
+    "LargeHankelWarning", "block_hankel", "era_realization", "impulse_response", "markov_parameters", "observer_markov_parameters",
     "markov_from_observer", "okid_markov_parameters", "okid_observer_gain", "system_impulse_response",
     "system_markov_from_observer",
     "IwanLOpInf", "TrainingSet", "LearnedHysteresis", "SliderState", "slider_stretches", "spml_module",

@@ -59,7 +59,8 @@ def impulse_response(make_stepper: Callable[[], object], n_inputs: int, count: i
         bar.update(count)
         columns.append(np.stack(response))               # (count, p)
     bar.close()
-    return MarkovParameters(np.stack(columns, axis=2), dt=dt, metadata={"source": "impulse response (stepper)"})
+    return MarkovParameters(np.stack(columns, axis=2), dt=dt, layout="npm",
+                            metadata={"source": "impulse response (stepper)"})
 
 
 def _unit_sample(j: int, m: int, dt: float) -> Callable[[float], np.ndarray]:
@@ -116,5 +117,5 @@ def system_impulse_response(system, dt: float, count: int, *, scheme=None, solve
         run = iterate(driven, scheme, np.zeros(n), np.zeros(n), dt, count, solver=solver, progress=progress)
         next(run)                                         # t_0: rest, zero input
         columns.append(np.stack([np.asarray(E @ result.q).ravel() for result in run]))
-    return MarkovParameters(np.stack(columns, axis=2), dt=dt,
+    return MarkovParameters(np.stack(columns, axis=2), dt=dt, layout="npm",
                             metadata={"source": f"impulse response ({getattr(scheme, 'name', type(scheme).__name__)})"})

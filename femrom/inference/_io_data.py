@@ -208,22 +208,39 @@ class MarkovParameters:
     Attributes
     ----------
     parameters : (N, p, m) ndarray
-        ``parameters[k] = Y_k``; python-control's layout is ``(p, m, N)``
-        (``np.moveaxis(parameters, 0, -1)``).
+        ``parameters[k] = Y_k``, stored in this layout whatever ``layout`` was given.
     dt : float
     metadata : dict
         Where they came from (``"source"``: an impulse response, OKID, a model).
+    layout : {None, "npm", "pmn"}
+        How ``parameters`` was given: ``"npm"`` femrom's ``(N, p, m)``; ``"pmn"``
+        python-control's ``(p, m, N)`` (``control.markov``), moved to ``(N, p, m)``.
+        ``None`` (default) reads ``(N, p, m)`` but refuses an array with more inputs
+        than samples (``m > N``), the sign of a ``(p, m, N)`` array given as
+        femrom's; say ``"npm"`` to keep such an array as it is.
     """
 
     parameters: np.ndarray
     dt: float = 1.0
     metadata: dict = field(default_factory=dict)
+    layout: str | None = None
 
     def __post_init__(self):
+        if self.layout not in (None, "npm", "pmn"):
+            raise FemromValueError(f"Markov parameters layout must be 'npm' (N, p, m) or 'pmn' (p, m, N: "
+                                   f"python-control's), got {self.layout!r}")
         Y = _real_finite("Markov parameters", self.parameters, 3)
+        if self.layout == "pmn":
+            Y = np.ascontiguousarray(np.moveaxis(Y, -1, 0))
         if Y.shape[0] < 2 or Y.shape[1] < 1 or Y.shape[2] < 1:
             raise FemromValueError(f"Markov parameters must be (N >= 2, p >= 1, m >= 1), got shape {Y.shape}")
+        if self.layout is None and Y.shape[2] > Y.shape[0]:
+            raise FemromValueError(
+                f"Markov parameters of shape {Y.shape} read as (N, p, m) are {Y.shape[0]} samples of a system with "
+                f"{Y.shape[2]} inputs, more inputs than samples: python-control's layout is (p, m, N); give "
+                "layout='pmn' for it, or layout='npm' if the shape is right")
         object.__setattr__(self, "parameters", Y)
+        object.__setattr__(self, "layout", "npm")
         object.__setattr__(self, "dt", _positive_step(self.dt))
 
     @property

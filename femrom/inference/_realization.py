@@ -64,6 +64,7 @@ structure), and every exact solution gives the same ``Y_k``.
 from __future__ import annotations
 
 import time
+import warnings
 
 import numpy as np
 import scipy.linalg
@@ -174,6 +175,11 @@ def era_realization(markov: MarkovParameters, order: int, *, rows: int | None = 
                                f"({rows} block rows, {columns} block columns): give more Markov parameters or blocks")
     H0 = block_hankel(Yt, rows, columns)
     H1 = block_hankel(Yt, rows, columns, shift=1)
+    flops = 4.0 * H0.shape[0] * H0.shape[1] * min(H0.shape)
+    if flops > LARGE_SVD_FLOPS:
+        warnings.warn(f"ERA: the Hankel matrix is {H0.shape[0]} x {H0.shape[1]} ({rows} block rows x {pt} outputs, "
+                      f"{columns} block columns x {mt} inputs); its SVD takes about {flops:.1e} flops. Fewer rows or "
+                      "columns, or output_directions, make it smaller", LargeHankelWarning, stacklevel=2)
     tic = time.perf_counter()
     with Stage(f"ERA: SVD of the {H0.shape[0]} x {H0.shape[1]} Hankel matrix", enabled=progress):
         P, s, Qt = scipy.linalg.svd(H0, full_matrices=False, lapack_driver="gesdd")
@@ -198,6 +204,15 @@ def era_realization(markov: MarkovParameters, order: int, *, rows: int | None = 
                 "output_directions": output_directions, "input_directions": input_directions,
                 "markov_count": N}
     return StateSpaceOperators(A=A, B=B, C=C, D=markov.feedthrough.copy(), dt=markov.dt, metadata=metadata)
+
+
+#: Flops of the Hankel matrix's SVD (``4 a b min(a, b)``) above which ERA says so before it starts:
+#: a few seconds or more (a 10,000 x 3,000 Hankel matrix, 3.6e11 flops, took 20 s on a 2-core machine).
+LARGE_SVD_FLOPS = 5e10
+
+
+class LargeHankelWarning(UserWarning):
+    """ERA was asked for a Hankel matrix whose SVD takes long (its size and cost are said)."""
 
 
 def _observer_regression(data: InputOutputData, observer_order: int, feedthrough: bool, at_rest: bool):
@@ -257,13 +272,38 @@ def observer_markov_parameters(data: InputOutputData, observer_order: int, *, fe
     Phi, Y = _observer_regression(data, l, feedthrough, at_rest)
     tic = time.perf_counter()
     with Stage(f"OKID: least squares {Phi.shape[1]} x {Phi.shape[0]}", enabled=progress):
-        theta, _, rank, _ = scipy.linalg.lstsq(Phi.T, Y.T, lapack_driver="gelsd")
+        coefficients, residual, rank = _least_squares(Phi, Y)
+        if not feedthrough and residual > 0:
+            _refuse_hidden_feedthrough(data, l, at_rest, residual)
     seconds = time.perf_counter() - tic
+    return coefficients, {"residual": residual, "rank": int(rank), "shape": list(Phi.T.shape),
+                          "seconds": seconds}
+
+
+#: ``feedthrough=False`` is refused when fitting ``D`` too lowers the observer regression's
+#: relative residual below this fraction of its value: the outputs then respond to the input of
+#: the same sample. Noise alone lowers it by about ``m / (equations per output)`` (a few per cent
+#: at most for a regression that is not underdetermined), a feedthrough by orders of magnitude.
+HIDDEN_FEEDTHROUGH_RATIO = 0.5
+
+
+def _least_squares(Phi: np.ndarray, Y: np.ndarray) -> tuple[np.ndarray, float, int]:
+    """``(Theta, relative residual, rank)`` of ``min ||Y - Theta Phi||_F``."""
+    theta, _, rank, _ = scipy.linalg.lstsq(Phi.T, Y.T, lapack_driver="gelsd")
     coefficients = theta.T
     den = np.linalg.norm(Y)
     residual = float(np.linalg.norm(Y - coefficients @ Phi) / den) if den > 0 else 0.0
-    return coefficients, {"residual": residual, "rank": int(rank), "shape": list(Phi.T.shape),
-                          "seconds": seconds}
+    return coefficients, residual, int(rank)
+
+
+def _refuse_hidden_feedthrough(data: InputOutputData, observer_order: int, at_rest: bool, residual: float) -> None:
+    """One error when the data say ``y_k`` depends on ``u_k`` but ``feedthrough=False`` was asked."""
+    _, with_d, _ = _least_squares(*_observer_regression(data, observer_order, True, at_rest))
+    if with_d < HIDDEN_FEEDTHROUGH_RATIO * residual:
+        raise FemromValueError(
+            f"OKID(feedthrough=False): the outputs respond to the input of the same sample (the observer "
+            f"regression leaves {residual:.3g} of the outputs unexplained without a feedthrough D, {with_d:.3g} "
+            "with one); use feedthrough=True")
 
 
 def system_markov_from_observer(coefficients: np.ndarray, n_inputs: int, n_outputs: int, observer_order: int,
@@ -337,8 +377,18 @@ def okid_markov_parameters(data: InputOutputData, observer_order: int, count: in
 def markov_from_observer(data: InputOutputData, coefficients: np.ndarray, diagnostics: dict, observer_order: int,
                          count: int, *, feedthrough: bool, at_rest: bool) -> MarkovParameters:
     """:class:`MarkovParameters` of the system from the observer's coefficients and the regression's diagnostics."""
-    Y = system_markov_from_observer(coefficients, data.n_inputs, data.n_outputs, observer_order, count,
-                                    feedthrough=feedthrough)
-    return MarkovParameters(Y, dt=data.dt, metadata={"source": "okid", "observer_order": observer_order,
-                                                      "feedthrough": feedthrough, "at_rest": at_rest,
-                                                      **{f"regression_{k}": v for k, v in diagnostics.items()}})
+    with np.errstate(over="ignore", invalid="ignore"):
+        Y = system_markov_from_observer(coefficients, data.n_inputs, data.n_outputs, observer_order, count,
+                                        feedthrough=feedthrough)
+    finite = np.isfinite(Y).all(axis=(1, 2))
+    if not finite.all():
+        first = int(np.argmin(finite))
+        raise FemromValueError(
+            f"OKID: the system's Markov parameters, recovered through the identified observer, overflow at "
+            f"k = {first} of {count}: the observer is unstable (its regression leaves "
+            f"{diagnostics['residual']:.3g} of the outputs unexplained); lower observer_order or ask for fewer "
+            "Markov parameters (rows, columns)")
+    return MarkovParameters(Y, dt=data.dt, layout="npm",
+                            metadata={"source": "okid", "observer_order": observer_order,
+                                      "feedthrough": feedthrough, "at_rest": at_rest,
+                                      **{f"regression_{k}": v for k, v in diagnostics.items()}})

@@ -137,4 +137,5 @@ def markov_parameters(model, count: int, dt: float | None = None) -> MarkovParam
         Y[k] = C @ AkB
         AkB = A @ AkB
     step = getattr(model, "dt", 1.0) if dt is None else dt
-    return MarkovParameters(Y, dt=step, metadata={"source": f"model ({type(model).__name__})"})
+    return MarkovParameters(Y, dt=step, metadata={"source": f"model ({type(model).__name__})"},
+                            layout="npm")
