@@ -2,7 +2,9 @@
 
     femrom cases                      list the named cases (the modules of femrom.cases)
     femrom --debug COMMAND ...        errors with their traceback (otherwise one line, exit 2)
-    femrom run beam [case options]    run a named case (femrom/cases/beam.py)
+    femrom run beam [case options]    run a named case (femrom/cases/beam.py); every case takes
+                                      -o/--out, --quick, --yes and --debug, and lists its own
+                                      options with --help
     femrom run my_scene.toml -o out/  run any scene file: outputs, energy, plot; with a
                                       [rom] section the whole reduced-model study and report
     femrom info my_scene.toml         build the scene and print its sizes and effects
@@ -26,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from femrom._errors import FemromValueError
+from femrom._errors import FemromError, FemromValueError
 
 
 #: The package of the named cases: one module per case, its scene file beside it.
@@ -257,15 +259,15 @@ def _user_errors() -> tuple[type[BaseException], ...]:
     from femrom.scene import SceneError
     from femrom.snapshots import IngestError, SnapshotStoreError
 
+    # FemromError: every error femrom raises for a user (a Newton failure, a diverged run included);
     # OSError: a full disk, a folder without write permission, a missing file (its message names it)
-    return SceneError, IngestError, SnapshotStoreError, MeshError, CaseError, OSError, ValueError
+    return FemromError, SceneError, IngestError, SnapshotStoreError, MeshError, CaseError, OSError, ValueError
 
 
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
-    debug = bool(argv[:1] == ["--debug"])
-    if debug:
-        argv = argv[1:]
+    debug = "--debug" in argv          # anywhere: femrom --debug run beam, femrom run beam --debug
+    argv = [arg for arg in argv if arg != "--debug"]
     shown = warnings.showwarning
     warnings.showwarning = _one_line_warning
     try:
@@ -350,14 +352,22 @@ def _main(argv: list[str]) -> int:
         opts = argparse.ArgumentParser(prog="femrom run SCENE.toml")
         opts.add_argument("-o", "--out", type=Path, default=Path("results") / target.stem)
         opts.add_argument("--yes", action="store_true",
-                          help=f"run even above {CONFIRM_STEPS:.0e} steps or half the memory in kept fields")
+                          help=f"run even above {CONFIRM_STEPS:.0e} steps or half the memory in kept fields, "
+                               "or with a step the conditioning check flags")
         o = opts.parse_args(rest)
+        from femrom.integrators import ConditioningWarning
         from femrom.scene import SceneError
 
         try:
-            metrics = run_scene_file(target, o.out, confirmed=o.yes)
+            with warnings.catch_warnings():
+                if not o.yes:   # a step that resolves nothing of the model is refused, not just said
+                    warnings.simplefilter("error", ConditioningWarning)
+                metrics = run_scene_file(target, o.out, confirmed=o.yes)
         except SceneError as exc:
             print(f"femrom: {exc}", file=sys.stderr)
+            return 2
+        except ConditioningWarning as exc:
+            print(f"femrom: {target}: {exc}; pass --yes to run it anyway", file=sys.stderr)
             return 2
         if "roms" in metrics:
             print(_study_line(metrics) + f"; report in {o.out / 'report.md'}")
@@ -366,7 +376,16 @@ def _main(argv: list[str]) -> int:
                   f"{metrics['stepping_seconds']:.2f} s; results in {o.out}")
         return 0
     module = load_case(args.target)
-    return int(module.main(rest) or 0)
+    from femrom.integrators import ConditioningWarning
+
+    try:
+        with warnings.catch_warnings():
+            if "--yes" not in rest:     # as for a scene file: a flagged step is refused, not just said
+                warnings.simplefilter("error", ConditioningWarning)
+            return int(module.main(rest) or 0)
+    except ConditioningWarning as exc:
+        print(f"femrom: {args.target}: {exc}; pass --yes to run it anyway", file=sys.stderr)
+        return 2
 
 
 if __name__ == "__main__":

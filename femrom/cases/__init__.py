@@ -31,11 +31,31 @@ The command line lists them (:func:`femrom.cli.available_cases`) and imports one
 
 from __future__ import annotations
 
+import argparse
 from pathlib import Path
 
 from femrom.cli import CaseError
 
-__all__ = ["scene_file"]
+__all__ = ["case_parser", "scene_file"]
+
+
+def case_parser(name: str, doc: str | None, *, quick: str, out: str | None = None) -> argparse.ArgumentParser:
+    """The command line of case ``name``: the options every case shares, to which it adds its own.
+
+    Shared: ``-o/--out`` (default ``results/<name>``), ``--quick`` (described by ``quick``: what the
+    case makes smaller), ``--yes`` (run even a step the conditioning check flags: the command line
+    refuses it otherwise) and ``--debug`` (errors with their traceback; read by the command line).
+    ``out`` replaces the help text of ``-o/--out``.
+    """
+    parser = argparse.ArgumentParser(prog=f"femrom run {name}", description=(doc or name).split("\n")[0])
+    shared = parser.add_argument_group("options of every case")
+    shared.add_argument("-o", "--out", type=Path, default=Path("results") / name,
+                        help=out or f"output folder (default results/{name})")
+    shared.add_argument("--quick", action="store_true", help=quick)
+    shared.add_argument("--yes", action="store_true",
+                        help="run even with a time step the conditioning check flags (refused otherwise)")
+    shared.add_argument("--debug", action="store_true", help="errors with their traceback")
+    return parser
 
 
 def scene_file(name: str) -> Path:

@@ -28,13 +28,13 @@ Run ``python -m femrom run beam [--out DIR] [--quick]``; tests import :func:`run
 """
 
 
-import argparse
 import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from femrom.cases import case_parser
 from femrom.post import machine_description, plot_accuracy_cost_groups, staged_output, table_section
 from femrom.scene import Derivatives, Scene
 from femrom.study import EXTRAPOLATION_LEARNER_NAMES, dispersion_error, extrapolation_scene, frequency_ladder, frequency_section, invariant_drift, \
@@ -201,9 +201,7 @@ def run(out_dir, *, quick: bool = False, scene_path=SCENE, rom: RomStudy | None 
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(prog="femrom run beam", description=__doc__.split("\n")[0])
-    parser.add_argument("-o", "--out", type=Path, default=Path("results") / "beam")
-    parser.add_argument("--quick", action="store_true", help="short window and ladders (tests)")
+    parser = case_parser("beam", __doc__, quick="short window and ladders (tests)")
     parser.add_argument("--paper", action="store_true",
                         help="finer mesh (h = 0.01, 200 dofs), dt = 2.5e-5, r up to 20")
     parser.add_argument("--ranks", type=int, nargs="+", help="basis sizes r of the ROM ladder")

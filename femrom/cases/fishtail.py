@@ -37,6 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
+from femrom.cases import case_parser
 from femrom import FemromValueError
 from femrom.post import accuracy_cost_table, plot_accuracy_cost, staged_output
 from femrom.scene import BasisSpec, Derivatives, InputConfig, LearnerSpec, ReportSpec, RomConfig, RunSpec, \
@@ -216,9 +217,7 @@ def run(out_dir, *, quick: bool = False, level: str = "small", train: str = "sig
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(prog="femrom run fishtail", description=__doc__.split("\n")[0])
-    parser.add_argument("-o", "--out", type=Path, default=Path("results") / "fishtail")
-    parser.add_argument("--quick", action="store_true", help="short window, coarse mesh ladder (tests)")
+    parser = case_parser("fishtail", __doc__, quick="short window, coarse mesh ladder (tests)")
     parser.add_argument("--level", default="small", choices=tuple(LEVELS),
                         help="mesh level: tiny 4.8e3, small 2e4 (default), medium 9e4, large 7.6e5 dofs")
     parser.add_argument("--train", default="sigmoid", choices=("sigmoid", "step"))

@@ -34,7 +34,6 @@ Run ``python -m femrom run jointed_beam [-o results/jointed_beam] [--full-sweep]
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import sys
 import time
@@ -43,6 +42,7 @@ from pathlib import Path
 
 import numpy as np
 
+from femrom.cases import case_parser
 from femrom.post import Backbone, hilbert_backbone, measured_backbone, period_corrected, plot_backbones, \
     read_hammer_impact, staged_output, static_qsma, with_linear_damping, write_metrics
 from femrom.study import JointedBeamModel, backbone_shift, compare_backbones, modal_qsma, output_ring_down, \
@@ -211,12 +211,10 @@ def run(config: JointedBeamCase, out: Path, progress=print, data_dir=None) -> di
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(prog="femrom run jointed_beam", description=__doc__.split("\n")[0])
-    parser.add_argument("-o", "--out", type=Path, default=Path("results") / "jointed_beam")
+    parser = case_parser("jointed_beam", __doc__, quick="short ring-down and few QSMA loads (tests)")
     parser.add_argument("--full-sweep", action="store_true",
                         help="the stepped sine at 0.2, 0.5, 1, 1.5 N over 79-81.5 Hz by 0.05 Hz (about 40 min)")
     parser.add_argument("--no-forced", action="store_true", help="skip the stepped sine")
-    parser.add_argument("--quick", action="store_true", help="short ring-down and few QSMA loads (tests)")
     parser.add_argument("--no-fit", action="store_true", help="the Iwan joint's chi and beta as given, not fitted")
     parser.add_argument("--data", type=Path, help="the folder of hammer_impact.npz (default: femrom.post.brb_data_dir())")
     args = parser.parse_args(argv)

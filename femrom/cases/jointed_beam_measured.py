@@ -24,7 +24,6 @@ Run ``python -m femrom run jointed_beam_measured [-o results/jointed_beam_measur
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import sys
 import time
@@ -33,6 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
+from femrom.cases import case_parser
 from femrom.inference import LagrangianOpInf, SecondOrderData, SpMLConfig, TrainingSet
 from femrom.post import Backbone, hilbert_backbone, measured_backbone, modal_record, period_corrected, plot_backbones, \
     read_hammer_impact, spectral_peaks, staged_output, write_metrics
@@ -229,12 +229,12 @@ def run(config: MeasuredRomCase, out: Path, progress=print, data_dir=None) -> di
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(prog="femrom run jointed_beam_measured", description=__doc__.split("\n")[0])
-    parser.add_argument("-o", "--out", type=Path, default=Path("results") / "jointed_beam_measured")
+    parser = case_parser("jointed_beam_measured", __doc__,
+                         quick="the forward split only, without the in-sample predictions (tests)")
     parser.add_argument("--data", type=Path, help="the folder of hammer_impact.npz (default: femrom.post.brb_data_dir())")
     parser.add_argument("--no-reverse", action="store_true", help="only the forward split (train high, test low)")
     args = parser.parse_args(argv)
-    config = MeasuredRomCase(reverse=not args.no_reverse)
+    config = MeasuredRomCase(reverse=not (args.no_reverse or args.quick), in_sample=not args.quick)
     with staged_output(args.out) as folder:
         metrics = run(config, folder, progress=lambda line: print(line, file=sys.stderr, flush=True),
                       data_dir=args.data)

@@ -20,12 +20,12 @@ Run ``python -m femrom run jointed_beam_prestress [--fine] [-o DIR]``; tests imp
 
 from __future__ import annotations
 
-import argparse
 import time
 from pathlib import Path
 
 import numpy as np
 
+from femrom.cases import case_parser
 from femrom.post import write_metrics
 from femrom.scene import (
     PrestressedModel,
@@ -114,12 +114,15 @@ def run(parameters: dict | None = None, **joint_parameters) -> dict:
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(prog="femrom run jointed_beam_prestress", description=__doc__.split("\n")[0])
+    parser = case_parser("jointed_beam_prestress", __doc__,
+                         quick="the default run: the coarse joint mesh is already this case's quickest "
+                               "(accepted so that every case takes it)",
+                         out="also write the results to OUT/metrics.json (default: print only)")
+    parser.set_defaults(out=None)
     parser.add_argument("--fine", action="store_true",
                         help="also the finer joint mesh (12.7 / 3.175 mm): the calibrated k_t's mesh sensitivity")
     parser.add_argument("--normal-stiffness", type=float, nargs="*", default=[],
                         help="also these k_n [Pa/m]: the calibrated k_t and the predictions under each")
-    parser.add_argument("-o", "--out", type=Path, help="also write the results to OUT/metrics.json")
     args = parser.parse_args(argv)
     runs = [({}, {})]
     if args.fine:

@@ -16,7 +16,6 @@ Run ``python -m femrom run jointed_beam_rom [-o results/jointed_beam_rom] [--qui
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import sys
 import time
@@ -25,6 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
+from femrom.cases import case_parser
 from femrom.inference import SpMLConfig
 from femrom.integrators import Newmark, Newton, SteadyStateCriterion, SteppedSine
 from femrom.post import period_corrected, plot_backbones, staged_output, write_metrics
@@ -213,9 +213,7 @@ def run(config: JointedBeamRomCase, out: Path, progress=print) -> dict:
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(prog="femrom run jointed_beam_rom", description=__doc__.split("\n")[0])
-    parser.add_argument("-o", "--out", type=Path, default=Path("results") / "jointed_beam_rom")
-    parser.add_argument("--quick", action="store_true", help="r = 2 only, short fits, no full-model steps, "
+    parser = case_parser("jointed_beam_rom", __doc__, quick="r = 2 only, short fits, no full-model steps, "
                         "a two-frequency stepped sine at 0.2 N")
     parser.add_argument("--extrapolation", action="store_true", help="also test a 1000 N blow (outside training)")
     parser.add_argument("--ranks", type=int, nargs="+", help="reduced dimensions (default 1 3 5)")

@@ -22,7 +22,6 @@ Run ``python -m femrom run nls [--out DIR] [--quick]``; tests import :func:`run`
 
 # no `from __future__ import annotations`: the CLI loads cases without registering them
 # in sys.modules, and dataclasses then cannot resolve string annotations
-import argparse
 import dataclasses
 import functools
 import os
@@ -33,6 +32,7 @@ import numpy as np
 import scipy.sparse as sp
 from threadpoolctl import threadpool_limits
 
+from femrom.cases import case_parser
 from femrom.fem import QuarticPotential
 from femrom.integrators import CanonicalSystem
 from femrom.post import accuracy_cost_table, machine_description, plot_accuracy_cost as plot_points, \
@@ -221,10 +221,7 @@ def report(cfg: NLSConfig, m: dict) -> list[str]:
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(prog="femrom run nls", description=__doc__.split("\n")[0])
-    parser.add_argument("-o", "--out", type=Path, default=Path("results") / "nls")
-    parser.add_argument("--quick", action="store_true",
-                        help="same windows, 2x coarser step (dt = 4e-3), headline rank only, no Tikhonov "
+    parser = case_parser("nls", __doc__, quick="same windows, 2x coarser step (dt = 4e-3), headline rank only, no Tikhonov "
                              "sweep or FOM time-step ladder (tests)")
     args = parser.parse_args(argv)
     with staged_output(args.out) as out:    # the results appear whole, or the old ones stay

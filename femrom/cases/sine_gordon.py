@@ -34,13 +34,13 @@ with its own sections, ``rom_state_error.png``, ``rom_energy_error.png``,
 Run ``python -m femrom run sine_gordon [--out DIR] [--quick]``; tests import :func:`run`.
 """
 
-import argparse
 import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from femrom.cases import case_parser
 from femrom import FemromValueError
 from femrom.post import accuracy_cost_table, pyplot, save_figure, staged_output, table_section
 from femrom.scene import Derivatives, Scene, build
@@ -227,9 +227,7 @@ def _plot_profiles(path, model, Q, times, V, curves: dict, at):
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(prog="femrom run sine_gordon", description=__doc__.split("\n")[0])
-    parser.add_argument("-o", "--out", type=Path, default=Path("results") / "sine_gordon")
-    parser.add_argument("--quick", action="store_true", help="n = 400, dt = 0.02, r = 3, 4 (tests)")
+    parser = case_parser("sine_gordon", __doc__, quick="n = 400, dt = 0.02, r = 3, 4 (tests)")
     parser.add_argument("--paper", action="store_true", help="dt = 0.005, r up to 12")
     parser.add_argument("--ranks", type=int, nargs="+", help="basis sizes r")
     args = parser.parse_args(argv)

@@ -16,7 +16,6 @@ Run ``python -m femrom run soft_robot [--out DIR] [--quick] [--full]``; tests im
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import math
 import sys
@@ -26,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
+from femrom.cases import case_parser
 from femrom import FemromValueError
 from femrom.control import travelling_wave
 from femrom.post import staged_output
@@ -222,9 +222,7 @@ def run(out_dir, config: SoftRobotCase = SoftRobotCase(), *, progress=None, scen
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(prog="femrom run soft_robot", description=__doc__.split("\n")[0])
-    parser.add_argument("-o", "--out", type=Path, default=Path("results") / "soft_robot")
-    parser.add_argument("--quick", action="store_true", help="coarse mesh, short windows (tests; about a minute)")
+    parser = case_parser("soft_robot", __doc__, quick="coarse mesh, short windows (tests; about a minute)")
     parser.add_argument("--full", action="store_true",
                         help="every model as an MPC controller at r = 10 and 20 (20 closed loops on the FOM)")
     parser.add_argument("--ranks", type=int, nargs="+", help="sizes r (default 2 4 6 10 16 20)")
