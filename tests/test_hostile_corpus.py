@@ -305,16 +305,16 @@ def _learn(learner, data):
 
 X = np.random.default_rng(0).standard_normal((12, 20))
 API_CASES = [
-    ("pod-rank-zero", lambda: _pod(X, rank=0), "rank 0 is not in 1..12"),
-    ("pod-rank-string", lambda: _pod(X, rank="2"), "rank must be a whole number, got '2'"),
+    ("pod-rank-zero", lambda: _pod(X, rank=0), "rank must be a positive integer, got 0"),
+    ("pod-rank-string", lambda: _pod(X, rank="2"), "rank must be a positive integer, got '2'"),
     ("pod-rank-too-large", lambda: _pod(X, rank=50), "rank 50 is not in 1..12"),
     ("pod-energy-nan", lambda: _pod(X, energy=float("nan")), "energy must be a finite number, got nan"),
     ("pod-1d", lambda: _pod(X[:, 0], rank=2), "snapshot matrix must be 2-D (n, K), got shape (12,)"),
     ("pod-inf", lambda: _pod(np.where(X > 2, np.inf, X), rank=2), "POD: snapshot column 19 is not finite"),
     ("pod-method-unknown", lambda: _pod(X, rank=2, method="qr"), "unknown POD method 'qr'; valid: auto, svd"),
-    ("rsvd-rank-zero", lambda: _rsvd(X, 0), "rank must be >= 1, got 0"),
+    ("rsvd-rank-zero", lambda: _rsvd(X, 0), "rank must be a positive integer, got 0"),
     ("rsvd-nan", lambda: _rsvd(np.where(X > 2, np.nan, X), 2), "a block of snapshot columns is not finite"),
-    ("rsvd-oversampling-negative", lambda: _rsvd(X, 2, oversampling=-1), "oversampling must be >= 0, got -1"),
+    ("rsvd-oversampling-negative", lambda: _rsvd(X, 2, oversampling=-1), "oversampling must be a non-negative integer, got -1"),
     ("system-mass-not-square", lambda: _chain(mass=sp.csr_matrix(np.ones((6, 7)))),
      "mass has shape (6, 7), expected (6, 6)"),
     ("system-sizes-differ", lambda: _chain(mass=sp.identity(5, format="csr")),
