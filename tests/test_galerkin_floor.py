@@ -84,7 +84,7 @@ class Plate:
         self.M, self.C, self.K = (system.mass.tocsc(), system.damping.tocsc(), system.stiffness.tocsc())
         self.B = system.input_matrix.toarray() if sp.issparse(system.input_matrix) else np.asarray(system.input_matrix)
         self.dt, self.t_end = scene.time.dt, scene.time.t_end
-        self.signals = {"train": tuple(i.signal for i in scene.inputs), "unseen": scene.rom.test[0].signals}
+        self.signals = {"train": tuple(i.signal for i in scene.inputs), "step_sine": scene.rom.test[0].signals}
 
     def inputs(self, run, dt):
         u = SignalVector(self.signals[run])
@@ -104,9 +104,9 @@ class Plate:
     def ratio(self, dt, r):
         """(Galerkin error, floor) on the unseen run with FOM, basis and ROM all at ``dt``."""
         Q_train, _ = self.fom("train", dt)
-        Q, _ = self.fom("unseen", dt)
+        Q, _ = self.fom("step_sine", dt)
         V = mass_pod(self.M, Q_train, r)
-        return m_error(self.M, V @ self.galerkin(V, "unseen", dt), Q), m_error(self.M, V @ (V.T @ (self.M @ Q)), Q)
+        return m_error(self.M, V @ self.galerkin(V, "step_sine", dt), Q), m_error(self.M, V @ (V.T @ (self.M @ Q)), Q)
 
 
 @pytest.fixture(scope="module")
@@ -123,14 +123,14 @@ def study(tmp_path_factory):
         pod = pod_basis(store, ("train",), W, config)
         data, projections = reduce_runs(store, runs, ("train",), pod.basis_, W, stored_derivatives=True)
         training = training_set(model.system, pod.basis_, W, data)
-        Q = np.hstack(list(store_source(store, "q", ["unseen"]).blocks()))
+        Q = np.hstack(list(store_source(store, "q", ["step_sine"]).blocks()))
     finally:
         store.close()
     rows = {}
     for spec in config.learners:
         for r in config.basis.ranks:
             rom = model_spec(spec).fit(training, r)
-            rows[spec.label, r] = (rom, evaluate(rom, runs["unseen"], projections["unseen"], extension=1.0))
+            rows[spec.label, r] = (rom, evaluate(rom, runs["step_sine"], projections["step_sine"], extension=1.0))
     return Plate(model), pod.basis_, runs, rows, Q
 
 
@@ -147,11 +147,11 @@ def test_galerkin_is_above_its_floor_where_lopinf_reaches_it(study):
 
 def test_femrom_galerkin_and_fom_are_the_plain_numpy_ones(study):
     plate, basis, _, rows, Q = study
-    Q_oracle, _ = plate.fom("unseen", plate.dt)
+    Q_oracle, _ = plate.fom("step_sine", plate.dt)
     assert m_error(plate.M, Q_oracle, Q) < 1e-9                     # the store's FOM run
     for r in (4, 12):
         rom, evaluation = rows["galerkin", r]
-        oracle = plate.galerkin(basis[:, :r], "unseen", plate.dt)
+        oracle = plate.galerkin(basis[:, :r], "step_sine", plate.dt)
         q = evaluation.solution.q
         assert np.linalg.norm(q - oracle) < 1e-9 * np.linalg.norm(oracle), r
         # the same error from the oracle's trajectory and the oracle's FOM, in the mass norm
@@ -174,12 +174,12 @@ def test_a_finer_time_step_does_not_bring_galerkin_to_its_floor(study):
 def test_the_excess_is_the_dropped_coupling_and_vanishes_on_eigenmodes(study):
     plate, basis, _, rows, _ = study
     M, C, K = plate.M, plate.C, plate.K
-    Q, Qv = plate.fom("unseen", plate.dt)
+    Q, Qv = plate.fom("step_sine", plate.dt)
     norm = np.sqrt(np.sum(Q * (M @ Q)))
     for r in (4, 8):
         V = basis[:, :r]
         X, Xv = V.T @ (M @ Q), V.T @ (M @ Qv)
-        q = plate.galerkin(V, "unseen", plate.dt)
+        q = plate.galerkin(V, "step_sine", plate.dt)
         floor = m_error(M, V @ X, Q)
         in_span = np.linalg.norm(X - q) / norm
         error = rows["galerkin", r][1].field_error
@@ -193,7 +193,7 @@ def test_the_excess_is_the_dropped_coupling_and_vanishes_on_eigenmodes(study):
     _, modes = sla.eigsh(K, 8, M, sigma=0)
     for r in (4, 8):
         V = modes[:, :r]
-        error = m_error(M, V @ plate.galerkin(V, "unseen", plate.dt), Q)
+        error = m_error(M, V @ plate.galerkin(V, "step_sine", plate.dt), Q)
         floor = m_error(M, V @ (V.T @ (M @ Q)), Q)
         assert abs(error / floor - 1) < 1e-6, (r, error, floor)         # 4.9e-3 and 1.8e-3: 10-20x the POD floors
         assert floor > 5 * rows["galerkin", r][1].projection_error, r
