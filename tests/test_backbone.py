@@ -475,9 +475,14 @@ def test_data_folder_and_reader_errors(tmp_path, monkeypatch):
     with pytest.raises(FileNotFoundError) as error:
         brb_data_dir()
     message = str(error.value)
-    assert "FEMROM_BRB_DATA" in message and str(missing) in message and "shared/data/brb" in message
+    assert "FEMROM_BRB_DATA" in message and str(missing) in message and "femrom data fetch brb" in message
     with pytest.raises(FileNotFoundError):
         read_hammer_impact()
+    # unset: the fetched copy in the cache, here none
+    monkeypatch.delenv("FEMROM_BRB_DATA")
+    monkeypatch.setenv("FEMROM_CACHE", str(tmp_path / "cache"))
+    with pytest.raises(FileNotFoundError, match="femrom data fetch brb"):
+        brb_data_dir()
     monkeypatch.setenv("FEMROM_BRB_DATA", str(tmp_path))
     assert brb_data_dir() == tmp_path
     with pytest.raises(FileNotFoundError, match="hammer_impact.npz"):
