@@ -12,7 +12,7 @@ Synthetic single-degree-of-freedom free decays with known answers:
   elastic-perfectly-plastic element (see :func:`jenkins_equivalent_linearisation`);
 
 then the measured hammer-impact ring-down of the jointed beam (skipped without the
-data), the plot helper and the error messages.
+data, failed under ``FEMROM_REQUIRE_DATA``), the plot helper and the error messages.
 """
 
 import numpy as np
@@ -298,11 +298,8 @@ def test_jenkins_backbone_against_equivalent_linearisation(jenkins_decays):
 
 
 @pytest.fixture(scope="module")
-def impact_record():
-    try:
-        return read_hammer_impact()
-    except FileNotFoundError as missing:
-        pytest.skip(f"jointed-beam data absent: {missing}")
+def impact_record(brb_data):
+    return read_hammer_impact(brb_data)
 
 
 def test_measured_backbone_of_the_jointed_beam(impact_record):
