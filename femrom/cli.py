@@ -12,6 +12,9 @@
                                       the scene's [sweep] runs as Dask tasks, into out/sweep.h5
     femrom ingest series.pvd -o store.h5 [--inputs u.csv] [--density RHO] [--output NAME:X,Y,Z:C]
                                       another solver's displacement series into a snapshot store
+    femrom data fetch brb             download public test data (pinned, SHA-256 checked) into the
+                                      cache and print the folder; `data path NAME` prints the folder
+                                      femrom reads, `data list` the data sets
 """
 
 from __future__ import annotations
@@ -243,6 +246,29 @@ def _ingest(args) -> int:
     return 0
 
 
+def _data(args) -> int:
+    """``femrom data list | fetch NAME | path NAME``: the public test data femrom fetches and caches."""
+    import os
+
+    from femrom.post import DATASETS, dataset, dataset_dir, fetch_dataset
+
+    if args.data_command == "list":
+        for name, data in DATASETS.items():
+            print(f"{name}  {data.title}: {', '.join(data.files)} ({data.source}); offline copy: ${data.environment}")
+        return 0
+    data = dataset(args.name)
+    if args.data_command == "path":
+        print(dataset_dir(args.name))
+        return 0
+    folder = fetch_dataset(args.name, progress=lambda message: print(f"femrom: {message}", file=sys.stderr))
+    print(f"{data.name}: {', '.join(data.files)} ({data.source}; SHA-256 checked) and "
+          f"{', '.join(data.derived)} in {folder}")
+    if os.environ.get(data.environment):
+        print(f"femrom: note: {data.environment} is set, so femrom reads {os.environ[data.environment]} instead",
+              file=sys.stderr)
+    return 0
+
+
 def _study_line(metrics: dict) -> str:
     """One line of a study's result: the first learned model's error at the largest r."""
     r = max(metrics["ranks"])
@@ -318,6 +344,13 @@ def _main(argv: list[str]) -> int:
     ing.add_argument("--length-scale", type=float, default=1.0,
                      help="multiplies the displacements (1e-3: a series in mm on a mesh in m)")
     ing.add_argument("--overwrite", action="store_true", help="replace an existing store")
+    data = sub.add_parser("data", help="public test data: fetch (pinned, checked) into the cache, or show where")
+    data_sub = data.add_subparsers(dest="data_command", required=True)
+    data_sub.add_parser("list", help="the data sets femrom can fetch")
+    data_fetch = data_sub.add_parser("fetch", help="download a data set into the cache and print the folder")
+    data_fetch.add_argument("name", help="the data set (femrom data list)")
+    data_path = data_sub.add_parser("path", help="print the folder femrom reads a data set from")
+    data_path.add_argument("name", help="the data set (femrom data list)")
 
     if argv[:1] == ["run"]:
         args, rest = parser.parse_known_args(argv)
@@ -342,6 +375,8 @@ def _main(argv: list[str]) -> int:
         return _sweep(args)
     if args.command == "ingest":
         return _ingest(args)
+    if args.command == "data":
+        return _data(args)
     # run
     if args.target is None or args.target in ("-h", "--help"):
         print("usage: femrom run CASE [case options] | femrom run SCENE.toml [-o OUT]")

@@ -12,7 +12,7 @@ Synthetic single-degree-of-freedom free decays with known answers:
   elastic-perfectly-plastic element (see :func:`jenkins_equivalent_linearisation`);
 
 then the measured hammer-impact ring-down of the jointed beam (skipped without the
-data), the plot helper and the error messages.
+data, failed under ``FEMROM_REQUIRE_DATA``), the plot helper and the error messages.
 """
 
 import numpy as np
@@ -298,11 +298,8 @@ def test_jenkins_backbone_against_equivalent_linearisation(jenkins_decays):
 
 
 @pytest.fixture(scope="module")
-def impact_record():
-    try:
-        return read_hammer_impact()
-    except FileNotFoundError as missing:
-        pytest.skip(f"jointed-beam data absent: {missing}")
+def impact_record(brb_data):
+    return read_hammer_impact(brb_data)
 
 
 def test_measured_backbone_of_the_jointed_beam(impact_record):
@@ -475,9 +472,14 @@ def test_data_folder_and_reader_errors(tmp_path, monkeypatch):
     with pytest.raises(FileNotFoundError) as error:
         brb_data_dir()
     message = str(error.value)
-    assert "FEMROM_BRB_DATA" in message and str(missing) in message and "shared/data/brb" in message
+    assert "FEMROM_BRB_DATA" in message and str(missing) in message and "femrom data fetch brb" in message
     with pytest.raises(FileNotFoundError):
         read_hammer_impact()
+    # unset: the fetched copy in the cache, here none
+    monkeypatch.delenv("FEMROM_BRB_DATA")
+    monkeypatch.setenv("FEMROM_CACHE", str(tmp_path / "cache"))
+    with pytest.raises(FileNotFoundError, match="femrom data fetch brb"):
+        brb_data_dir()
     monkeypatch.setenv("FEMROM_BRB_DATA", str(tmp_path))
     assert brb_data_dir() == tmp_path
     with pytest.raises(FileNotFoundError, match="hammer_impact.npz"):

@@ -6,6 +6,7 @@ import pytest
 import scipy.linalg as sla
 import scipy.sparse as sp
 
+from _required import extra
 from femrom.control import (
     ClosedLoopResult,
     DisturbanceModel,
@@ -29,7 +30,7 @@ from femrom.integrators import ImplicitMidpoint, Newmark
 from femrom.rom import DiscreteStateSpace, SecondOrderROM
 from femrom.scene import SecondOrderSystem
 
-control = pytest.importorskip("control")
+control = extra("control")
 
 DT = 0.01
 

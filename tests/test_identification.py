@@ -14,6 +14,7 @@ import pytest
 import scipy.sparse as sp
 from scipy.optimize import linear_sum_assignment
 
+from _required import extra
 from femrom.inference import (
     DMDc,
     ERA,
@@ -125,7 +126,7 @@ def test_dmdc_recovers_the_system_from_noise_free_data():
 
 
 def test_dmdc_agrees_with_pydmd_with_truncated_ranks():
-    pydmd = pytest.importorskip("pydmd")
+    pydmd = extra("pydmd")
     A, B, C, D = random_system(12, 2, 3, 0.9, seed=3)
     rng = np.random.default_rng(4)
     U = rng.standard_normal((2, 150))
@@ -189,7 +190,7 @@ def test_dmdc_errors_name_the_culprit():
 # -- ERA ----------------------------------------------------------------------------------
 
 def test_era_realises_the_markov_parameters_of_a_known_mimo_system_like_python_control():
-    control = pytest.importorskip("control")
+    control = extra("control")
     A, B, C, D = random_system(6, 3, 4, 0.9, seed=8)
     truth = markov_parameters(StateSpaceOperators(A, B, C, D, DT), 41)
     learner = ERA(6, rows=20, columns=20).fit(truth)
@@ -395,7 +396,7 @@ def test_okid_observer_tracks_the_state_and_approaches_the_kalman_filter():
 
 
 def test_okid_agrees_with_python_control_markov_on_data_from_rest():
-    control = pytest.importorskip("control")
+    control = extra("control")
     A, B, C, D = random_system(5, 2, 3, 0.6, seed=13)
     rng = np.random.default_rng(14)
     U = rng.standard_normal((2, 400))

@@ -14,6 +14,7 @@ import pytest
 import scipy.linalg as sl
 from skfem import MeshLine
 
+from _required import extra
 from femrom.fem import (Condensation, axial_stiffness, bending_stiffness, line_basis, line_mass,
                         rayleigh_damping)
 from femrom.inference import (
@@ -435,7 +436,7 @@ def test_euclidean_basis_needs_the_reduced_mass(beam):
 
 # -- 7. plain OpInf and the opinf package ------------------------------------
 def test_plain_opinf_agrees_with_first_order_opinf_package():
-    opinf = pytest.importorskip("opinf")
+    opinf = extra("opinf")
     rng = np.random.default_rng(7)
     data = random_data(rng, 5, 300, noise=0.3)
     plain = SecondOrderOpInf(["damping"]).fit(data)

@@ -4,6 +4,7 @@ model's validation against the full model, the ring-down, the metrics the issue 
 import numpy as np
 import pytest
 
+import _required
 from femrom.cases import jointed_beam as case
 
 
@@ -75,11 +76,15 @@ def test_the_ring_down_follows_the_quasi_static_backbone(metrics):
             z = np.interp(a, amplitudes, [r["damping_ratio"] for r in hyper])
             assert row["frequency_hz"] == pytest.approx(f, abs=0.015)
             assert row["damping_ratio"] == pytest.approx(z, rel=0.06)
-    if "measured" in metrics["backbone"]:
-        measured = metrics["backbone"]["measured"]
-        assert measured[0]["amplitude_m_s2"] > 10 * measured[-1]["amplitude_m_s2"]
-        comparison = metrics["against_measured"]["fom_qsma"]
-        assert comparison is not None and comparison["shift_measured_hz"] > 0.1
+
+
+def test_the_measured_backbone_is_compared_when_the_data_are_there(metrics):
+    if "measured" not in metrics["backbone"]:     # the case leaves it out, with a note, without the data
+        _required.missing(f"jointed-beam data absent: {metrics['notes']}", _required.DATA)
+    measured = metrics["backbone"]["measured"]
+    assert measured[0]["amplitude_m_s2"] > 10 * measured[-1]["amplitude_m_s2"]
+    comparison = metrics["against_measured"]["fom_qsma"]
+    assert comparison is not None and comparison["shift_measured_hz"] > 0.1
 
 
 def test_the_stepped_sine_tends_to_the_stuck_joints_response_at_small_force(metrics):

@@ -14,13 +14,14 @@ import pytest
 import scipy.linalg as sla
 import scipy.sparse as sp
 
+from _required import extra
 from femrom.fem import ClampedIwanLaw, JointForce
 from femrom.inference import SpMLConfig
 from femrom.inference import galerkin
 from femrom.scene import SecondOrderSystem, Signal, SignalVector
 from femrom.study import ModelSpec, RingDownComparison, compare_ring_downs, reference_ring_down
 
-pytest.importorskip("torch")
+extra("torch")
 
 N = 4
 

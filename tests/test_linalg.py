@@ -41,6 +41,7 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
+from _required import extra
 from femrom.linalg import (
     InnerProduct,
     StreamingSketch,
@@ -563,7 +564,7 @@ def _failing_read(*args):
 
 
 def test_dask_default_local_cluster_is_closed_and_an_address_is_used(chain_store, monkeypatch):
-    distributed = pytest.importorskip("distributed")
+    distributed = extra("distributed")
     from femrom.linalg import _dask
 
     path, matrix = chain_store

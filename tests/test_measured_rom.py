@@ -2,7 +2,8 @@
 
 ``femrom.post.modal_record`` on synthetic records with known modal coordinates, then
 the jointed beam's measured hammer-impact ring-down (``femrom/cases/jointed_beam_measured.py``;
-skipped when the data folder is absent: ``$FEMROM_BRB_DATA`` or ``../shared/data/brb``).
+skipped when the data are absent, ``$FEMROM_BRB_DATA`` or ``femrom data fetch brb``; failed
+under ``FEMROM_REQUIRE_DATA``).
 """
 
 from __future__ import annotations
@@ -11,7 +12,7 @@ import numpy as np
 import pytest
 
 from femrom.cases import jointed_beam_measured as case
-from femrom.post import band_limited_integrals, brb_data_dir, modal_record
+from femrom.post import band_limited_integrals, modal_record
 
 RATE = 2000.0
 BAND = (60.0, 100.0)
@@ -82,14 +83,10 @@ def test_bad_arguments_raise_one_line(kwargs, word):
 
 
 @pytest.fixture(scope="module")
-def measured(tmp_path_factory):
-    try:
-        brb_data_dir()
-    except FileNotFoundError as missing:
-        pytest.skip(f"jointed-beam data absent: {missing}")
+def measured(tmp_path_factory, brb_data):
     # the case's defaults; the in-sample predictions (docs only) are left out to keep the test short
     config = case.MeasuredRomCase(in_sample=False)
-    return case.run(config, tmp_path_factory.mktemp("brb_measured"), progress=lambda line: None)
+    return case.run(config, tmp_path_factory.mktemp("brb_measured"), progress=lambda line: None, data_dir=brb_data)
 
 
 def test_the_three_sensors_support_one_coordinate_in_the_mode_1_band(measured):

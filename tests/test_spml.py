@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from _required import extra
 from femrom.cases import scene_file
 from femrom.inference import (TORCH_MISSING, ConvexPowers, LagrangianOpInf, LearnedDissipation, LearnedPotential,
                               NetworkLayer, ProjectedNonlinearForce, ReducedOperators, ScalarNetwork, SecondOrderData,
@@ -18,7 +19,7 @@ from femrom.integrators import DiscreteGradient, ImplicitMidpoint, Newton
 from femrom.rom import SecondOrderROM
 from femrom.study import force_error
 
-torch = pytest.importorskip("torch")
+torch = extra("torch")
 ROOT = Path(__file__).resolve().parents[1]
 
 #: Python run first in a subprocess: torch cannot be imported (as if not installed). A finder,

@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
+from _required import extra
 from femrom.fem import JenkinsForce, LocalPotential
 from femrom.inference import ProjectedNonlinearForce, ReducedOperators
 from femrom.integrators import registered_schemes
@@ -48,7 +49,7 @@ def test_state_space_form_equals_predict(scheme):
     X = Z + ss.input_offset @ U
     assert relative(X[:8], solution.q) < 1e-12 and relative(X[8:], solution.v) < 1e-12
     # python-control, an independent simulator of (A, B, C, D, dt), gives the same outputs
-    control = pytest.importorskip("control")
+    control = extra("control")
     response = control.forced_response(ss.to_control(), T=times, U=U, X0=z0)
     assert relative(np.atleast_2d(response.outputs), solution.outputs) < 1e-12
 

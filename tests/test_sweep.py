@@ -13,12 +13,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from _required import extra
 from femrom.scene import Scene, SceneError, build
 from femrom.snapshots import SnapshotStore
 from femrom.snapshots import run_fom
 from femrom.study import run_sweep, sweep_runs
 
-pytest.importorskip("distributed")
+extra("distributed")
 
 DATA = Path(__file__).parent / "data"
 

@@ -6,8 +6,9 @@ damping-vs-amplitude curves from ring-down signals (:func:`hilbert_backbone`,
 (:func:`quasi_static_modal_analysis`; along a frictional joint's loading path: :func:`static_qsma`),
 backbone maps (:func:`period_corrected`: a time scheme's period error removed; :func:`with_linear_damping`),
 the linearised frequency response of a stuck joint (:func:`linear_accelerance`), figures of
-closed loops (:func:`plot_closed_loops`, :func:`render_closed_loop`), and the jointed-beam impact
-data (:func:`read_hammer_impact`)."""
+closed loops (:func:`plot_closed_loops`, :func:`render_closed_loop`), the jointed-beam impact
+data (:func:`read_hammer_impact`), and the public test data femrom fetches, checks and caches
+(:func:`fetch_dataset`, :func:`dataset_dir`)."""
 
 from femrom._json import jsonable
 from femrom.post._backbone import (
@@ -18,6 +19,16 @@ from femrom.post._backbone import (
     spectral_peaks,
 )
 from femrom.post._backbone_maps import period_corrected, with_linear_damping
+from femrom.post._datasets import (
+    DATASETS,
+    Dataset,
+    DatasetError,
+    DatasetNotFoundError,
+    data_cache_dir,
+    dataset,
+    dataset_dir,
+    fetch_dataset,
+)
 from femrom.post._closed_loop_figures import plot_closed_loops, render_closed_loop
 from femrom.post._export import export_prediction
 from femrom.post._frf import linear_accelerance
@@ -54,6 +65,8 @@ from femrom.post._report import accuracy_cost_table, machine_description, table_
 
 __all__ = [
     "relative_error",
+    "DATASETS", "Dataset", "DatasetError", "DatasetNotFoundError", "data_cache_dir", "dataset", "dataset_dir",
+    "fetch_dataset",
     "BandIntegrals", "band_limited_integrals", "band_weights", "ModalRecord", "modal_record",
            "accuracy_cost_table", "Backbone", "brb_data_dir", "default_trim", "export_prediction",
            "hilbert_backbone", "ImpactRecord", "jsonable", "machine_description", "masing_damping", "measured_backbone",

@@ -2,7 +2,8 @@ r"""The hammer-impact ring-down of the jointed (half Brake-Reuss) beam, read whe
 
 The measured data (Chen et al., MSSP 166:108401, 2022; public repository
 ``mattiacenedese/BRBtesting``, GPL-3.0) stay outside the repository: code takes
-their path as a parameter, by default :func:`brb_data_dir`. The file
+their path as a parameter, by default :func:`brb_data_dir` (``$FEMROM_BRB_DATA``, else
+the copy ``femrom data fetch brb`` put in the cache: :mod:`femrom.post._datasets`). The file
 ``hammer_impact.npz`` holds ``t`` (k,) [s], sampled at 12,800 Hz from -0.01 s
 (10 ms pre-trigger), and ``acc`` (3, k) [m/s^2], rows acc1, acc2, acc3
 (see the README.md next to it).
@@ -15,7 +16,6 @@ default trim (0.25 s at each end, the band-pass transients).
 
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -23,34 +23,24 @@ import numpy as np
 
 from femrom._errors import FemromValueError
 from femrom.post._backbone import Backbone, hilbert_backbone, peak_backbone, spectral_peaks
+from femrom.post._datasets import HAMMER_IMPACT_FILE, DatasetNotFoundError, dataset_dir
 
-#: Environment variable naming the folder of the jointed-beam data.
-BRB_DATA_ENV = "FEMROM_BRB_DATA"
-#: The impact record's file name inside that folder.
-HAMMER_IMPACT_FILE = "hammer_impact.npz"
 #: The mode-1 band and window of femrom issue 16 [Hz], [s].
 MODE1_BAND = (60.0, 100.0)
 MODE1_WINDOW = 0.2
 
 
 def brb_data_dir() -> Path:
-    """Folder of the jointed-beam data: ``$FEMROM_BRB_DATA`` if set, else
-    ``<repo root>/../shared/data/brb`` (repo root = the folder holding the ``femrom`` package).
+    """Folder of the jointed-beam data: ``$FEMROM_BRB_DATA`` (an offline copy) if set, else the
+    copy ``femrom data fetch brb`` put in the cache (:func:`~femrom.post.dataset_dir`).
 
     Raises
     ------
-    FileNotFoundError
-        The folder does not exist (the message names the variable and the default).
+    DatasetNotFoundError
+        (a ``FileNotFoundError``) The variable names no folder, or nothing was fetched; the message
+        says to run ``femrom data fetch brb`` or to set the variable.
     """
-    default = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "brb"
-    configured = os.environ.get(BRB_DATA_ENV)
-    folder = Path(configured) if configured else default
-    if not folder.is_dir():
-        raise FileNotFoundError(
-            f"jointed-beam data folder {folder} not found: set {BRB_DATA_ENV} to the folder holding "
-            f"{HAMMER_IMPACT_FILE} (now {'set to ' + repr(configured) if configured else 'unset'}; "
-            f"default {default})")
-    return folder
+    return dataset_dir("brb")
 
 
 @dataclass(frozen=True)
@@ -100,8 +90,8 @@ def read_hammer_impact(path=None) -> ImpactRecord:
 
     Raises
     ------
-    FileNotFoundError
-        No such file (or the default folder is missing).
+    DatasetNotFoundError
+        (a ``FileNotFoundError``) No such file, or no data folder (:func:`brb_data_dir`).
     FemromValueError
         The file lacks ``t``/``acc``, their shapes disagree, samples are non-finite or
         the times are not uniformly increasing.
@@ -110,7 +100,7 @@ def read_hammer_impact(path=None) -> ImpactRecord:
     if path.is_dir():
         path = path / HAMMER_IMPACT_FILE
     if not path.is_file():
-        raise FileNotFoundError(f"hammer-impact file {path} not found")
+        raise DatasetNotFoundError(f"hammer-impact file {path} not found")
     with np.load(path, allow_pickle=False) as data:
         missing = [key for key in ("t", "acc") if key not in data.files]
         if missing:
