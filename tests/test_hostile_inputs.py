@@ -465,3 +465,37 @@ def test_mpc_settings(call, fragment):
     with pytest.raises(ValueError) as info:
         call()
     assert fragment in str(info.value), str(info.value)
+
+
+# -- environment variables -------------------------------------------------------------------------
+ENVIRONMENT = [
+    ("memory-limit-text", "FEMROM_MEMORY_LIMIT_GB", "abc", "FEMROM_MEMORY_LIMIT_GB must be a number of GB, got 'abc'"),
+    ("memory-limit-negative", "FEMROM_MEMORY_LIMIT_GB", "-1", "FEMROM_MEMORY_LIMIT_GB must be positive, got '-1'"),
+    ("memory-limit-nan", "FEMROM_MEMORY_LIMIT_GB", "nan", "FEMROM_MEMORY_LIMIT_GB must be positive, got 'nan'"),
+    ("progress-seconds-text", "FEMROM_PROGRESS_SECONDS", "often",
+     "FEMROM_PROGRESS_SECONDS must be a number of seconds, got 'often'"),
+    ("progress-seconds-negative", "FEMROM_PROGRESS_SECONDS", "-5", "FEMROM_PROGRESS_SECONDS must be >= 0, got '-5'"),
+    ("cache-is-a-file", "FEMROM_CACHE", "FILE", "cannot be created (FEMROM_CACHE)"),
+    ("memory-limit-valid", "FEMROM_MEMORY_LIMIT_GB", "4", ACCEPT),
+]
+
+
+@pytest.mark.parametrize("variable, value, fragment", [c[1:] for c in ENVIRONMENT], ids=[c[0] for c in ENVIRONMENT])
+def test_environment_variables(tmp_path, capsys, monkeypatch, variable, value, fragment):
+    scene = _beam_file(tmp_path / "scene.toml", SHORT, ("mesh_size = 0.02", "mesh_size = 0.0201"))  # a new mesh
+    if value == "FILE":
+        value = str(_beam_file(tmp_path / "a_file", SHORT))
+    monkeypatch.setenv(variable, value)
+    code, err = _run_cli(["run", str(scene), "-o", str(tmp_path / "out")], capsys)
+    if fragment is ACCEPT:
+        assert code == 0, err
+        return
+    assert code == 2 and fragment in err and err.count("\n") == 1, err
+
+
+def test_a_mesh_path_entry_that_is_not_a_folder_is_said(tmp_path, monkeypatch):
+    from femrom.mesh import available_geometries
+
+    monkeypatch.setenv("FEMROM_MESH_PATH", str(tmp_path / "nowhere"))
+    with pytest.warns(UserWarning, match="FEMROM_MESH_PATH entry .*nowhere is not a folder; it is skipped"):
+        assert "beam_line" in available_geometries()

@@ -78,7 +78,13 @@ def generate_mesh(geometry: str | os.PathLike, parameters: Mapping[str, float] |
     target = directory / f"{geo.stem}-{_cache_key(geo, values)[:24]}.msh"
     if target.is_file() and not force:
         return target
-    directory.mkdir(parents=True, exist_ok=True)
+    try:
+        directory.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        where = "cache_dir" if cache_dir is not None else (
+            "FEMROM_CACHE" if os.environ.get("FEMROM_CACHE") else "the default cache folder")
+        raise MeshError(f"mesh cache folder {directory} cannot be created ({where}): "
+                        f"{exc.strerror or exc}") from None
     label = f"meshing {geo.stem}"
     if values:
         label += " (" + ", ".join(f"{name}={value:g}" for name, value in values.items()) + ")"

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import re
+import warnings
 from pathlib import Path
 
 from femrom.mesh._errors import MeshError
@@ -28,8 +29,12 @@ def search_directories() -> list[Path]:
     The entries of the environment variable ``FEMROM_MESH_PATH``
     (``os.pathsep``-separated), then the repository's ``meshes/`` folder.
     """
-    entries = os.environ.get("FEMROM_MESH_PATH", "").split(os.pathsep)
-    return [Path(entry).expanduser() for entry in entries if entry] + [_REPOSITORY_MESHES]
+    entries = [Path(entry).expanduser() for entry in os.environ.get("FEMROM_MESH_PATH", "").split(os.pathsep)
+               if entry]
+    for entry in entries:
+        if not entry.is_dir():
+            warnings.warn(f"FEMROM_MESH_PATH entry {entry} is not a folder; it is skipped", stacklevel=2)
+    return entries + [_REPOSITORY_MESHES]
 
 
 def available_geometries() -> dict[str, Path]:
