@@ -23,6 +23,7 @@ import argparse
 import ast
 import importlib
 import importlib.util
+import os
 import pkgutil
 import sys
 import time
@@ -84,8 +85,6 @@ CONFIRM_STEPS = 10_000_000
 
 def memory_bound_bytes() -> int:
     """Half the machine's memory, or ``FEMROM_MEMORY_LIMIT_GB``: what a run may hold in fields."""
-    import os
-
     text = os.environ.get("FEMROM_MEMORY_LIMIT_GB")
     if text:
         try:
@@ -248,8 +247,6 @@ def _ingest(args) -> int:
 
 def _data(args) -> int:
     """``femrom data list | fetch NAME | path NAME``: the public test data femrom fetches and caches."""
-    import os
-
     from femrom.post import DATASETS, dataset, dataset_dir, fetch_dataset
 
     if args.data_command == "list":
@@ -383,7 +380,10 @@ def _main(argv: list[str]) -> int:
         print("cases: " + ", ".join(available_cases()))
         return 0 if args.target else 2
     target = Path(args.target)
-    if target.suffix.lower() == ".toml" or target.is_file() or target.is_dir():   # a path, never a case name
+    # a scene path: anything but a case's name that ends in .toml, names a file or folder, or has a
+    # separator (a case's name wins over a folder it left in the working directory: ./NAME is the folder)
+    if args.target not in available_cases() and (
+            target.suffix.lower() == ".toml" or target.exists() or "/" in args.target or os.sep in args.target):
         opts = argparse.ArgumentParser(prog="femrom run SCENE.toml")
         opts.add_argument("-o", "--out", type=Path, default=Path("results") / target.stem)
         opts.add_argument("--yes", action="store_true",

@@ -499,3 +499,17 @@ def test_a_mesh_path_entry_that_is_not_a_folder_is_said(tmp_path, monkeypatch):
     monkeypatch.setenv("FEMROM_MESH_PATH", str(tmp_path / "nowhere"))
     with pytest.warns(UserWarning, match="FEMROM_MESH_PATH entry .*nowhere is not a folder; it is skipped"):
         assert "beam_line" in available_geometries()
+
+
+def test_a_case_name_wins_over_a_folder_of_that_name_and_a_path_does_not(tmp_path, capsys, monkeypatch):
+    # a case's results folder left in the working directory (femrom run beam -o beam) used to turn
+    # the next `femrom run beam` into "beam: is a directory, not a scene file"
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "beam").mkdir()
+    (tmp_path / "notacase").mkdir()
+    code, err = _run_cli(["run", "beam", "--bogus"], capsys)      # reached the case's own parser
+    assert code == 2 and "femrom run beam: error: unrecognized arguments: --bogus" in err, err
+    code, err = _run_cli(["run", "./beam"], capsys)
+    assert code == 2 and "is a directory" in err, err
+    code, err = _run_cli(["run", "notacase"], capsys)
+    assert code == 2 and "is a directory" in err, err

@@ -22,11 +22,15 @@ def machine_description() -> dict:
 
 
 def write_metrics(path, metrics: dict) -> Path:
-    """Write ``metrics`` as JSON (numpy values converted); atomic replace."""
+    """Write ``metrics`` as JSON (numpy values converted); atomic replace.
+
+    JSON has no ``nan`` or ``inf``: a quantity without a finite value (the errors of a model
+    that diverged, a time that was not measured) is written as ``null``, and the record it
+    belongs to says why (a model row's ``diverged`` or ``failed``)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.name}.{os.getpid()}.{uuid.uuid4().hex[:8]}.tmp")   # never shared by two writers
-    tmp.write_text(dumps(metrics, indent=2) + "\n")
+    tmp.write_text(dumps(metrics, non_finite="null", indent=2) + "\n")
     os.replace(tmp, path)
     return path
 

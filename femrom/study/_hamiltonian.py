@@ -234,7 +234,7 @@ def canonical_rows(system, run: CanonicalRun, specs, *, ranks, train_window: flo
             row = {"method": spec.label, "learner": spec.label, "r": r, "integrator": spec.scheme,
                    "regularization": None if spec.intrusive else weight,
                    "basis_seconds": basis_seconds,
-                   "fit_seconds": float("nan") if spec.intrusive else fit_seconds,
+                   "fit_seconds": None if spec.intrusive else fit_seconds,   # a projection: no fit
                    "offline_seconds": basis_seconds + (0.0 if spec.intrusive else fit_seconds),
                    **outcome, "projection_error_test": projection, **metrics}
             if not spec.intrusive and isinstance(model.operators_, HamiltonianOperators):   # learned D^_q, D^_p

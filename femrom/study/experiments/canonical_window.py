@@ -43,6 +43,8 @@ def window_metrics(system, Q, P, Qr, Pr, train: slice, test: slice, dt: float, i
     out = {"train_error": state_error(Q, P, Qr, Pr, train) if finite_train else float("inf"),
            "test_error": state_error(Q, P, Qr, Pr, test) if finite else float("inf"),
            "finite": finite, "blowup_time": float(dt * bad[0]) if bad.size else None}
+    if bad.size:     # when, and why: the errors and drifts after it are not finite
+        out["diverged"] = f"at t = {dt * bad[0]:.4g} (reconstructed state not finite)"
     with np.errstate(all="ignore"):
         values = {} if invariants is None else invariants(Qr, Pr)
         H = system.hamiltonian(Qr, Pr)
