@@ -105,7 +105,8 @@ class ClosedLoopResult:
         ``solver_seconds_per_step`` (median of the solver's own time),
         ``realtime_factor`` (``dt`` over the median call; > 1 is faster than real
         time), ``n_fallbacks``, ``n_inaccurate`` (solves the solver flagged
-        inaccurate), ``n_steps``.
+        inaccurate), ``n_repaired`` (plans that failed the MPC's accuracy certificate and
+        were repaired), ``n_steps``.
         """
         qp = self.qp_seconds
         median = float(np.median(qp)) if qp.size else float("nan")
@@ -119,7 +120,8 @@ class ClosedLoopResult:
             "solver_seconds_per_step": float(np.median(solver)) if solver.size else float("nan"),
             "realtime_factor": (self.dt / median) if self.dt and median > 0 else None,
             "n_fallbacks": int(self.n_fallbacks),
-            "n_inaccurate": sum(status == "optimal_inaccurate" for status in self.statuses),
+            "n_inaccurate": sum(status.startswith("optimal_inaccurate") for status in self.statuses),
+            "n_repaired": sum(status.endswith("(repaired)") for status in self.statuses),
             "n_steps": self.n_samples - 1,
         }
 

@@ -26,7 +26,7 @@ from femrom.study.experiments.closed_loop import ClosedLoopTest, open_loop_error
 #: Columns of a report table of :func:`closed_loop_rows`.
 CLOSED_LOOP_COLUMNS = ["controller", "r", "reference", "tracking_error", "model_error_on_applied_inputs",
                        "input_effort", "max_constraint_violation", "qp_seconds_per_step", "qp_seconds_max",
-                       "n_fallbacks"]
+                       "n_fallbacks", "n_repaired"]
 
 
 def closed_loop_rows(fom, dt: float, models: dict, controllers, references: dict, n_steps: int, *, horizon: int,
