@@ -3,7 +3,7 @@
 The problem: a damped, forced elastic string (P1 elements, n = 600 free dofs,
 Rayleigh damping, one point force ``u(t)``, released from a static deflection)
 integrated with Newmark average acceleration; mass-orthonormal POD bases of
-r = 10, 30, 60, 100, 150 from its snapshots; fourth-order finite-difference
+r = 10, 30, 60, 100, 150, 200 from its snapshots; fourth-order finite-difference
 derivatives; L-OpInf with damping and input terms and a relative Tikhonov
 weight of 1e-8. Solvers:
 
@@ -25,9 +25,14 @@ unconstrained problem, so its objective is a lower bound, shown for scale).
 ``--problem random`` runs the same ladder on random data with many active
 constraints (``random_data``) instead.
 
+``--fast-method interior_point`` (or ``first_order``) forces one path of the fast
+solver (``FastSolver(method=...)``); the interior point is then taken even above
+``ipm_max_unknowns`` (r = 150: a 4.1 GB Newton matrix, whose threaded Cholesky
+crashed in OpenBLAS here, docs/inference.md).
+
 Run ``python -m benchmarks.fit_ladder [--sizes 10 30 60] [--problem string|random]
-[--out benchmarks/results]``; it prints a table and writes ``fit_ladder.json``
-(``fit_ladder_random.json``).
+[--fast-method auto|interior_point|first_order] [--out benchmarks/results]``; it
+prints a table and writes ``fit_ladder.json`` (``fit_ladder_random.json``).
 """
 
 from __future__ import annotations
@@ -43,12 +48,12 @@ import numpy as np
 from skfem import MeshLine
 
 from femrom.fem import Condensation, axial_stiffness, line_basis, line_mass, rayleigh_damping
-from femrom.inference import (LagrangianOpInf, SecondOrderData, SecondOrderOpInf, reduce_snapshots,
-                              solve_conic, solve_fast)
+from femrom.inference import (FastSolver, LagrangianOpInf, SecondOrderData, SecondOrderOpInf,
+                              reduce_snapshots, solve_conic, solve_fast)
 from femrom.integrators import Newmark, Trajectory, integrate
 from femrom.scene import SecondOrderSystem
 
-SIZES = (10, 30, 60, 100, 150)
+SIZES = (10, 30, 60, 100, 150, 200)
 SOLVERS = ("fast", "clarabel", "scs")
 #: The conic solvers' own wall-clock limits (seconds), set to ``--limit``.
 TIME_LIMIT_OPTION = {"clarabel": "time_limit", "scs": "time_limit_secs"}
@@ -99,7 +104,7 @@ def random_data(r: int, seed: int = 0) -> SecondOrderData:
 
 
 def run(sizes=SIZES, out_dir: Path | None = None, problem_kind: str = "string",
-        limit: float = LIMIT_SECONDS, solvers=None) -> list[dict]:
+        limit: float = LIMIT_SECONDS, solvers=None, fast_method: str = "auto") -> list[dict]:
     solvers = SOLVERS if solvers is None else tuple(solvers)
     if problem_kind == "string":
         M, Q, U, dt = string_data()
@@ -123,7 +128,7 @@ def run(sizes=SIZES, out_dir: Path | None = None, problem_kind: str = "string",
                 results[name] = {"skipped": f"predicted {predicted:.0f} s > {limit:.0f} s"}
                 continue
             if name == "fast":
-                _, info = solve_fast(problem)
+                _, info = solve_fast(problem, FastSolver(method=fast_method))
             else:   # a run that would overshoot the prediction stops at the limit, said so
                 tic = time.perf_counter()
                 try:
@@ -213,8 +218,11 @@ def main(argv=None) -> int:
                         help="skip a solver whose predicted time exceeds this (seconds)")
     parser.add_argument("--solvers", nargs="+", choices=SOLVERS, default=list(SOLVERS),
                         help="a subset to (re)measure; the file keeps the other rows")
+    parser.add_argument("--fast-method", choices=("auto", "interior_point", "first_order"), default="auto",
+                        help="FastSolver(method=...) of the fast column (interior_point is taken even "
+                             "above ipm_max_unknowns)")
     args = parser.parse_args(argv)
-    run(args.sizes, args.out, args.problem, args.limit, args.solvers)
+    run(args.sizes, args.out, args.problem, args.limit, args.solvers, args.fast_method)
     return 0
 
 
