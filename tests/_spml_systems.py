@@ -60,11 +60,13 @@ class KnownSystem:
         return self.shape.size
 
     def acceleration(self, q: np.ndarray, v: np.ndarray) -> np.ndarray:
-        """(r, K) the true acceleration at columns (or (r,) at one state)."""
+        """(r, K) the true acceleration at columns (or (r,) at one state): unit mass, the potential's
+        gradient ``3 T3[q, q, .] + 4 T4[q, q, q, .]`` by contractions."""
         ops = self.operators
-        f = ops.stiffness @ q + ops.damping @ v + ops.term("learned_potential").forces(np.atleast_2d(q.T).T) \
-            .reshape(np.shape(q))
-        return -np.linalg.solve(ops.mass_matrix, f)
+        poly = ops.term("learned_potential").polynomial
+        grad = 3.0 * np.einsum("ijk,j...,k...->i...", poly.T3, q, q) \
+            + 4.0 * np.einsum("ijkl,j...,k...,l...->i...", poly.T4, q, q, q)
+        return -(ops.stiffness @ q + ops.damping @ v + grad)
 
     def run(self, amplitude: float, t_end: float, noise: float = 0.0, seed: int = 0) -> SecondOrderData:
         """Exact samples every ``dt`` on [0, t_end] from ``amplitude * shape`` at rest; ``noise``: Gaussian
