@@ -72,7 +72,7 @@ def test_unconstrained_mpc_with_the_dare_terminal_cost_is_the_lqr(formulation, s
         x = rng.standard_normal(4)
         u = mpc.control(x, np.zeros(4))
         # the solvers stop at 1e-10 on a well-conditioned QP (cond H = 7) and python-control solves
-        # the DARE by its own call: measured 5e-15 (Clarabel) to 8e-12 (OSQP); 1e-8 leaves room for
+        # the DARE by its own call: measured 2e-14 (Clarabel) to 2e-11 (OSQP); 1e-8 leaves room for
         # both, and is far below the gap of the same MPC without the terminal cost (asserted below)
         assert np.linalg.norm(u + K @ x) <= 1e-8 * np.linalg.norm(K @ x)
     assert mpc.statuses == ["optimal"] * 3
@@ -96,10 +96,48 @@ def test_formulations_solve_the_same_qp():
         plans[formulation] = mpc.plan_
     assert set(registered_formulations()) >= {"condensed", "sparse", "condensed_osqp"}
     # bounds are active (a QP, not a linear solve), and the plans agree to the solvers' 1e-9
-    # tolerance amplified by the Hessian's conditioning (290): measured 4e-7 (sparse), 1e-5 of the bound
+    # tolerance amplified by the Hessian's conditioning (290): measured 4e-7 (sparse), 3e-9
+    # (condensed_osqp); the bound, 1e-6 = 1e-5 of the input bound, is the one docs/control.md states
     assert np.max(np.abs(plans["condensed"])) > 0.1 - 1e-6
     for name in ("sparse", "condensed_osqp"):
         assert np.max(np.abs(plans[name] - plans["condensed"])) < 1e-5 * 0.1, name
+
+
+@pytest.mark.parametrize("formulation, solver", [("condensed", "CLARABEL"), ("sparse", "CLARABEL"),
+                                                 ("condensed", "OSQP"), ("condensed_osqp", "OSQP")])
+def test_without_bounds_every_formulation_is_the_tracking_qp_written_out(formulation, solver):
+    """No input bound, so nothing can hide a wrong term: the input-rate weight S is active and the
+    previous input large, and the plan of every formulation equals the tracking problem of the
+    module docstring written here in cvxpy with the states as variables (Clarabel to 1e-12). The
+    formulations' solvers stop at 1e-10 on a well-conditioned QP (the LQR model of the test above):
+    measured 2e-14 (Clarabel) to 8e-12 (OSQP) relative to the largest input; 1e-8 leaves room for
+    both and is far below the 0.87 a plan for -u_prev is off (asserted)."""
+    import cvxpy as cp
+    model = small_lqr_system()
+    A, B, C, D = model.A, model.B, model.C, model.D
+    n, m, p, N = A.shape[0], B.shape[1], C.shape[0], 12
+    Q, R, S = np.diag([1.0, 2.0, 0.5, 0.1]), np.diag([0.3, 0.1]), np.diag([2.0, 1.0])
+    rng = np.random.default_rng(3)
+    z0, reference, u_prev = rng.standard_normal(n), rng.standard_normal((p, N)), np.array([1.5, -2.0])
+    u, z = cp.Variable((m, N)), cp.Variable((n, N + 1))
+    cost, constraints = 0, [z[:, 0] == z0]
+    for j in range(N):
+        constraints.append(z[:, j + 1] == A @ z[:, j] + B @ u[:, j])
+        move = u[:, j] - (u_prev if j == 0 else u[:, j - 1])
+        cost += (cp.quad_form(C @ z[:, j] + D @ u[:, j] - reference[:, j], Q) + cp.quad_form(u[:, j], R)
+                 + cp.quad_form(move, S))
+    written = cp.Problem(cp.Minimize(cost), constraints)
+    written.solve(solver="CLARABEL", tol_gap_abs=1e-12, tol_gap_rel=1e-12, tol_feas=1e-12)
+    assert written.status == "optimal"
+    expected = u.value
+    mpc = LinearMPC(model, horizon=N, output_weight=Q, input_weight=R, input_rate_weight=S, input_bound=None,
+                    formulation=formulation, solver=QPSolver(solver, tolerance=1e-10))
+    mpc.control(z0, reference, u_prev)
+    assert mpc.statuses == ["optimal"]
+    scale = np.max(np.abs(expected))
+    assert np.max(np.abs(mpc.plan_ - expected)) < 1e-8 * scale
+    mpc.control(z0, reference, -u_prev)           # the previous input matters to the plan
+    assert np.max(np.abs(mpc.plan_ - expected)) > 0.1 * scale
 
 
 # -- observers -------------------------------------------------------------------------------

@@ -299,18 +299,80 @@ def test_render_is_a_non_blank_image_of_the_requested_size(tmp_path, tiny_model)
     assert len(colours) > 50
 
 
-# -- the main job: README's first command, small level -------------------------------------
-@pytest.fixture(scope="module")
-def main_job(tmp_path_factory):
-    """``python3 -m femrom run fishtail`` as the README runs it (small level, 2e4 dofs,
-    300 steps, ladders and renders on; 70 s on a quiet machine), in a subprocess."""
-    out = tmp_path_factory.mktemp("main_job")
-    done = subprocess.run([sys.executable, "-m", "femrom", "run", "fishtail", "--out", str(out)],
+# -- the main job: README's first command ----------------------------------------------------
+def non_finite(value, path=()):
+    """Every entry of a metrics tree that is not a finite number: ``(path, value)`` for NaN and
+    infinities, whether JSON holds them as numbers or as strings (``write_metrics`` writes
+    neither: a quantity without a finite value is ``null``, see :func:`nulls`)."""
+    if isinstance(value, dict):
+        return [bad for key, item in value.items() for bad in non_finite(item, path + (key,))]
+    if isinstance(value, list):
+        return [bad for i, item in enumerate(value) for bad in non_finite(item, path + (i,))]
+    if isinstance(value, float) and not np.isfinite(value):
+        return [(path, value)]
+    if isinstance(value, str) and value.strip().lower().lstrip("+-") in ("nan", "inf", "infinity"):
+        return [(path, value)]
+    return []
+
+
+def nulls(row: dict, keys=("test_output_error", "test_field_error", "test_energy_ratio",
+                            "train_output_error", "train_energy_ratio")) -> list[str]:
+    """The error columns of a model's row that hold no finite value (``null`` in metrics.json)."""
+    return [key for key in keys if key in row and row[key] is None]
+
+
+def ratio(value) -> float:
+    """An energy ratio as a number: ``null`` (no finite value: a diverged model) is infinite."""
+    return float("inf") if value is None else float(value)
+
+
+def run_main_command(out, *options):
+    """``python3 -m femrom run fishtail`` as the README runs it, in a subprocess."""
+    done = subprocess.run([sys.executable, "-m", "femrom", "run", "fishtail", "--out", str(out), *options],
                           capture_output=True, text=True, cwd=ROOT, timeout=1800)
     assert done.returncode == 0, done.stderr[-2000:]
     return out, done.stdout, json.loads((out / "metrics.json").read_text())
 
 
+@pytest.fixture(scope="module")
+def light_job(tmp_path_factory):
+    """The README's command on a light setting (tiny mesh, half window, r = 2 and 4, no ladders, no
+    reverse study): the command line, the streamed snapshots, the report and the renders end to end
+    in 17 s on a quiet machine (90 s on a loaded one; the README setting below, 160-180 s, is slow)."""
+    return run_main_command(tmp_path_factory.mktemp("light_job"), "--quick", "--level", "tiny", "--ranks", "2", "4",
+                            "--no-ladders", "--no-reverse")
+
+
+def test_the_main_command_runs_end_to_end_on_a_light_setting(light_job):
+    out, stdout, metrics = light_job
+    assert f"report: {out / 'report.md'}" in stdout       # it says where the report is
+    assert metrics["level"] == "tiny" and metrics["quick"] and metrics["ranks"] == [2, 4]
+    for name in ("report.md", "response.png", "rom_error.png", "energy.png", "scene.toml", "paraview/fishtail.pvd"):
+        assert (out / name).stat().st_size > 0, name
+    assert not (out / "snapshots.h5").exists()            # streamed, scored, deleted
+    assert non_finite(metrics) == []                      # every model is stable at r = 2, 4 on this window
+    rows = {(x["r"], x["learner"]): x for x in metrics["roms"]}
+    assert set(rows) == {(r, learner) for r in (2, 4) for learner in metrics["learners"]}
+    lop, galerkin = rows[4, "lopinf"], rows[4, "galerkin"]
+    # measured (tiny mesh, 0.12 s): L-OpInf at r = 4 on the unseen step 1.63e-3 in the output, 2.48e-3 in
+    # the field, Galerkin 1.68e-3 and 2.58e-3, r = 2 about 1.5e-2: 3x the measured value leaves room for
+    # another gmsh or BLAS, not for a model that stops following the step
+    assert lop["test_output_error"] < 5e-3 and lop["test_field_error"] < 7.5e-3
+    assert lop["test_output_error"] < 2 * galerkin["test_output_error"]
+    assert lop["test_output_error"] < 0.3 * rows[2, "lopinf"]["test_output_error"]   # more modes help
+    for row in rows.values():   # no model beats the projection of the FOM on its basis (a lower side)
+        assert row["test_field_error"] >= 0.99 * row["test_projection_error"] > 0, (row["r"], row["learner"])
+    assert 0.1 < lop["test_energy_ratio"] < 1.5               # settles below the FOM's overshoot peak (0.56)
+
+
+@pytest.fixture(scope="module")
+def main_job(tmp_path_factory):
+    """``python3 -m femrom run fishtail`` exactly as the README runs it (small level, 2e4 dofs,
+    300 steps, ladders and renders on; 70-160 s), in a subprocess: the slow tests below."""
+    return run_main_command(tmp_path_factory.mktemp("main_job"))
+
+
+@pytest.mark.slow
 def test_main_job_runs_the_small_fishtail_end_to_end(main_job):
     out, stdout, metrics = main_job
     assert f"report: {out / 'report.md'}" in stdout       # it says where the report is
@@ -326,8 +388,17 @@ def test_main_job_runs_the_small_fishtail_end_to_end(main_job):
     assert not (out / "snapshots.h5").exists()            # streamed, scored, deleted
     # Newmark is second order: the dt ladder against dt = 1 ms (measured 1.98)
     assert 1.8 < metrics["time_step_ladder"][0]["observed_order"] < 2.2
+    # strict JSON: nothing is NaN or infinite; an error without a finite value is null, and only plain
+    # OpInf's unstable models have one, each labelled diverged (docs/cases/fishtail.md)
+    assert non_finite(metrics) == []
+    for row in metrics["roms"] + metrics["roms_reverse"]:
+        if row["learner"] in ("galerkin", "lopinf", "lopinf_fd"):
+            assert nulls(row) == [] and "diverged" not in row, (row["r"], row["learner"])
+        elif nulls(row):
+            assert row["learner"] in ("opinf", "opinf_fd") and "diverged" in row, (row["r"], row["learner"])
 
 
+@pytest.mark.slow
 def test_main_job_learns_from_displacements_alone_every_kth_step(main_job):
     """The report's every-k-th-step rows (femrom.study.subsampled_rows). Measured at r = 12: every
     step, displacements alone 9.7e-5 (the projection floor 9.0e-5), stored q', q'' 7.0e-4, 4th-order
@@ -346,6 +417,7 @@ def test_main_job_learns_from_displacements_alone_every_kth_step(main_job):
     assert rows[2, "integrator_dt"]["test_field_error"] < 0.2 * rows[2, "integrator"]["test_field_error"]
 
 
+@pytest.mark.slow
 def test_main_job_lopinf_predicts_the_unseen_step_and_stays_stable(main_job):
     """The seed's claim on femrom's own fishtail: trained on the sigmoid, L-OpInf predicts
     the step. Measured (2026-11-23): output error 2.7e-3, 1.5e-3, 1.4e-3, 5.3e-4 at r = 4, 6,
@@ -365,15 +437,18 @@ def test_main_job_lopinf_predicts_the_unseen_step_and_stays_stable(main_job):
             assert row["damping_min_eig"] > -1e-10, (r, learner)
             # 10 windows under the held step: a stable damped model settles below the
             # FOM's overshoot peak or near it (measured 0.10-1.014)
-            assert float(row["test_energy_ratio"]) < 1.5, (r, learner)   # JSON writes inf as "inf"
-    # what plain OpInf does on the same data, asserted as observed (docs/cases/fishtail.md):
-    # unstable at some r (r = 8 from the stored derivatives: energy 2e123; from finite
-    # differences at r >= 6). If this stops, the page's comparison must be rewritten.
+            assert ratio(row["test_energy_ratio"]) < 1.5, (r, learner)
+    # what plain OpInf does on the same data, asserted as observed (docs/cases/fishtail.md): a
+    # regression pin, not a property of OpInf: one run measured it unstable at r = 8 from the stored
+    # derivatives (energy 2e123) and from finite differences at r >= 6; the threshold 1e3 sits far
+    # below those and far above the stable models' <= 1.014. If this stops, the page's comparison
+    # must be rewritten.
     blowups = [r for r in ranks for learner in ("opinf", "opinf_fd")
-               if not float(rows[r, learner]["test_energy_ratio"]) < 1e3]   # JSON: "inf"
+               if not ratio(rows[r, learner]["test_energy_ratio"]) < 1e3]
     assert blowups, "plain OpInf stayed stable at every r: update docs/cases/fishtail.md"
 
 
+@pytest.mark.slow
 def test_main_job_reverse_direction(main_job):
     """Trained on the step, tested on the sigmoid (measured: Galerkin 1.3e-6, L-OpInf
     1.1e-4 at r = 12; L-OpInf 4.3e-2 at r = 4, which the page reports as a miss)."""
@@ -381,4 +456,4 @@ def test_main_job_reverse_direction(main_job):
     rows = {(x["r"], x["learner"]): x for x in metrics["roms_reverse"]}
     assert rows[12, "galerkin"]["test_output_error"] < 1e-5
     assert rows[12, "lopinf"]["test_output_error"] < 1e-3      # ~10x the measured 1.1e-4
-    assert all(np.isfinite(float(rows[r, "lopinf"]["test_energy_ratio"])) for r, _ in rows)
+    assert all(np.isfinite(ratio(rows[r, "lopinf"]["test_energy_ratio"])) for r, _ in rows)

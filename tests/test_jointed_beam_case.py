@@ -4,17 +4,21 @@ model's validation against the full model, the ring-down, the metrics the issue 
 import numpy as np
 import pytest
 
-import _required
 from femrom.cases import jointed_beam as case
+
+#: ring-down windows compared with QSMA: the 1 s ring-down's 0.2 s windows at 16.3 down to 12.1 m/s^2,
+#: all inside QSMA's 1-30 m/s^2 (measured 4 of 4)
+MIN_COMPARED = 4
 
 
 @pytest.fixture(scope="module")
-def metrics(tmp_path_factory):
-    # the Iwan joint at the fitted chi, beta (the case's defaults; fitting needs the full QSMA grid)
+def metrics(tmp_path_factory, brb_data):
+    # the Iwan joint at the fitted chi, beta (the case's defaults; fitting needs the full QSMA grid:
+    # test_the_documented_headline_numbers below runs it); the measured backbone from the data
     config = case.JointedBeamCase(ring_down=1.0, qsma_amplitudes=(1.0, 1.76, 3.1, 5.46, 9.61, 16.9, 30.0), fit_iwan=False,
                                   training_impacts=(300.0,), training_window=0.1,
                                   forced_levels=(2e-4, 0.05), forced_frequencies=(80.3,))
-    return case.run(config, tmp_path_factory.mktemp("jointed_beam"), progress=lambda line: None)
+    return case.run(config, tmp_path_factory.mktemp("jointed_beam"), progress=lambda line: None, data_dir=brb_data)
 
 
 def test_one_calibrated_stiffness_and_two_predicted_modes(metrics):
@@ -69,6 +73,7 @@ def test_the_ring_down_follows_the_quasi_static_backbone(metrics):
     # log amplitude, and the bounds are 2x those
     hyper = metrics["backbone"]["hyper_qsma_iwan"]
     amplitudes = np.log([r["amplitude_m_s2"] for r in hyper])
+    compared = 0
     for row in transient:
         a = np.log(row["amplitude_m_s2"])
         if amplitudes[0] <= a <= amplitudes[-1]:
@@ -76,15 +81,20 @@ def test_the_ring_down_follows_the_quasi_static_backbone(metrics):
             z = np.interp(a, amplitudes, [r["damping_ratio"] for r in hyper])
             assert row["frequency_hz"] == pytest.approx(f, abs=0.015)
             assert row["damping_ratio"] == pytest.approx(z, rel=0.06)
+            compared += 1
+    # every window of the ring-down is compared (a backbone out of order or out of range compares none)
+    assert compared >= MIN_COMPARED, (compared, len(transient))
 
 
-def test_the_measured_backbone_is_compared_when_the_data_are_there(metrics):
-    if "measured" not in metrics["backbone"]:     # the case leaves it out, with a note, without the data
-        _required.missing(f"jointed-beam data absent: {metrics['notes']}", _required.DATA)
+def test_the_measured_backbone_is_read_and_compared(metrics):
     measured = metrics["backbone"]["measured"]
     assert measured[0]["amplitude_m_s2"] > 10 * measured[-1]["amplitude_m_s2"]
+    # docs/cases/jointed_beam.md: 0.172 Hz from 1 to 23.9 m/s^2 (the same processing of the same file:
+    # deterministic; the band admits a change of filter round-off, not of the processing)
     comparison = metrics["against_measured"]["fom_qsma"]
-    assert comparison is not None and comparison["shift_measured_hz"] > 0.1
+    assert comparison is not None and 0.165 < comparison["shift_measured_hz"] < 0.18
+    assert comparison["amplitudes_m_s2"][0] == pytest.approx(1.0, abs=0.05)
+    assert comparison["amplitudes_m_s2"][1] == pytest.approx(23.9, abs=0.1)
 
 
 def test_the_stepped_sine_tends_to_the_stuck_joints_response_at_small_force(metrics):
@@ -103,3 +113,38 @@ def test_the_stepped_sine_tends_to_the_stuck_joints_response_at_small_force(metr
     assert deviation[2e-4] < 0.06
     assert deviation[0.05] > 2 * deviation[2e-4]       # at 0.05 N (8 m/s^2) the joint clearly slips
     assert small["outputs"]["acc1"][0]["amplitude_m_s2"] > 2.0   # near resonance: a real response
+
+
+@pytest.mark.slow
+def test_the_documented_headline_numbers(tmp_path, brb_data):
+    """The default run of docs/cases/jointed_beam.md (16 QSMA loads, chi and beta fitted on the impact
+    data, 3 s ring-down; the stepped sine left out): 150-240 s on 2 shared cores. Measured on the default
+    mesh: the Iwan model's shift 1.180 x the measured (0.2027 against 0.1717 Hz from 1 to 23.9 m/s^2),
+    its worst damping error 10.8 %; the dry-friction model's 1.226 x and 49.6 %; the ring-down's 1.197 x
+    and 12.0 %. The fit, the mesh and the processing are deterministic; the bands admit what a
+    different gmsh or BLAS moves (the docs' load-grid dependence of the dry-friction shift, 0.04 in
+    the ratio) and each keeps a lower side, so that a model that stops softening or damping, or one
+    that agrees by construction, fails."""
+    config = case.JointedBeamCase(forced=False)
+    assert config.fit_iwan
+    metrics = case.run(config, tmp_path / "jointed_beam", progress=lambda line: None, data_dir=brb_data)
+    iwan = metrics["joint"]["iwan"]
+    assert iwan["fitted"] and -1.0 < iwan["chi"] < 0.0 and iwan["beta"] > 0     # Segalman's range for lap joints
+    against = metrics["against_measured"]
+
+    def ratio(name):
+        return against[name]["shift_model_hz"] / against[name]["shift_measured_hz"]
+
+    assert 0.165 < against["fom_qsma_iwan"]["shift_measured_hz"] < 0.18            # the documented 0.172 Hz
+    # "the Iwan model's is 1.18 times the measured shift": within the issue's factor of 2 by far
+    assert 1.13 < ratio("fom_qsma_iwan") < 1.23, ratio("fom_qsma_iwan")
+    # "damping within 30 %: met by the Iwan joint (worst error 11 %)"
+    assert 0.05 < against["fom_qsma_iwan"]["damping_max_relative_error"] < 0.15
+    # "the dry-friction model's 1.23 times", and it misses the damping target (50 %)
+    assert 1.15 < ratio("fom_qsma") < 1.33, ratio("fom_qsma")
+    assert 0.3 < against["fom_qsma"]["damping_max_relative_error"] < 0.65
+    # the reduced and hyper-reduced Iwan models stay near the full one (measured 1.114 and 1.103, 10.2 and 9.2 %)
+    for name in ("reduced_qsma_iwan", "hyper_qsma_iwan"):
+        assert 1.05 < ratio(name) < 1.23 and against[name]["damping_max_relative_error"] < 0.15, name
+    # "transient: 0.125 Hz against 0.104, 12 %" over its own 2.1-15.6 m/s^2
+    assert 1.1 < ratio("transient") < 1.3 and 0.05 < against["transient"]["damping_max_relative_error"] < 0.2

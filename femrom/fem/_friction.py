@@ -74,6 +74,20 @@ class JenkinsForce(NonlinearForce):
     def local_commit(self, x, xdot, state):
         return x - self.local_force(x, None, state) / self.stiffness
 
+    def local_step_derivative(self, x, state, dx, dstate):
+        r"""Forward derivative of one return-map step along ``m`` directions.
+
+        ``dx`` (s, m) and ``dstate`` (s, m) are the derivatives of the coordinates and of the
+        frozen slider positions; returns ``(dg, dz)`` (s, m): of the force and of the committed
+        slider. Stuck: ``g = k (x - z)``, ``z`` kept, so ``dg = k (dx - dz)``, ``dz`` kept;
+        slipping: ``g = +-F_s``, ``z = x -+ F_s / k``, so ``dg = 0``, ``dz = dx``. Carried over a
+        sampled period, this is the exact derivative of the sampled hysteresis loop
+        (:class:`femrom.integrators.HarmonicBalance`).
+        """
+        sticking = slider_return(self._trial(x, state), self.slip_force)[1][:, None]
+        dg = np.where(sticking, self.stiffness[:, None] * (dx - dstate), 0.0)
+        return dg, np.where(sticking, dstate, dx)
+
     def checkpoint(self, state):
         return {"slider": np.asarray(state, dtype=float)}
 

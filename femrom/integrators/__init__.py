@@ -22,6 +22,11 @@ Three separate pieces:
   frequency by frequency without restarting, whole periods at
   a time to a tested steady state (:class:`SteadyStateCriterion`), and reports the
   first-harmonic amplitude and phase of each output (:class:`SteppedSineResult`);
+- *harmonic balance* (:class:`HarmonicBalance`) writes any model's periodic steady state under
+  ``F b sin(Omega t)`` as Fourier coefficients, with the nonlinear force (memory included)
+  evaluated by alternating frequency-time marches over the period; :func:`frequency_response`
+  and :func:`force_response` continue it by pseudo-arclength, and :func:`epmc` gives a damped
+  nonlinear mode (frequency and damping against amplitude, :class:`NonlinearModes`);
 - a *linear-solver strategy* (:func:`femrom.solvers.make_solver`) factorises
   (or preconditions) an effective matrix once and solves with it every step.
 
@@ -50,6 +55,16 @@ from femrom.integrators._hamiltonian import (
     CanonicalTrajectory,
     integrate_canonical,
 )
+from femrom.integrators._epmc import NonlinearModes, epmc
+from femrom.integrators._harmonic_balance import (
+    AFTResult,
+    FourierBasis,
+    HarmonicBalance,
+    HarmonicBalanceError,
+    HarmonicBalanceSolution,
+    default_samples,
+)
+from femrom.integrators._hb_continuation import HarmonicBalanceCurve, force_response, frequency_response
 from femrom.integrators._implicit import ImplicitSolve
 from femrom.integrators._march import Stepper, input_sample, input_samples, march, run_linear, uniform_step
 from femrom.integrators._newton import ConvergenceError, Newton, newton_loop
@@ -93,4 +108,7 @@ __all__ = [
     "Shaker", "input_sample", "input_samples", "time_scheme", "uniform_step",     "FrequencyResponse", "Peak", "SteadyStateCriterion", "SteadyStateWarning",
     "SteppedSine", "SteppedSineResult", "first_harmonic", "parabolic_peak",
     "prewarped_frequency",
+    "AFTResult", "FourierBasis", "HarmonicBalance", "HarmonicBalanceCurve", "HarmonicBalanceError",
+    "HarmonicBalanceSolution", "NonlinearModes", "default_samples", "epmc", "force_response",
+    "frequency_response",
 ]

@@ -18,7 +18,7 @@ from femrom.post._backbone import (
     peak_backbone,
     spectral_peaks,
 )
-from femrom.post._backbone_maps import period_corrected, with_linear_damping
+from femrom.post._backbone_maps import epmc_backbone, period_corrected, with_linear_damping
 from femrom.post._datasets import (
     DATASETS,
     Dataset,
@@ -77,4 +77,4 @@ __all__ = [
            "save_figure", "spectral_peaks", "staged_output", "table_section", "vertex_displacements",
            "write_metrics", "write_vtu_series",
            "linear_accelerance", "period_corrected", "plot_closed_loops", "render_closed_loop", "static_qsma",
-           "with_linear_damping"]
+           "with_linear_damping", "epmc_backbone"]

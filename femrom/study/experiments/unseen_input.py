@@ -76,8 +76,9 @@ def evaluate(rom, run: FOMRun, projection: Projection, *, extension: float,
     default; a training window's end for a test of extrapolation in time). A ROM
     that blows up (plain OpInf can) gets infinite errors; the overflow on the way is
     expected and not reported as a warning. ``energy_growth`` is the ROM's largest
-    energy on the run's window over its energy scale, ``blowup_time`` the first time its
-    energy exceeds :data:`BLOWUP` times that scale (``None``: never) or stops being finite.
+    energy on the run's window over its energy scale, ``blowup_time`` the first time, over the
+    extended window, its energy exceeds :data:`BLOWUP` times that scale (``None``: never) or stops
+    being finite.
     The scale is the ROM's initial energy, or, for a run from rest (initial energy 0: a
     driven structure), the FOM's largest energy on the run (:func:`energy_scale`); without
     either, ``energy_growth`` is ``nan`` and only a non-finite energy counts as a blow-up.
@@ -95,10 +96,11 @@ def evaluate(rom, run: FOMRun, projection: Projection, *, extension: float,
         energy = solution.energy
         scale = energy_scale(energy, run.energy)
         growth = float(np.nanmax(np.abs(energy)) / scale) if scale else float("nan")
-        big = ~np.isfinite(energy) | ((np.abs(energy) > BLOWUP * scale) if scale else False)
+        big = ~np.isfinite(long.energy) | ((np.abs(long.energy) > BLOWUP * scale) if scale else False)
         return Evaluation(output_error, projection.field_error(solution.q, columns),
                           projection.projection_error(rom.r, columns), ratio, final, growth,
-                          float(times[np.argmax(big)]) if big.any() else None, solution, long_times, long.energy)
+                          float(long_times[np.argmax(big)]) if big.any() else None, solution, long_times,
+                          long.energy)
 
 
 
