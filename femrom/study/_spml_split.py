@@ -118,7 +118,7 @@ def _hybrid(conservative, dissipative):
     terms = keep + [t for t in dissipative.terms if t.name == "learned_dissipation"]
     ops = ReducedOperators(tuple(terms), dict(conservative.metadata))
     if C is not None:
-        from femrom.inference._terms import term_class
+        from femrom.inference import term_class
         ops = ops.with_terms(term_class("damping")(C))
     return ops
 
