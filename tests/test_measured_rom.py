@@ -135,33 +135,41 @@ def test_spml_bends_the_backbone_the_right_way_but_misses_the_shift_l_opinf_is_f
     # L-OpInf is linear: a flat backbone by construction (observed 3e-6 Hz: Hilbert round-off)
     assert abs(lopinf["shift_predicted_hz"]) < 1e-3
     # SpML's learned quartic softens: its frequency rises as the amplitude falls (observed
-    # +5.5e-4 Hz), so it is closer to the measured shift than L-OpInf's, but a smooth
+    # +5.3e-4 Hz), so it is closer to the measured shift than L-OpInf's, but a smooth
     # potential's shift falls as the amplitude squared and the 30 % target is missed
     # (observed error 99 %, docs/cases/jointed_beam_measured.md): the band is 0 < shift < 0.1 x measured
-    # (regression pin around the measured +5.5e-4 Hz against +0.061 Hz)
+    # (regression pin around the measured +5.3e-4 Hz against +0.061 Hz)
     assert 0 < spml["shift_predicted_hz"] < 0.1 * spml["shift_measured_hz"]
     assert spml["shift_relative_error"] < lopinf["shift_relative_error"]
 
 
 def test_spml_damping_against_l_opinf_on_untrained_amplitudes(measured):
+    # SpML's least-squares stage switches its convex dissipation off on both splits (its random start
+    # validates worse than none, and L-BFGS cannot switch it back on: docs/cases/jointed_beam_measured.md,
+    # "What the least-squares stage changed"), so its damping is linear like L-OpInf's
     splits = measured["splits"]
-    # forward (train high, test low): both keep the training part's damping (observed max
-    # relative errors: SpML 0.44, L-OpInf 0.48; measured 0.152 -> 0.139 %, predicted ~0.20 %)
+    # forward (train high, test low): both keep the training part's damping (observed max relative
+    # errors: SpML 0.4829, L-OpInf 0.4833; measured 0.152 -> 0.139 %, predicted 0.206 % by both)
     forward = splits["forward"]["models"]
-    assert forward["SpML"]["damping_relative_error_max"] <= forward["L-OpInf"]["damping_relative_error_max"]
-    # target missed: both sides stated (regression pin around the measured 0.44)
-    assert 0.3 < forward["SpML"]["damping_relative_error_max"] < 0.6
-    # reverse (train low, test high): SpML's dissipation grows with the amplitude (observed
-    # 0.158 -> 0.184 % against the measured 0.167 -> 0.207 %), max error 0.11 against
-    # L-OpInf's flat 0.150 % (0.30): within the 30 % target; 0.2 leaves room for the fit (regression
-    # pin between the measured 0.11 and 0.30)
+    assert forward["SpML"]["damping_relative_error_max"] == pytest.approx(
+        forward["L-OpInf"]["damping_relative_error_max"], abs=0.03)
+    # target missed: both sides stated (regression pin around the measured 0.48)
+    assert 0.35 < forward["SpML"]["damping_relative_error_max"] < 0.6
+    # SpML's damping is flat over the test amplitudes (observed 0.20583 -> 0.20584 %; pin 2 %)
+    low, high = forward["SpML"]["damping_predicted_percent"][1], forward["SpML"]["damping_predicted_percent"][0]
+    assert 0.98 * low < high < 1.02 * low
+    # reverse (train low, test high): SpML's damping no longer grows with the amplitude (observed
+    # 0.149 -> 0.145 % from the lowest to the highest, against the measured 0.174 -> 0.214 %: the same
+    # c over the quartic's higher frequency), max error 0.32 against L-OpInf's flat 0.150 % (0.30):
+    # the 30 % target missed by both (regression pin around the measured 0.32 and 0.97)
     reverse = splits["reverse"]["models"]
     low, high = reverse["SpML"]["damping_predicted_percent"][1], reverse["SpML"]["damping_predicted_percent"][0]
-    assert high > 1.05 * low
-    assert reverse["SpML"]["damping_relative_error_max"] < 0.2 < reverse["L-OpInf"]["damping_relative_error_max"]
-    # upward, the quartic overshoots the frequency shift (observed 0.95 Hz against 0.049 Hz measured:
-    # error 18; regression pin at 1)
-    assert reverse["SpML"]["shift_relative_error"] > 1.0
+    assert 0.93 * low < high < 1.01 * low
+    assert 0.25 < reverse["SpML"]["damping_relative_error_max"] < 0.4
+    assert 0.25 < reverse["L-OpInf"]["damping_relative_error_max"] < 0.4
+    # upward, the quartic overshoots the frequency shift (observed 1.08 Hz against 0.043 Hz measured:
+    # error 24; regression pin 10-40)
+    assert 10 < reverse["SpML"]["shift_relative_error"] < 40
 
 
 def test_learned_sliders_on_the_untrained_amplitudes(measured):
@@ -169,15 +177,15 @@ def test_learned_sliders_on_the_untrained_amplitudes(measured):
     forward, reverse = splits["forward"]["models"], splits["reverse"]["models"]
     iwan, spml = forward["Iwan-L-OpInf"], forward["SpML"]
     # forward (train high, test low): the sliders learned on the high amplitudes bend the backbone
-    # the measured way, ten times more than SpML's quartic (observed +0.0084 Hz against +0.0005 Hz),
+    # the measured way, ten times more than SpML's quartic (observed +0.0084 Hz against +0.00053 Hz),
     # but keep only 13 % of the measured +0.064 Hz: the 30 % target is missed (both sides stated;
     # regression pin around the run's values)
     assert 10 * spml["shift_predicted_hz"] < iwan["shift_predicted_hz"] < 0.3 * iwan["shift_measured_hz"]
     # and the damping on the low amplitudes is closer than SpML's and L-OpInf's (observed max
-    # relative error 0.27 against 0.44 and 0.48; regression pin at 0.8x)
+    # relative error 0.27 against 0.48 and 0.48; regression pin at 0.8x)
     assert iwan["damping_relative_error_max"] < 0.8 * min(spml["damping_relative_error_max"],
                                                           forward["L-OpInf"]["damping_relative_error_max"])
     # reverse (train low, test high): the shift stays bounded (observed error 0.65: 0.015 Hz against
-    # 0.043 Hz) where SpML's quartic overshoots 18-fold; 1.0 separates the two (regression pin)
+    # 0.043 Hz) where SpML's quartic overshoots 24-fold; 1.0 separates the two (regression pin)
     assert reverse["Iwan-L-OpInf"]["shift_relative_error"] < 1.0 < reverse["SpML"]["shift_relative_error"]
     assert reverse["Iwan-L-OpInf"]["shift_predicted_hz"] > 0

@@ -210,16 +210,24 @@ def test_spml_learns_a_known_quartic_potential_on_top_of_lopinf(duffing):
     ops = learner.operators_
     assert np.linalg.eigvalsh(ops.stiffness).min() > 0 and np.linalg.eigvalsh(ops.damping).min() >= -1e-12
     assert np.allclose(ops.mass_matrix, ops.mass_matrix.T) and np.linalg.eigvalsh(ops.mass_matrix).min() > 0
-    assert ops.term("learned_potential") is not None and ops.term("learned_dissipation") is not None
-    # the kept weights are the best ones by the validation loss
-    best = min(h["validation_loss"] for h in learner.history_)
-    assert learner.best_iteration_ == next(h["iteration"] for h in learner.history_ if h["validation_loss"] == best)
+    assert ops.term("learned_potential") is not None
+    # the truth has no nonlinear dissipation: the least-squares stage switched the learned one off
+    # (exported without it) or L-BFGS left it small
+    dissipation = ops.term("learned_dissipation")
+    assert dissipation is None or np.linalg.norm(dissipation.forces(None, data[3].velocities)) \
+        < 1e-3 * np.linalg.norm(data[3].accelerations)
+    # the kept weights are the best ones by the validation loss: no check of L-BFGS scored better
+    # by more than the tolerance than what was kept (the least-squares start included)
+    kept = learner.stages_[-1]["validation_loss"]
+    assert all(kept <= h["validation_loss"] / (1.0 - learner.config.tolerance) for h in learner.history_)
     assert learner.loss_ < 1e-2 * learner.linear_loss_
 
 
 def test_same_seed_same_weights_and_another_seed_other_weights(duffing):
     _, data, _ = duffing
-    config = SpMLConfig(potential_widths=(8,), dissipation_widths=(4,), max_iterations=20, check_every=10)
+    # L-BFGS from the seeded weights (the least-squares stage could switch the networks off)
+    config = SpMLConfig(potential_widths=(8,), dissipation_widths=(4,), max_iterations=20, check_every=10,
+                        least_squares=False)
 
     def weights(seed):
         ops = SpML(["damping"], config=SpMLConfig(**{**config.__dict__, "seed": seed}), progress=False) \

@@ -14,6 +14,9 @@ and coefficients, so the numpy terms take ``q^`` and ``q^'`` as they are.
 
 from __future__ import annotations
 
+import time
+from dataclasses import replace
+
 import numpy as np
 import torch
 
@@ -21,6 +24,10 @@ from femrom.inference._networks import (ConvexPowers, NetworkLayer, ScalarNetwor
                                        monomials, multi_indices)
 
 DTYPE = torch.float64
+
+#: The raw output weight of a switched-off dissipation network (:func:`prune`), and the export's
+#: threshold below which the network is left out (``softplus(-35) = 6e-16`` of the force scale).
+PRUNED_RAW, PRUNED = -40.0, -35.0
 
 
 def _tensor(x) -> torch.Tensor:
@@ -293,17 +300,18 @@ class SpMLModule(torch.nn.Module):
                     terms[d] = (idx, self.cU * self.alpha[str(d)].numpy() / np.prod(sq[idx], axis=1))
                 polynomial = SymmetricPolynomial(self.r, terms)
             u_network = None
-            if self.u_output is not None:
+            if self.u_output is not None and bool(torch.any(self.u_output != 0)):   # a pruned one costs, adds 0
                 layers = [NetworkLayer(self.u_biases[0].numpy().copy(), None, self.u_weights[0].numpy() / sq)]
                 layers += [NetworkLayer(b.numpy().copy(), W.numpy().copy()) for W, b in
                            zip(self.u_weights[1:], self.u_biases[1:])]
                 u_network = ScalarNetwork(layers, self.cU * self.u_output.numpy(), "tanh")
             powers = None
-            if self.d_cubic is not None:
+            if self.d_cubic is not None and bool(torch.any(self.d_cubic != 0) or torch.any(self.d_quartic != 0)):
                 powers = ConvexPowers(self.cF ** (1 / 3) * self.d_cubic.numpy() / sv,
                                       self.cF ** 0.25 * self.d_quartic.numpy() / sv)
             f_network = None
-            if self.f_output_raw is not None:
+            # switched off (:func:`prune`): softplus(-40) = 4e-18 of the force scale, below round-off
+            if self.f_output_raw is not None and float(self.f_output_raw.max()) > PRUNED:
                 softplus = torch.nn.functional.softplus
                 layers = [NetworkLayer(self.f_biases[0].numpy().copy(), None, self.f_input[0].numpy() / sv)]
                 layers += [NetworkLayer(b.numpy().copy(), softplus(raw).numpy().copy(), U.numpy() / sv)
@@ -313,35 +321,142 @@ class SpMLModule(torch.nn.Module):
         return mass, linear, polynomial, u_network, powers, f_network
 
 
-def train(module: SpMLModule, train_arrays, validation_arrays, config, progress) -> dict:
-    r"""Minimise ``||R||_F^2 / ||Y||_F^2`` (+ weight decay) over the module's weights by full-batch L-BFGS.
+def train(module: SpMLModule, train_arrays, validation_arrays, config, progress, rollouts=None) -> dict:
+    r"""Fit the module's weights in stages (:func:`_stages`) and return what each did.
 
     ``train_arrays``/``validation_arrays``: ``(q, v, a, Y, blocks, ||Y||_F^2)`` with (K, r) arrays
-    and a list of (K, p_j) blocks (:meth:`SpMLModule.residual`).
-    Every ``check_every`` iterations the loss on the validation trajectory (the training
-    data without one) is compared with the best so far: the best weights are kept, and
-    training stops after ``patience`` checks without a relative improvement of ``tolerance``.
-    Returns the history and the best check. Runs on ``config.threads`` torch threads (restored
-    after): at these sizes intra-op threads cost more than they give (measured on 2 shared
-    cores: a (9000, 3) x (3, 16) product took 26 ms on 2 threads, 0.36 ms on 1).
+    and a list of (K, p_j) blocks (:meth:`SpMLModule.residual`); ``rollouts``: ``(training,
+    validation or None)`` trajectory lists for the rollout refinement (:class:`Rollout`). Runs on ``config.threads``
+    torch threads (restored after): at these sizes intra-op threads cost more than they give
+    (measured on 2 shared cores: a (9000, 3) x (3, 16) product took 26 ms on 2 threads, 0.36 ms on 1).
     """
     threads = torch.get_num_threads()
     torch.set_num_threads(int(config.threads))
     try:
-        return _train(module, train_arrays, validation_arrays, config, progress)
+        return _stages(module, train_arrays, validation_arrays, config, progress, rollouts)
     finally:
         torch.set_num_threads(threads)
 
 
-def _train(module, train_arrays, validation_arrays, config, progress) -> dict:
-    tensors = []
-    for arrays in (train_arrays, validation_arrays):
-        if arrays is not None:
-            q = _tensor(arrays[0])
-            tensors.append((q, *(_tensor(x) for x in arrays[1:4]), [_tensor(D) for D in arrays[4]],
-                            module.features(q), float(arrays[5])))
-    train_t = tensors[0]
-    valid_t = tensors[1] if validation_arrays is not None else None
+def _loss_on(module, arrays) -> float:
+    q, v, a, Y, blocks, features, norm = arrays
+    with torch.no_grad():
+        R = module.residual(q, v, a, Y, blocks, features)
+        return float((R * R).sum() / norm)
+
+
+def _tensors(module, arrays):
+    if arrays is None:
+        return None
+    q = _tensor(arrays[0])
+    return (q, *(_tensor(x) for x in arrays[1:4]), [_tensor(D) for D in arrays[4]], module.features(q),
+            float(arrays[5]))
+
+
+def _snapshot(module) -> dict:
+    return {"state": {k: v.detach().clone() for k, v in module.state_dict().items()},
+            "bases": [e["base"].clone() for e in module.linear]}
+
+
+def _restore(module, snapshot: dict) -> None:
+    module.load_state_dict(snapshot["state"])
+    for e, base in zip(module.linear, snapshot["bases"]):
+        e["base"] = base.clone()
+
+
+def _stages(module, train_arrays, validation_arrays, config, progress, rollouts=None) -> dict:
+    r"""Least squares, L-BFGS, least squares again: each stage kept only if the checked loss falls.
+
+    The checked loss is the validation trajectory's (the training loss without one).
+
+    1. ``least_squares``: :func:`solve_linear_part` from step 1's values twice, with the
+       networks and convex powers as initialised and with them switched off (:func:`prune`); the
+       best of the two and of step 1's start is kept (``polynomial_start`` drops step 1's start).
+    2. L-BFGS (:func:`_train`) on every weight from there, at most ``max_iterations``.
+    3. ``least_squares_rounds - 1`` more solves of the linear part (kept, pruned) with the
+       networks where L-BFGS left them, each followed by L-BFGS on the remaining budget, while a
+       solve improves the checked loss by ``tolerance``.
+    4. With ``rollout_steps``: L-BFGS on the rollout loss (:class:`Rollout`, :func:`refine_rollout`),
+       checked on the validation trajectory's windows.
+    """
+    train_t = _tensors(module, train_arrays)
+    valid_t = _tensors(module, validation_arrays)
+
+    def score():
+        return _loss_on(module, valid_t if valid_t is not None else train_t)
+
+    stages, history, iterations = [], [], 0
+
+    def record(name, tic, **extra):
+        stages.append({"stage": name, "seconds": time.perf_counter() - tic, "loss": _loss_on(module, train_t),
+                       "validation_loss": None if valid_t is None else _loss_on(module, valid_t), **extra})
+
+    def solve_from(start: dict):
+        """Candidates of one least-squares round from ``start``: (score, snapshot)."""
+        out, cache = [], {}
+        for pruned in (False, True):
+            _restore(module, start)
+            if pruned:
+                prune(module)
+            solve_linear_part(module, train_arrays, train_t[5], config.polynomial_ridge, cache=cache)
+            out.append((score(), _snapshot(module), pruned))
+        return out
+
+    tic = time.perf_counter()
+    record("step 1", tic)
+    if config.least_squares or config.polynomial_start:
+        tic = time.perf_counter()
+        start = _snapshot(module)
+        candidates = solve_from(start)
+        if not config.polynomial_start:
+            _restore(module, start)
+            candidates.append((score(), start, None))
+        best = min(candidates, key=lambda c: c[0])
+        _restore(module, best[1])
+        record("least squares", tic, pruned=best[2])
+    rounds = max(int(config.least_squares_rounds), 1) if (config.least_squares or config.polynomial_start) else 1
+    for k in range(rounds):
+        budget = int(config.max_iterations) - iterations
+        if budget <= 0:
+            break
+        tic = time.perf_counter()
+        result = _train(module, train_t, valid_t, replace(config, max_iterations=budget), progress, offset=iterations)
+        history += result["history"]
+        iterations = result["iterations"]
+        record("L-BFGS", tic, iterations=result["iterations"])
+        if k == rounds - 1:
+            break
+        tic = time.perf_counter()
+        current = (score(), _snapshot(module), None)
+        best = min(solve_from(current[1]) + [current], key=lambda c: c[0])
+        _restore(module, best[1])
+        record("least squares", tic, pruned=best[2])
+        if not best[0] < current[0] * (1.0 - config.tolerance):
+            break
+    if rollouts is not None:
+        tic = time.perf_counter()
+        make = [None if t is None else Rollout(module, t, config.rollout_steps, config.rollout_substeps,
+                                               config.rollout_stride) for t in rollouts]
+        checked = make[1] if make[1] is not None else make[0]
+        with torch.no_grad():
+            before = float(checked.loss())
+        result = refine_rollout(module, make[0], make[1], config, progress, iterations)
+        history += result["history"]
+        iterations = result["iterations"]
+        record("rollout", tic, iterations=result["iterations"], rollout_loss_before=before,
+               rollout_loss=result["best_loss"])
+    best_iteration = max((h["iteration"] for h in history if h.get("kept")), default=0)
+    return {"history": history, "best_iteration": best_iteration, "best_loss": score(),
+            "iterations": iterations, "stages": stages}
+
+
+def _train(module, train_t, valid_t, config, progress, offset: int = 0, objective=None) -> dict:
+    """Full-batch L-BFGS on every weight, at most ``config.max_iterations`` (module docstring of
+    :func:`train`): every ``check_every`` iterations the checked loss is compared with the best so
+    far (the start's included), the best weights are kept, and training stops after ``patience``
+    checks without a relative improvement of ``tolerance``; when L-BFGS stops on its own it is
+    restarted once with a fresh memory. ``offset``: iterations done before (for the history);
+    ``objective``: the loss of an arrays tuple (default: the relative residual)."""
     parameters = [p for p in module.parameters() if p.requires_grad]
 
     def lbfgs():
@@ -353,6 +468,8 @@ def _train(module, train_arrays, validation_arrays, config, progress) -> dict:
     decay = [p for name, p in module.named_parameters() if "weights" in name or "input" in name or "raw" in name]
 
     def loss_of(arrays):
+        if objective is not None:
+            return objective(arrays)
         q, v, a, Y, blocks, features, norm = arrays
         R = module.residual(q, v, a, Y, blocks, features)
         return (R * R).sum() / norm
@@ -367,24 +484,29 @@ def _train(module, train_arrays, validation_arrays, config, progress) -> dict:
 
     def score():
         arrays = valid_t if valid_t is not None else train_t
-        return float(loss_of(arrays).detach())
+        with torch.no_grad():
+            return float(loss_of(arrays))
 
-    history, best = [], {"loss": np.inf, "iteration": 0, "state": None}
-    stale, iterations, offset, stalled = 0, 0, 0, False
+    history = []
+    best = {"loss": score(), "iteration": offset, "state": _snapshot(module)}
+    stale, iterations, restart, stalled = 0, 0, 0, False
     while iterations < config.max_iterations:
         optimizer.step(closure)
-        done = offset + int(optimizer.state[parameters[0]].get("n_iter", 0))
+        done = restart + int(optimizer.state[parameters[0]].get("n_iter", 0))
         step_iterations = max(done - iterations, 1)
         iterations = done
-        train_loss, check = float(loss_of(train_t).detach()), score()
-        history.append({"iteration": iterations, "loss": train_loss, "validation_loss": check})
+        with torch.no_grad():
+            train_loss = float(loss_of(train_t))
+        check = score()
+        history.append({"iteration": offset + iterations, "loss": train_loss, "validation_loss": check,
+                        "kept": False})
         progress.label = f"SpML fit: loss {train_loss:.3e}" + (f", validation {check:.3e}" if valid_t else "")
         progress.update(step_iterations)
         if not np.isfinite(check):
             break
         if check < best["loss"] * (1.0 - config.tolerance):
-            best = {"loss": check, "iteration": iterations,
-                    "state": {k: v.detach().clone() for k, v in module.state_dict().items()}}
+            best = {"loss": check, "iteration": offset + iterations, "state": _snapshot(module)}
+            history[-1]["kept"] = True
             stale = 0
         else:
             stale += 1
@@ -395,10 +517,339 @@ def _train(module, train_arrays, validation_arrays, config, progress) -> dict:
             # with a fresh memory, and if that stalls at once too, the fit has converged
             if stalled:
                 break
-            stalled, offset, optimizer = True, iterations, lbfgs()
+            stalled, restart, optimizer = True, iterations, lbfgs()
         else:
             stalled = False
-    if best["state"] is not None:
-        module.load_state_dict(best["state"])
+    _restore(module, best["state"])
     return {"history": history, "best_iteration": best["iteration"], "best_loss": best["loss"],
-            "iterations": iterations}
+            "iterations": offset + iterations}
+
+
+# -- the part linear in the parameters, solved exactly ----------------------------------------------
+def _unknowns(structure: str, r: int, p: int) -> list:
+    if structure in ("spd", "psd", "symmetric"):
+        return [(i, j) for i in range(r) for j in range(i, r)]
+    return [(i, j) for i in range(r) for j in range(p)]
+
+
+def _matrix_block(D: np.ndarray, structure: str, r: int) -> np.ndarray:
+    """(k, r, n) the residual's derivative in the unknowns of ``X`` in ``D @ X.T`` (symmetric: pairs)."""
+    pairs = _unknowns(structure, r, D.shape[1])
+    block = np.zeros((D.shape[0], r, len(pairs)))
+    for c, (i, j) in enumerate(pairs):
+        block[:, i, c] += D[:, j]
+        if structure != "free" and i != j:
+            block[:, j, c] += D[:, i]
+    return block
+
+
+def _matrix_of(theta: np.ndarray, structure: str, shape) -> np.ndarray:
+    X = np.zeros(shape)
+    for c, (i, j) in enumerate(_unknowns(structure, shape[0], shape[1])):
+        X[i, j] = theta[c]
+        if structure != "free":
+            X[j, i] = theta[c]
+    return X
+
+
+def _cone(X: np.ndarray, structure: str, floor: float) -> np.ndarray:
+    if structure not in ("spd", "psd"):
+        return X
+    w, U = np.linalg.eigh(0.5 * (X + X.T))
+    return (U * np.maximum(w, floor)) @ U.T
+
+
+def fixed_forces(module: SpMLModule, q: torch.Tensor, v: torch.Tensor) -> torch.Tensor:
+    """(K, r) the forces of the networks and the convex powers (what the linear solve keeps fixed)."""
+    with torch.no_grad():
+        out = torch.zeros_like(q)
+        if module.u_output is not None:
+            zero = torch.zeros((1, module.r), dtype=DTYPE)
+            x = q / module.sq
+            out = out + module.cU * (module._u_network(x, True) - module._u_network(zero, True)) / module.sq
+        if module.has_dissipation:
+            out = out + module.dissipation_force(v)
+    return out
+
+
+def prune(module: SpMLModule) -> None:
+    """Switch the networks and the convex powers off (the potential network's output to 0, which
+    training can move again; the dissipation's powers and output to 0 and ``softplus(-40)``, which it
+    cannot: their gradients vanish there)."""
+    with torch.no_grad():
+        if module.u_output is not None:
+            module.u_output.zero_()
+        if module.d_cubic is not None:
+            module.d_cubic.zero_()
+            module.d_quartic.zero_()
+        if module.f_output_raw is not None:
+            module.f_output_raw.fill_(PRUNED_RAW)
+
+
+def solve_linear_part(module: SpMLModule, arrays, features: dict, ridge: float, chunk: int = 2048,
+                      cache: dict | None = None) -> None:
+    r"""Set the parameters that enter the residual linearly to their least-squares values, the rest fixed.
+
+    With the networks and the convex powers fixed, the residual
+    ``R = Y + (M^ - M_0) Q'' + sum_j D_j X_j^T + Phi(Q) alpha + f_fixed`` is linear in the mass ``M^``
+    (symmetric; when learned), the linear terms ``X_j`` (symmetric ones by their upper triangles) and
+    the monomials' coefficients ``alpha``. The loss ``||M^^-1 R||_F^2`` is weighted by the current
+    mass; the solve minimises ``||W R||_F^2`` with ``W = M_cur^-1`` subject to ``tr M^ = tr M_0`` (the
+    gauge), by its normal equations accumulated over column chunks (KKT system for the
+    constraint) with a relative Tikhonov weight ``ridge`` per block (monomials of one degree, one
+    matrix). ``M^`` and the ``spd``/``psd`` terms are projected back onto their cones (eigenvalues
+    clipped at ``eps``, 0, or 1e-8 of the mass's largest); the coefficients ``alpha`` are then solved
+    again with the matrices fixed. The module's parameters are set in place (the linear terms are
+    re-based: their starting matrix becomes the solution and the correction ``P`` restarts at 0).
+    """
+    q, v, a, Y, blocks, _ = arrays
+    K, r = q.shape
+    with torch.no_grad():
+        M_cur = module.mass().numpy()
+        M0 = (module.L0 @ module.L0.T).numpy()
+    W = np.linalg.inv(M_cur)
+    fixed = fixed_forces(module, _tensor(q), _tensor(v)).numpy()
+    degrees = list(module.indices)
+    maps = {d: module._derivative_map(d) for d in degrees}
+    sizes = [len(module.indices[d]) for d in degrees]
+    learn_mass = bool(module.config.learn_mass)
+    refine = bool(module.config.refine_linear)
+    scale = module.cU / float(module.sq[0])        # isotropic scales (:func:`_scales`)
+
+    def poly_block(rows):
+        parts = []
+        for d, n in zip(degrees, sizes):
+            m, p, i, e = (t.numpy() for t in maps[d])
+            Phi = features[d][rows].numpy()
+            block = np.zeros((Phi.shape[0], r, n))
+            np.add.at(block, (slice(None), i, m), scale * e[None, :] * Phi[:, p])
+            parts.append(block)
+        return parts
+
+    def accumulate(with_matrices: bool, constant):
+        """Normal equations; the Gram matrix depends on the weight only, so ``cache`` keeps it for the
+        next candidate of the same round."""
+        key = (W.tobytes(), with_matrices)
+        if cache is not None and key in cache:
+            G, widths, design = cache[key]
+            h = sum(A.T @ (constant[rows] @ W.T).ravel() for rows, A in design)
+            return G, h, widths
+        G, h, widths, design = np.zeros((0, 0)), np.zeros(0), [], []
+        for start in range(0, K, chunk):
+            rows = slice(start, start + chunk)
+            parts = poly_block(rows)
+            if with_matrices:
+                if learn_mass:
+                    parts.append(_matrix_block(a[rows], "symmetric", r))
+                if refine:
+                    parts += [_matrix_block(D[rows], e["structure"], r) for e, D in zip(module.linear, blocks)]
+            widths = [p.shape[2] for p in parts]
+            if not widths:
+                return G, h, widths
+            A = np.einsum("ij,kjp->kip", W, np.concatenate(parts, axis=2)).reshape(-1, sum(widths))
+            b = (constant[rows] @ W.T).ravel()
+            G, h = (A.T @ A, A.T @ b) if G.size == 0 else (G + A.T @ A, h + A.T @ b)
+            design.append((rows, A))
+        if cache is not None:
+            cache[key] = (G, widths, design)
+        return G, h, widths
+
+    def solve(G, h, widths, constraint=None):
+        d = np.diag(G)
+        reg, start = np.zeros(G.shape[0]), 0
+        for width in widths:
+            block = slice(start, start + width)
+            reg[block] = ridge * max(float(np.mean(d[block])), np.finfo(float).tiny)
+            start += width
+        A = G + np.diag(reg)
+        if constraint is None:
+            return -np.linalg.lstsq(A, h, rcond=None)[0]
+        c, value = constraint
+        n = A.shape[0]
+        kkt = np.block([[A, c[:, None]], [c[None, :], np.zeros((1, 1))]])
+        return np.linalg.lstsq(kkt, np.concatenate([-h, [value]]), rcond=None)[0][:n]
+
+    base = Y - a @ M0.T + fixed                     # R = base + a M^T + sum D X^T + Phi alpha
+    if not refine and module.linear:                # the linear terms stay: on the constant's side
+        base = base + sum(D @ X.detach().numpy().T for X, D in zip(module.linear_matrices(), blocks))
+    matrices = {}
+    widths = []
+    if learn_mass or refine:
+        G, h, widths = accumulate(True, base if learn_mass else base + a @ M_cur.T)
+    if widths:
+        npoly = sum(sizes)
+        constraint = None
+        if learn_mass:
+            pairs = _unknowns("symmetric", r, r)
+            c = np.zeros(G.shape[0])
+            for k, (i, j) in enumerate(pairs):
+                if i == j:
+                    c[npoly + k] = 1.0
+            constraint = (c, float(np.trace(M0)))
+        theta = solve(G, h, widths, constraint)
+        start = npoly
+        if learn_mass:
+            n = r * (r + 1) // 2
+            M = _matrix_of(theta[start:start + n], "symmetric", (r, r))
+            matrices["mass"] = _cone(M, "spd", 1e-8 * max(np.linalg.eigvalsh(M).max(), 1e-300))
+            start += n
+        if refine:
+            for e, D in zip(module.linear, blocks):
+                n = len(_unknowns(e["structure"], r, D.shape[1]))
+                X = _matrix_of(theta[start:start + n], e["structure"], (r, D.shape[1]))
+                matrices[e["name"]] = _cone(X, e["structure"], e["shift"] if e["structure"] == "spd" else 0.0)
+                start += n
+    # the coefficients again, the (projected) matrices fixed
+    M = matrices.get("mass", M_cur)
+    constant = base + a @ M.T
+    if refine and module.linear:
+        constant = constant + sum(D @ matrices[e["name"]].T for e, D in zip(module.linear, blocks))
+    alpha = np.zeros(0)
+    if degrees:
+        G, h, widths = accumulate(False, constant)
+        alpha = solve(G, h, widths)
+    elif not matrices:
+        return
+    _set(module, alpha, degrees, sizes, matrices)
+
+
+def _set(module: SpMLModule, alpha, degrees, sizes, matrices: dict) -> None:
+    with torch.no_grad():
+        start = 0
+        for d, n in zip(degrees, sizes):
+            module.alpha[str(d)].copy_(_tensor(alpha[start:start + n]))
+            start += n
+        if "mass" in matrices:
+            inner = np.linalg.solve(module.L0.numpy(), np.linalg.cholesky(matrices["mass"]))
+            module.mass_lower.copy_(_tensor(np.tril(inner, -1)))
+            module.mass_log_diagonal.copy_(_tensor(np.log(np.diag(inner))))
+        for e in module.linear:
+            if e["name"] not in matrices:
+                continue
+            X = matrices[e["name"]]
+            if e["structure"] in ("spd", "psd"):
+                S = 0.5 * (X + X.T) - e["shift"] * np.eye(X.shape[0])
+                w, Q = np.linalg.eigh(S)
+                e["base"] = _tensor((Q * np.sqrt(np.maximum(w, 0.0))) @ Q.T)
+            else:
+                e["base"] = _tensor(X)
+            if "parameter" in e:
+                e["parameter"].zero_()
+
+
+# -- the rollout refinement: trajectories through the discrete-gradient step -------------------------
+def _monomials_t(x: torch.Tensor, index: torch.Tensor) -> torch.Tensor:
+    out = torch.ones((x.shape[0], index.shape[0]), dtype=DTYPE)
+    for j in range(index.shape[1]):
+        out = out * x[:, index[:, j]]
+    return out
+
+
+def _potential_force_t(module: SpMLModule, q: torch.Tensor) -> torch.Tensor:
+    """(B, r) ``dU^/dq`` at the rows of ``q``, differentiable in ``q`` too (the monomials computed in torch)."""
+    x = q / module.sq
+    features = {d: _monomials_t(x, torch.as_tensor(multi_indices(module.r, d - 1))) for d in module.indices}
+    return module.potential_force(q, features)
+
+
+class Rollout:
+    r"""Windows of a trajectory predicted by the discrete-gradient step, differentiable in the weights.
+
+    From every ``stride``-th sample ``(q_k, v_k)`` of each trajectory, ``steps`` samples ahead,
+    each sample interval in ``substeps`` steps of the implicit midpoint rule with the average-vector-field
+    discrete gradient of ``U^`` (two-point Gauss-Legendre, exact for the monomials; Gonzalez's
+    correction, which the ROM applies to a network's potential, is left out: its size is the
+    quadrature's ``O(|Delta|^5)``), ``newton`` fixed-point iterations preconditioned by the linear
+    step matrix ``(2/h) M^ + C^ + (h/2) K^`` and unrolled for autograd. The loss is
+    ``sum ||q - q_data||^2 / s_q^2 + ||v - v_data||^2 / s_v^2`` over the windows' samples, divided
+    by its value for a model that stays at rest. Inputs at a step's midpoint are linear
+    interpolations of the samples'.
+    """
+
+    def __init__(self, module: SpMLModule, trajectories: list, steps: int, substeps: int, stride: int,
+                 newton: int = 4):
+        self.module, self.steps, self.substeps, self.newton = module, int(steps), int(substeps), int(newton)
+        starts, q, v, u, dts = [], [], [], [], []
+        for tr in trajectories:
+            n = tr["q"].shape[1]
+            for k in range(0, n - self.steps, int(stride)):
+                starts.append(len(q))
+                q.append(tr["q"][:, k:k + self.steps + 1].T)
+                v.append(tr["v"][:, k:k + self.steps + 1].T)
+                u.append(None if tr.get("u") is None else tr["u"][:, k:k + self.steps + 1].T)
+                dts.append(tr["dt"])
+        if not q:
+            raise ValueError("no rollout windows: trajectories shorter than the window")
+        self.q = _tensor(np.stack(q))                  # (B, steps + 1, r)
+        self.v = _tensor(np.stack(v))
+        self.u = None if u[0] is None else _tensor(np.stack(u))
+        self.h = _tensor(np.array(dts))[:, None] / self.substeps     # (B, 1)
+        self.sq, self.sv = float(module.sq[0]), float(module.sv[0])
+        self.norm = float(((self.q[:, 1:] / self.sq) ** 2).sum() + ((self.v[:, 1:] / self.sv) ** 2).sum())
+        self.names = [e["name"] for e in module.linear]
+
+    def _matrices(self):
+        m = self.module
+        out = dict(zip(self.names, m.linear_matrices()))
+        return m.mass(), out.get("stiffness"), out.get("damping"), out.get("input")
+
+    def predict(self):
+        """(q, v) (B, steps + 1, r): the windows predicted from their first samples."""
+        m = self.module
+        M, K, C, B = self._matrices()
+        r = m.r
+        q, v = self.q[:, 0], self.v[:, 0]
+        qs, vs = [q], [v]
+        h = self.h
+        eye = torch.eye(r, dtype=DTYPE)
+        for k in range(self.steps):
+            for j in range(self.substeps):
+                force = None
+                if B is not None and self.u is not None:
+                    s = (j + 0.5) / self.substeps
+                    u_mid = (1 - s) * self.u[:, k] + s * self.u[:, k + 1]
+                    force = u_mid @ B.T
+                # the linear step matrix per window (h may differ between trajectories)
+                J = (2.0 / h)[:, :, None] * M + (0.5 * h)[:, :, None] * (K if K is not None else 0 * eye)
+                if C is not None:
+                    J = J + C
+                x = v
+                for _ in range(self.newton):
+                    G = self._residual(M, K, C, force, q, v, x, h)
+                    x = x - torch.linalg.solve(J, G)
+                q = q + h * x
+                v = 2.0 * x - v
+            qs.append(q)
+            vs.append(v)
+        return torch.stack(qs, 1), torch.stack(vs, 1)
+
+    def _residual(self, M, K, C, force, q, v, x, h):
+        m = self.module
+        q1 = q + h * x
+        G = (2.0 / h) * (x - v) @ M.T
+        if K is not None:
+            G = G + (q + 0.5 * h * x) @ K.T
+        if C is not None:
+            G = G + x @ C.T
+        if force is not None:
+            G = G - force
+        if m.has_potential:
+            delta = q1 - q
+            G = G + 0.5 * sum(_potential_force_t(m, q + s * delta) for s in (0.5 - 0.5 / np.sqrt(3.0),
+                                                                              0.5 + 0.5 / np.sqrt(3.0)))
+        if m.has_dissipation:
+            G = G + m.dissipation_force(x)
+        return G
+
+    def loss(self) -> torch.Tensor:
+        q, v = self.predict()
+        return (((q[:, 1:] - self.q[:, 1:]) / self.sq) ** 2).sum() / self.norm \
+            + (((v[:, 1:] - self.v[:, 1:]) / self.sv) ** 2).sum() / self.norm
+
+
+def refine_rollout(module: SpMLModule, train: Rollout, validation: Rollout | None, config, progress,
+                   offset: int) -> dict:
+    """L-BFGS on the rollout loss (:class:`Rollout`), checked on the validation windows (the training
+    ones without), the best weights kept (the start's included), at most ``config.rollout_iterations``."""
+    return _train(module, train, validation, replace(config, max_iterations=int(config.rollout_iterations)),
+                  progress, offset=offset, objective=lambda rollout: rollout.loss())

@@ -27,7 +27,9 @@ calls :func:`run_study`, :class:`StudyState` for its ``extend`` hook and experim
 - metrics: :func:`mass_norm`, :class:`Projection` (exact field errors at every r from one pass),
   :func:`invariant_drift`; over time on one run: :func:`state_energy`,
   :func:`reconstructed_energy_error`, :func:`rom_table`, :func:`plot_histories`,
-  :func:`plot_output_history`; learned forces: :func:`force_error`, :func:`nonlinear_forces`;
+  :func:`plot_output_history`; learned forces: :func:`force_error`, :func:`nonlinear_forces`, and where a learned nonlinear
+  model's error comes from against a true one: :func:`spml_error_split` (:class:`SpMLErrorSplit`,
+  :func:`acceleration_residual`, :func:`modal_rates`);
 - linear models as discrete state spaces on every run: :func:`linear_model_rows` (second-order
   ROMs and DMDc, ERA, OKID), :func:`linear_model_section`; MPC closed loops on a FOM:
   :func:`closed_loop_rows`, :func:`closed_loop_section` (:data:`CLOSED_LOOP_COLUMNS`);
@@ -54,6 +56,7 @@ calls :func:`run_study`, :class:`StudyState` for its ``extend`` hook and experim
 """
 
 from femrom.study._learned_forces import force_error, nonlinear_forces
+from femrom.study._spml_split import SpMLErrorSplit, acceleration_residual, modal_rates, spml_error_split
 from femrom.study._figures import (
     plot_accuracy_cost,
     plot_invariant_drifts,
@@ -139,7 +142,7 @@ __all__ = [
     "CLOSED_LOOP_COLUMNS", "dispersion_error", "ClosedLoopTest", "closed_loop_rows", "closed_loop_section", "compare_backbones", "compare_models", "compare_ring_downs",
     "compare_stepped_sines", "Cost", "ecsw_training", "evaluate", "Experiment", "extrapolation_config",
     "EXTRAPOLATION_LEARNER_NAMES", "extrapolation_scene", "final_state", "final_state_ladders",
-    "final_state_section", "fom_runs", "force_error", "frequency_ladder", "frequency_section",
+    "final_state_section", "fom_runs", "force_error", "spml_error_split", "SpMLErrorSplit", "acceleration_residual", "modal_rates", "frequency_ladder", "frequency_section",
     "HYPER_COLUMNS", "hyper_reduced_rows", "invariant_drift", "JOINTED_BEAM", "JointedBeamModel",
     "linear_model_rows", "linear_model_section", "mass_generator", "mass_norm", "mass_pod", "modal_qsma",
     "ModelSpec", "natural_frequencies", "nonlinear_forces", "observed_order",

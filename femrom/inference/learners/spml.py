@@ -11,9 +11,8 @@ import numpy as np
 
 from femrom._errors import FemromTypeError, FemromValueError
 from femrom._progress import Progress
-from femrom.inference._data import SecondOrderData, concatenate
+from femrom.inference._data import SecondOrderData, concatenate, sampling_step
 from femrom.inference._learner import Learner, register_learner
-from femrom.inference._networks import derivative_map, monomials, multi_indices
 from femrom.inference._operators import ReducedOperators
 from femrom.inference._second_order import system_terms, terms_for_training
 from femrom.inference._structured_lstsq import FastSolver
@@ -72,14 +71,28 @@ class SpMLConfig:
         (``None``: r; 0: none).
     dissipation_widths : tuple of int
         Hidden widths of the input-convex network (softplus); ``()``: none.
+    least_squares : bool
+        Solve the part of the model linear in its parameters (the mass, step 1's linear terms,
+        the monomials' coefficients) exactly by structured least squares, with the networks and
+        convex powers as they are and with them switched off, before L-BFGS and between its
+        stages (``least_squares_rounds``); a solve is kept only where it lowers the checked
+        (validation) loss, and step 1's start stays a candidate. Without it, L-BFGS alone from
+        step 1 (docs/spml.md, "Convergence").
+    least_squares_rounds : int
+        Least-squares solves at most, each followed by L-BFGS on the remaining iterations; the
+        rounds stop early when a solve improves the checked loss by less than ``tolerance``.
+    rollout_steps : int
+        Samples per window of the rollout refinement (0: none): after the other stages, L-BFGS on
+        the error of windows predicted by the discrete-gradient step from every ``rollout_stride``-th
+        sample, each sample interval in ``rollout_substeps`` steps, at most ``rollout_iterations``
+        iterations, checked on the validation trajectory's windows (docs/spml.md, "Convergence").
+        Needs sampled times, and no known force terms.
+    rollout_substeps, rollout_stride, rollout_iterations : int
     polynomial_start : bool
-        Start the monomials (and corrections of step 1's linear terms) at their least-squares
-        solution (:func:`_polynomial_start`) instead of zero. Measured: it helps where the
-        potential is a polynomial of degree <= 4 (a reduced Duffing system: force error 8.8e-3
-        against 0.11 from zero after 150 iterations) and hurts where it is not (sine-Gordon:
-        1.4 against 0.037, the quartic fit of ``sin q - q`` extrapolates badly), so it is off.
+        Start from the least-squares solution whatever step 1's start scores (implies
+        ``least_squares``).
     polynomial_ridge : float
-        Relative Tikhonov weight of that least-squares start.
+        Relative Tikhonov weight of the least-squares solves, per block.
     refine_linear : bool
         Refine step 1's linear terms in step 2 within their structure (``K^ = G G^T + eps I``,
         ``C^ = G G^T``, ``B^`` free), starting from step 1's values; ``False`` keeps them fixed.
@@ -111,6 +124,12 @@ class SpMLConfig:
     learn_dissipation: bool | None = None
     dissipation_directions: int | None = None
     dissipation_widths: tuple = (16,)
+    least_squares: bool = True
+    least_squares_rounds: int = 2
+    rollout_steps: int = 0
+    rollout_substeps: int = 4
+    rollout_stride: int = 1
+    rollout_iterations: int = 100
     polynomial_start: bool = False
     polynomial_ridge: float = 1e-12
     refine_linear: bool = True
@@ -135,9 +154,12 @@ class SpMLConfig:
         for name in ("potential_widths", "dissipation_widths"):
             if any(w < 1 for w in getattr(self, name)):
                 raise FemromValueError(f"SpMLConfig.{name} must be positive widths, got {getattr(self, name)}")
+        if int(self.rollout_steps) < 0:
+            raise FemromValueError(f"SpMLConfig.rollout_steps must be >= 0, got {self.rollout_steps}")
         if self.dissipation_directions is not None and int(self.dissipation_directions) < 0:
             raise FemromValueError(f"SpMLConfig.dissipation_directions must be >= 0, got {self.dissipation_directions}")
-        for name in ("max_iterations", "check_every", "patience", "history_size", "threads"):
+        for name in ("max_iterations", "check_every", "patience", "history_size", "threads", "least_squares_rounds",
+                     "rollout_substeps", "rollout_stride", "rollout_iterations"):
             if int(getattr(self, name)) < 1:
                 raise FemromValueError(f"SpMLConfig.{name} must be >= 1, got {getattr(self, name)}")
         if not (self.tolerance >= 0 and self.weight_decay >= 0 and self.polynomial_ridge >= 0):
@@ -208,7 +230,11 @@ class SpML(Learner):
     potential_ : LearnedPotential or None
     dissipation_ : LearnedDissipation or None
     history_ : list of dict
-        ``iteration``, ``loss`` (training), ``validation_loss`` at every check.
+        ``iteration``, ``loss`` (training), ``validation_loss`` at every check of L-BFGS, ``kept``
+        where the weights were the best so far.
+    stages_ : list of dict
+        ``stage`` ("step 1", "least squares", "L-BFGS"), ``seconds``, ``loss``, ``validation_loss``
+        after it (``pruned``: whether a least-squares solve switched the networks off).
     best_iteration_, iterations_ : int
     loss_ : float
         The relative training loss of the kept weights; ``linear_loss_`` step 1's.
@@ -309,6 +335,9 @@ class SpML(Learner):
         import torch
 
         tic = time.perf_counter()
+        pieces = list(data) if isinstance(data, (list, tuple)) else [data]
+        held = None if validation is None else list(validation) if isinstance(validation, (list, tuple)) \
+            else [validation]
         data = self._own(concatenate(data) if isinstance(data, (list, tuple)) else data)
         if validation is not None:
             validation = self._own(concatenate(validation) if isinstance(validation, (list, tuple)) else validation)
@@ -324,15 +353,18 @@ class SpML(Learner):
             cfg = replace(cfg, learn_dissipation=self.linear.damping)
         self.config_ = cfg
         specs = self._linear_specs(data, train_arrays)
-        initial = _polynomial_start(train_arrays, specs, scales, cfg) \
-            if cfg.potential_degrees and cfg.polynomial_start else None
         generator = torch.Generator().manual_seed(int(cfg.seed))
-        module = backend.SpMLModule(r, cfg, scales, self._mass0(r), specs, generator, initial)
+        module = backend.SpMLModule(r, cfg, scales, self._mass0(r), specs, generator)
+        rollouts = None
+        if cfg.rollout_steps and not self.linear.known_terms:
+            rollouts = (_trajectories(pieces), None if held is None else _trajectories(held))
         with Progress(cfg.max_iterations, "SpML fit", enabled=self.progress) as progress:
-            result = backend.train(module, train_arrays, validation_arrays, cfg, progress)
+            result = backend.train(module, train_arrays, validation_arrays, cfg, progress, rollouts)
+        self._module = module                     # the torch side, for diagnostics (not saved)
         mass, linear, polynomial, u_network, powers, f_network = module.export()
         self.linear_matrices_ = linear
         self.history_ = result["history"]
+        self.stages_ = result["stages"]
         self.best_iteration_, self.iterations_ = result["best_iteration"], result["iterations"]
         self.training_seconds_ = time.perf_counter() - tic
         self.mass_ = mass
@@ -384,95 +416,19 @@ class SpML(Learner):
         return out
 
 
-def _polynomial_start(arrays, specs: list, scales: dict, config, chunk: int = 2048) -> dict:
-    r"""The monomials' coefficients and corrections of step 1's linear terms, by linear least squares.
-
-    The monomials enter the residual linearly, and so do corrections ``dX_j`` of step 1's
-    linear terms: ``min || R_1 + sum_j dX_j D_j + sum_m alpha_m grad phi_m(Q) ||_F`` is an
-    least-squares problem, solved by its normal equations (accumulated over column chunks) with
-    a relative Tikhonov weight per block, ``polynomial_ridge`` times the block's mean Gram
-    diagonal: directions the data hardly see (a POD coordinate a symmetric motion never
-    excites) get no coefficient, which would otherwise fit round-off and blow up away from
-    the data. ``dX_j`` is symmetric for
-    ``spd``/``psd``/``symmetric`` terms; ``X_j + dX_j`` is projected back onto its cone
-    (eigenvalues clipped at ``eps`` or 0), and the coefficients are solved again with the
-    projected terms fixed. Step 1 fits a linear model to nonlinear data, so its ``K^`` and
-    ``C^`` carry part of the nonlinear force: without the corrections the monomials cannot take it back.
-    The solution is where L-BFGS starts: from zero, gradient descent on monomials whose
-    coordinates span orders of magnitude (POD) converges slowly (measured on the cubic beam,
-    four trajectories, monomials alone: a relative loss of 3e-5 after 1500 iterations from
-    zero, 1e-5 after 12 from here). Updates the ``matrix`` of
-    ``specs``; returns ``{"alpha": {degree: (n,)}}`` in the module's scaled units.
-    """
-    Q, V, A, Y, blocks, norm = arrays
-    R1 = Y + sum(D @ s["matrix"].T for s, D in zip(specs, blocks))          # (K, r)
-    K, r = Q.shape
-    sq, cU = scales["q"], scales["potential"]
-    x = Q / sq
-    maps = {d: derivative_map(r, d) for d in config.potential_degrees}
-    sizes = [len(multi_indices(r, d)) for d in config.potential_degrees]
-
-    def unknowns(spec, D):
-        if spec["structure"] in ("spd", "psd", "symmetric"):
-            return [(i, j) for i in range(r) for j in range(i, r)]
-        return [(i, j) for i in range(r) for j in range(D.shape[1])]
-
-    def design(rows: slice, refined: list) -> np.ndarray:
-        k = x[rows].shape[0]
-        parts = []
-        for d, n in zip(config.potential_degrees, sizes):
-            m, p, i, e = maps[d]
-            block = np.zeros((k, r, n))
-            np.add.at(block, (slice(None), i, m), (e * cU / sq[i])[None, :] * monomials(x[rows], d - 1)[:, p])
-            parts.append(block)
-        for spec, D in refined:
-            pairs = unknowns(spec, D)
-            block = np.zeros((k, r, len(pairs)))
-            for c, (i, j) in enumerate(pairs):
-                block[:, i, c] += D[rows, j]
-                if spec["structure"] != "free" and i != j:
-                    block[:, j, c] += D[rows, i]
-            parts.append(block)
-        return np.concatenate(parts, axis=2).reshape(k * r, -1)
-
-    def solve(refined: list) -> np.ndarray:
-        G, h = 0.0, 0.0
-        for start in range(0, K, chunk):
-            rows = slice(start, start + chunk)
-            D = design(rows, refined)
-            G, h = G + D.T @ D, h + D.T @ R1[rows].ravel()
-        widths = sizes + [len(unknowns(spec, D)) for spec, D in refined]
-        ridge, start = np.zeros(G.shape[0]), 0
-        for width in widths:                 # relative Tikhonov per block (monomials of one degree, a term)
-            block = slice(start, start + width)
-            ridge[block] = config.polynomial_ridge * max(float(np.mean(np.diag(G)[block])), np.finfo(float).tiny)
-            start += width
-        return -np.linalg.lstsq(G + np.diag(ridge), h, rcond=None)[0]
-
-    refined = [(spec, D) for spec, D in zip(specs, blocks)] if config.refine_linear else []
-    if refined:
-        theta = solve(refined)
-        start = sum(sizes)
-        for spec, D in refined:
-            pairs = unknowns(spec, D)
-            dX = np.zeros_like(spec["matrix"])
-            for c, (i, j) in enumerate(pairs):
-                dX[i, j] = theta[start + c]
-                if spec["structure"] != "free":
-                    dX[j, i] = theta[start + c]
-            start += len(pairs)
-            X = spec["matrix"] + dX
-            if spec["structure"] in ("spd", "psd"):          # back into the cone: eigenvalues >= eps (or 0)
-                w, U = np.linalg.eigh(0.5 * (X + X.T))
-                X = (U * np.maximum(w, spec["shift"] if spec["structure"] == "spd" else 0.0)) @ U.T
-            spec["matrix"] = X
-        R1 = Y + sum(D @ s["matrix"].T for s, D in zip(specs, blocks))
-    theta = solve([])
-    out, start = {}, 0
-    for d, n in zip(config.potential_degrees, sizes):
-        out[d] = theta[start:start + n]
-        start += n
-    return {"alpha": out}
+def _trajectories(datasets) -> list:
+    """``{"q", "v", "u", "dt"}`` of every trajectory of ``datasets`` (split at their ``starts``), for the
+    rollout refinement: the sampling step from the times."""
+    out = []
+    for d in datasets:
+        step = sampling_step(d)
+        if step is None:
+            raise FemromValueError("SpMLConfig.rollout_steps needs data with uniformly sampled times")
+        bounds = list(d.starts) + [d.n_samples]
+        for a, b in zip(bounds[:-1], bounds[1:]):
+            out.append({"q": d.states[:, a:b], "v": d.velocities[:, a:b], "dt": float(step),
+                        "u": None if d.inputs is None else d.inputs[:, a:b]})
+    return out
 
 
 def _scales(data: SecondOrderData, target_norm2: float) -> dict:

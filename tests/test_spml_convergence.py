@@ -1,0 +1,132 @@
+"""SpML converges where its model class contains the truth: the error split, the least-squares stage,
+the differentiable discrete-gradient rollout, and the issue's targets on exact and noisy data.
+
+The systems come from ``tests/_spml_systems.py`` (a chain of three masses with quartic springs,
+two coupled Duffing oscillators: unit mass, linear damping, a polynomial potential); a held-out
+system of the same kind is one more factory there.
+"""
+
+import numpy as np
+import pytest
+
+from _required import extra
+from _spml_systems import SYSTEMS, predict, prediction_errors
+from femrom.inference import SpML, SpMLConfig
+from femrom.rom import SecondOrderROM
+from femrom.study import spml_error_split
+
+torch = extra("torch")
+
+
+@pytest.fixture(scope="module", params=sorted(SYSTEMS))
+def exact(request):
+    """(system, training runs, validation run, the unseen amplitude over three training windows)."""
+    system = SYSTEMS[request.param]()
+    train, validation = system.training()
+    return system, train, validation, system.test(3.0)
+
+
+def _fit(train, validation, **options):
+    return SpML(["damping"], config=SpMLConfig(seed=0, **options), progress=False).fit(train, validation=validation)
+
+
+def test_the_split_puts_l_bfgs_alones_gap_in_the_optimisation_and_the_dissipation(exact):
+    """The issue's diagnosis: L-BFGS alone (the former default) stops far above the truth's loss,
+    and what it leaves shows most in the dissipation, which the loss hardly sees."""
+    system, train, validation, test = exact
+    learner = _fit(train, validation, least_squares=False, max_iterations=300)
+    split = spml_error_split(learner.operators_, system.operators, train, test)
+    # exact data: the truth's loss is round-off (observed 4e-33); L-BFGS stops at 1e-6 .. 1e-5
+    assert split.truth_loss < 1e-28 and split.loss > 1e6 * split.truth_loss, split
+    # the damping is 2-3 % of the forces, so its error weighs 1e-3 in the loss: observed after 300
+    # iterations 0.26 against a potential within 0.047 (chain), and at the former default (2000) 0.15
+    # against 5.5e-3
+    assert split.dissipation > 3 * split.potential, split
+
+
+def test_exact_data_meet_the_targets(exact):
+    """Truth in the class, exact data, the default fit: force error <= 1e-4, the unseen amplitude within
+    1e-3 over the training window's length and 1e-2 over three times it (discrete gradient at dt / 8)."""
+    system, train, validation, test = exact
+    learner = _fit(train, validation)
+    split = spml_error_split(learner.operators_, system.operators, train, test)
+    # observed 7e-8 (chain) and 9e-12 (Duffing): the least-squares stage lands on the truth
+    assert split.potential <= 1e-4, split
+    assert split.dissipation <= 1e-3 and split.mass <= 1e-4, split
+    errors = prediction_errors(learner.operators_, system, test)
+    # observed 7.1e-5 / 1.8e-4 (chain) and 2.2e-4 / 3.4e-4 (Duffing): the scheme's own error at dt / 8
+    # (the truth stepped the same way has the same numbers to 3 digits)
+    assert errors["window"] <= 1e-3 and errors["total"] <= 1e-2, errors
+    stages = [s["stage"] for s in learner.stages_]
+    assert stages[:3] == ["step 1", "least squares", "L-BFGS"]
+    assert learner.stages_[1]["loss"] < 1e-10 * learner.stages_[0]["loss"]
+
+
+def test_a_solve_is_kept_only_where_it_lowers_the_checked_loss(exact):
+    """Every stage's checked (validation) loss is at most the one before: a least-squares solve or an
+    L-BFGS stage that would raise it is not kept."""
+    _, train, validation, _ = exact
+    learner = _fit(train, validation, max_iterations=60, least_squares_rounds=3)
+    losses = [s["validation_loss"] for s in learner.stages_]
+    assert all(b <= a * (1 + 1e-12) for a, b in zip(losses, losses[1:])), learner.stages_
+
+
+def test_the_rollout_is_the_discrete_gradient_scheme_and_refines_without_harm(exact):
+    """The differentiable rollout predicts what the numpy discrete-gradient ROM predicts (a polynomial
+    potential: the two-point quadrature is exact, Gonzalez's correction vanishes). A rollout stage
+    lowers the rollout loss but fits the scheme's trajectories at its step: from a converged fit on
+    exact data it moves the force by the scheme's error (observed 5e-4 and 6e-4 at dt / 2), which is
+    why it is off by default."""
+    from femrom.inference._spml_torch import Rollout
+
+    system, train, validation, _ = exact
+    learner = _fit(train, validation, rollout_steps=3, rollout_stride=40, rollout_iterations=4,
+                   rollout_substeps=2)
+    stage = learner.stages_[-1]
+    assert stage["stage"] == "rollout" and stage["rollout_loss"] <= stage["rollout_loss_before"]
+    split = spml_error_split(learner.operators_, system.operators, train, system.test(1.0))
+    assert 1e-5 < split.potential <= 1e-2, split
+    # the module at the exported weights against the ROM on one window
+    module = learner._module
+    data = train[1]
+    window = {"q": data.states[:, :6], "v": data.velocities[:, :6], "u": None, "dt": system.dt}
+    rollout = Rollout(module, [window], steps=5, substeps=2, stride=10, newton=8)
+    with torch.no_grad():
+        q, v = (x.numpy()[0].T for x in rollout.predict())
+    t = (system.dt / 2) * np.arange(11)
+    rom = SecondOrderROM(learner.operators_).predict(t, initial=(data.states[:, 0], data.velocities[:, 0]),
+                                                     scheme="discrete_gradient")
+    np.testing.assert_allclose(q, rom.q[:, ::2], rtol=0, atol=1e-10 * np.abs(rom.q).max())
+    np.testing.assert_allclose(v, rom.v[:, ::2], rtol=0, atol=1e-9 * np.abs(rom.v).max())
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", sorted(SYSTEMS))
+def test_one_percent_noise(name):
+    """1 % noise (of each field's RMS) on states, velocities and accelerations. The optimiser reaches the
+    truth's loss (the fit is as good as the data allow); the targets at 10x the exact ones do not all
+    hold (docs/spml.md, "Convergence"): the errors are the estimator's (noise in the states is noise in
+    the regressors, which biases K^ by sigma^2 / var of the weak modes), not the optimiser's."""
+    system = SYSTEMS[name]()
+    train, validation = system.training(noise=0.01)
+    test = system.test(3.0)
+    learner = _fit(train, validation)
+    split = spml_error_split(learner.operators_, system.operators, train, test)
+    # observed: chain 4.57e-3 against the truth's 4.62e-3; Duffing 3.33e-4 against 3.35e-4
+    assert split.loss <= split.truth_loss, split
+    errors = prediction_errors(learner.operators_, system, test)
+    assert errors["finite"]
+    # observed: chain force 3.4e-2, prediction 2.1e-2 / 0.10; Duffing 3.2e-3, 1.0e-2 / 3.5e-2
+    met = split.potential <= 1e-3 and errors["window"] <= 1e-2 and errors["total"] <= 1e-1
+    if not met:
+        pytest.xfail(f"1 % noise, {name}: force {split.potential:.2e}, prediction {errors['window']:.2e} / "
+                     f"{errors['total']:.2e} against 1e-3, 1e-2 / 1e-1")
+
+
+def test_predict_helper_returns_the_samples():
+    system = SYSTEMS["duffing2"]()
+    run = system.run(1.0, 1.0)
+    Q, V = predict(system.operators, run)
+    assert Q.shape == run.states.shape and V.shape == run.velocities.shape
+    # the true model at dt / 8 against the exact run over one second: the scheme's error only
+    assert np.abs(Q - run.states).max() < 1e-4
