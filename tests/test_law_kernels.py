@@ -98,7 +98,10 @@ def test_parallel_sliders_match_numpy_from_stick_to_full_slip(name, amplitude):
 
 @pytest.mark.parametrize("name", sorted(LAWS))
 def test_parallel_sliders_match_numpy_along_a_reversing_path(name):
-    """Load, reverse, reload in both tangential directions: each path commits its own states, which stay equal."""
+    """Load, reverse, reload in both tangential directions: each path commits its own states, which stay equal.
+
+    The path repeats its turning points, so sliders committed in slip are evaluated again on their slip
+    limit (``|t^tr| = f_m`` to round-off), where an ulp in the norm would flip the tangent's branch."""
     law = LAWS[name]()
     s = 12
     rng = np.random.default_rng(7)

@@ -25,12 +25,17 @@ from numba import njit
 
 @njit(cache=True, inline="always")
 def _radial(trial0, trial1, limit):
-    """``(ratio, d0, d1, slipping)`` of one slider: :func:`femrom.fem.radial_return` for a single point."""
+    """``(ratio, safe, slipping)`` of one slider: :func:`femrom.fem.radial_return` for a single point, the
+    slip direction being ``trial / safe``.
+
+    ``hypot`` as numpy's, not ``sqrt(a^2 + b^2)``: a slider committed in slip sits on ``|t^tr| = limit``
+    to round-off, and an ulp of difference in the norm would flip its tangent between stick and slip.
+    """
     norm = math.hypot(trial0, trial1)
     slipping = (norm > limit) or (limit <= 0.0)
     safe = norm if norm > 0.0 else 1.0
     ratio = limit / safe if slipping else 1.0
-    return ratio, trial0 / safe, trial1 / safe, slipping
+    return ratio, safe, slipping
 
 
 @njit(cache=True)
@@ -46,11 +51,12 @@ def parallel_sliders(gap, state, stiffness, strength, normal_stiffness, tangent)
         for m in range(n):
             k = stiffness[m]
             trial0, trial1 = k * (g0 - state[i, m, 0]), k * (g1 - state[i, m, 1])
-            ratio, e0, e1, slipping = _radial(trial0, trial1, strength[m])
+            ratio, safe, slipping = _radial(trial0, trial1, strength[m])
             t0 += ratio * trial0
             t1 += ratio * trial1
             if tangent:
                 if slipping:
+                    e0, e1 = trial0 / safe, trial1 / safe
                     d00 += k * (ratio * (1.0 - e0 * e0))
                     d01 += k * (ratio * (0.0 - e0 * e1))
                     d11 += k * (ratio * (1.0 - e1 * e1))
@@ -75,7 +81,7 @@ def parallel_sliders_commit(gap, state, stiffness, strength):
         for m in range(n):
             k = stiffness[m]
             trial0, trial1 = k * (g0 - state[i, m, 0]), k * (g1 - state[i, m, 1])
-            ratio, _, _, _ = _radial(trial0, trial1, strength[m])
+            ratio, _, _ = _radial(trial0, trial1, strength[m])
             new[i, m, 0] = g0 - ratio * trial0 / k
             new[i, m, 1] = g1 - ratio * trial1 / k
     return new
@@ -97,12 +103,13 @@ def clamped_iwan(gap, state, stiffness, unit_strength, normal_stiffness, tangent
             k = stiffness[m]
             trial0, trial1 = k * (g0 - state[i, m, 0]), k * (g1 - state[i, m, 1])
             limit = slip_traction * unit_strength[m] if closed else 0.0
-            ratio, e0, e1, slipping = _radial(trial0, trial1, limit)
+            ratio, safe, slipping = _radial(trial0, trial1, limit)
             t0 += ratio * trial0
             t1 += ratio * trial1
             if tangent:
                 diagonal += ratio * k
                 if slipping:
+                    e0, e1 = trial0 / safe, trial1 / safe
                     weight = ratio * k
                     w00 += weight * e0 * e0
                     w01 += weight * e0 * e1
@@ -128,7 +135,7 @@ def clamped_iwan_commit(gap, state, stiffness, unit_strength):
             k = stiffness[m]
             trial0, trial1 = k * (g0 - state[i, m, 0]), k * (g1 - state[i, m, 1])
             limit = slip_traction * unit_strength[m] if closed else 0.0
-            ratio, _, _, _ = _radial(trial0, trial1, limit)
+            ratio, _, _ = _radial(trial0, trial1, limit)
             new[i, m, 0] = g0 - ratio * trial0 / k
             new[i, m, 1] = g1 - ratio * trial1 / k
     return new
