@@ -13,11 +13,17 @@ Newmark average acceleration (dense Newton: 10 dofs), in one process:
   as the case trains it, on 0.15 s all-pair ring-downs at 300 and 1500 N);
 - ``all_pairs``: the joint on all 592 pairs.
 
-The blocks alternate ``--repeats`` times; the medians of their mean step times give the
-ratios against ``linear`` (the issue's target: a nonlinear step within 3x).
+The two nonlinear models step twice, with the interface law in numpy (``_numpy``) and with
+its compiled kernels (``_compiled``, :func:`femrom.fem.use_compiled_laws`). The blocks
+alternate ``--repeats`` times; the medians of their mean step times, and their spread
+(min-max), give the ratios against ``linear`` (the issue's target: a nonlinear step within
+3x). An untimed run of the hyper-reduced model counts the law's calls per step and keeps
+the sampled pairs' last gaps and states, on which ``--calls`` evaluations (with the
+tangent) and commits are timed the same way, numpy against compiled: law time per step =
+calls x time per call, and the rest of the step is what is left outside the law.
 
-Run ``python -m benchmarks.jointed_beam_step`` (about 5 minutes); it prints a
-table and writes ``benchmarks/results/jointed_beam_step.json``.
+Run ``python -m benchmarks.jointed_beam_step`` (about 5 minutes); it prints
+tables and writes ``benchmarks/results/jointed_beam_step.json``.
 """
 
 from __future__ import annotations
@@ -34,6 +40,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from femrom.cases.jointed_beam import SCENE
+from femrom.fem import compiled_laws, use_compiled_laws
 from femrom.integrators import Newmark, StepResult, integrate
 from femrom.study import JointedBeamModel
 
@@ -49,12 +56,58 @@ def block(system, state, dt: float, n_steps: int) -> tuple[float, int]:
     return (time.perf_counter() - tic) / n_steps, summary.newton_iterations
 
 
+def law_calls(system, state, dt: float, n_steps: int):
+    """Untimed: ``({"evaluate": calls per step, "commit": ...}, law, last gap, last state)`` of a joint model."""
+    law = system.nonlinear.transformed.force_model.law
+    cls = type(law)
+    counts = {"evaluate": 0, "commit": 0}
+    last = {}
+    original = cls.evaluate, cls.commit
+
+    def evaluate(self, gap, state, tangent=True):
+        counts["evaluate"] += 1
+        last["gap"], last["state"] = np.array(gap), np.array(state)
+        return original[0](self, gap, state, tangent)
+
+    def commit(self, gap, state):
+        counts["commit"] += 1
+        return original[1](self, gap, state)
+
+    cls.evaluate, cls.commit = evaluate, commit
+    try:
+        integrate(system, Newmark(), None, None, dt, n_steps, start=StepResult.at_rest(system.n_dofs, state=state),
+                  progress=False)
+    finally:
+        cls.evaluate, cls.commit = original
+    return {key: value / n_steps for key, value in counts.items()}, law, last["gap"], last["state"]
+
+
+def law_timings(law, gap, state, n_calls: int, repeats: int) -> dict:
+    """Medians and spread [us] of ``evaluate`` (with the tangent) and ``commit``, numpy and compiled, alternating."""
+    seconds = {}
+    for _ in range(repeats):
+        for compiled in (False, True):
+            use_compiled_laws(compiled)
+            for what, call in (("evaluate", lambda: law.evaluate(gap, state)), ("commit", lambda: law.commit(gap, state))):
+                tic = time.perf_counter()
+                for _ in range(n_calls):
+                    call()
+                seconds.setdefault(what, {}).setdefault("compiled" if compiled else "numpy", []).append(
+                    (time.perf_counter() - tic) / n_calls)
+    use_compiled_laws(True)
+    return {what: {path: {"median_us": 1e6 * statistics.median(v), "min_us": 1e6 * min(v), "max_us": 1e6 * max(v)}
+                   for path, v in paths.items()} for what, paths in seconds.items()}
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--modes", type=int, default=10)
     parser.add_argument("--steps", type=int, default=2000)
     parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--calls", type=int, default=1000)
     args = parser.parse_args()
+    if not compiled_laws():
+        raise SystemExit("the compiled kernels are off (numba missing or FEMROM_COMPILED_LAWS=0)")
     config = JointedBeamModel(n_modes=args.modes)
     setup = config.calibrated(config.scene(SCENE))
     model, q0, z0 = config.iwan_joint(setup)
@@ -65,25 +118,55 @@ def main() -> None:
     D0 = all_pairs.nonlinear.tangent(np.zeros(all_pairs.n_dofs), None, z0)[0]
     linear = dataclasses.replace(all_pairs, stiffness=sp.csr_matrix(all_pairs.stiffness + D0), nonlinear=None,
                                  load=None)
-    models = (("linear", linear, None), ("hyper", hyper, z_hyper), ("all_pairs", all_pairs, z0))
+    calls, law, gap, state = law_calls(hyper, z_hyper, dt, min(args.steps, 1000))
+    models = (("linear", linear, None, True),
+              ("hyper_numpy", hyper, z_hyper, False), ("hyper_compiled", hyper, z_hyper, True),
+              ("all_pairs_numpy", all_pairs, z0, False), ("all_pairs_compiled", all_pairs, z0, True))
+    for _, system, state0, _ in models[1:3]:                          # compile (or load) outside the blocks
+        block(system, state0, dt, 2)
     seconds = {name: [] for name, *_ in models}
     iterations = {}
     for _ in range(args.repeats):
-        for name, system, state in models:
-            per_step, newton = block(system, state, dt, args.steps)
+        for name, system, state0, compiled in models:
+            use_compiled_laws(compiled)
+            per_step, newton = block(system, state0, dt, args.steps)
             seconds[name].append(per_step)
             iterations[name] = newton / args.steps
+    use_compiled_laws(True)
     medians = {name: statistics.median(values) for name, values in seconds.items()}
+    laws = law_timings(law, gap, state, args.calls, args.repeats)
+    law_ms = {path: 1e-3 * (calls["evaluate"] * laws["evaluate"][path]["median_us"]
+                            + calls["commit"] * laws["commit"][path]["median_us"]) for path in ("numpy", "compiled")}
     result = {"machine": platform.platform(), "modes": args.modes, "pairs": int(sampling.n_pairs),
               "sampled_pairs": int(sampling.pairs.size), "law": "clamped_iwan",
-              "steps_per_block": args.steps, "repeats": args.repeats, "dt": dt,
+              "sliders": int(law.n_elements), "steps_per_block": args.steps, "repeats": args.repeats, "dt": dt,
               "ms_per_step": {name: 1e3 * value for name, value in medians.items()},
+              "spread_ms_per_step": {name: [1e3 * min(v), 1e3 * max(v)] for name, v in seconds.items()},
               "all_ms_per_step": {name: [1e3 * v for v in values] for name, values in seconds.items()},
               "newton_iterations_per_step": iterations,
-              "ratio_to_linear": {name: medians[name] / medians["linear"] for name in ("hyper", "all_pairs")}}
-    print("| step | ms (median of blocks) | / linear | Newton iterations per step |\n|---|---|---|---|")
+              "ratio_to_linear": {name: medians[name] / medians["linear"] for name in medians if name != "linear"},
+              "speedup_compiled": {kind: medians[f"{kind}_numpy"] / medians[f"{kind}_compiled"]
+                                   for kind in ("hyper", "all_pairs")},
+              "hyper_law_calls_per_step": calls, "hyper_law_call_us": laws,
+              "hyper_law_ms_per_step": law_ms,
+              "hyper_outside_law_ms_per_step": {path: 1e3 * medians[f"hyper_{path}"] - law_ms[path]
+                                                for path in ("numpy", "compiled")}}
+    print("| step | ms (median of blocks) | spread (min-max) | / linear | Newton iterations per step |"
+          "\n|---|---|---|---|---|")
     for name, value in medians.items():
-        print(f"| {name} | {1e3 * value:.3f} | {value / medians['linear']:.1f} | {iterations[name]:.2f} |")
+        low, high = result["spread_ms_per_step"][name]
+        print(f"| {name} | {1e3 * value:.3f} | {low:.3f}-{high:.3f} | {value / medians['linear']:.2f} "
+              f"| {iterations[name]:.2f} |")
+    print(f"\nhyper-reduced law ({sampling.pairs.size} pairs x {law.n_elements} sliders), "
+          f"{calls['evaluate']:.2f} evaluations + {calls['commit']:.2f} commits per step:")
+    print("| call | numpy [us] | compiled [us] | speed-up |\n|---|---|---|---|")
+    for what, paths in laws.items():
+        n, c = paths["numpy"], paths["compiled"]
+        print(f"| {what} | {n['median_us']:.1f} ({n['min_us']:.1f}-{n['max_us']:.1f}) "
+              f"| {c['median_us']:.1f} ({c['min_us']:.1f}-{c['max_us']:.1f}) | {n['median_us'] / c['median_us']:.1f} |")
+    for path in ("numpy", "compiled"):
+        print(f"{path}: law {law_ms[path]:.3f} ms a step, outside the law "
+              f"{result['hyper_outside_law_ms_per_step'][path]:.3f} ms")
     RESULTS.parent.mkdir(parents=True, exist_ok=True)
     RESULTS.write_text(json.dumps(result, indent=1))
     print(f"written: {RESULTS}")

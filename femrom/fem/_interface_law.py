@@ -35,6 +35,7 @@ import numpy as np
 
 from femrom._errors import FemromValueError
 from femrom._registry import Registry
+from femrom.fem._law_kernels import compiled_kernels
 
 #: The interface laws by name (the modules of :mod:`femrom.fem.interface_laws` are imported on first read).
 INTERFACE_LAWS = Registry("interface law", "femrom.fem.interface_laws", order=lambda name, cls: name,
@@ -222,7 +223,24 @@ class ParallelSliderLaw(InterfaceLaw):
         trial = k * (g_t[:, None, :] - state)
         return g_t, g_n, k, trial, radial_return(trial, self.slider_strength[None, :])
 
+    def _compiled(self, gap, state):
+        """``(kernels, gap, state)`` as the compiled kernels take them, or ``None``: numpy evaluates."""
+        kernels = compiled_kernels()
+        if kernels is None:
+            return None
+        gap = np.ascontiguousarray(gap, dtype=float)
+        state = np.ascontiguousarray(state, dtype=float)
+        if gap.ndim != 2 or gap.shape[1] != 3 or state.shape != (gap.shape[0], self.slider_stiffness.size, 2):
+            return None                                      # numpy broadcasts or raises as it always has
+        return kernels, gap, state
+
     def evaluate(self, gap, state, tangent=True):
+        compiled = self._compiled(gap, state)
+        if compiled is not None:
+            kernels, gap, state = compiled
+            traction, D = kernels.parallel_sliders(gap, state, self.slider_stiffness, self.slider_strength,
+                                                   float(self.normal_stiffness), bool(tangent))
+            return traction, (D if tangent else None)
         g_t, g_n, _, _, (t, ratio, direction, slipping) = self._sliders(gap, state)
         traction = np.empty((g_n.size, 3))
         traction[:, :2] = t.sum(axis=1)
@@ -236,6 +254,10 @@ class ParallelSliderLaw(InterfaceLaw):
         return traction, D
 
     def commit(self, gap, state):
+        compiled = self._compiled(gap, state)
+        if compiled is not None:
+            kernels, gap, state = compiled
+            return kernels.parallel_sliders_commit(gap, state, self.slider_stiffness, self.slider_strength)
         g_t, _, k, _, (t, *_rest) = self._sliders(gap, state)
         return g_t[:, None, :] - t / k
 

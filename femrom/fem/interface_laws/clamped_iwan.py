@@ -58,6 +58,7 @@ from femrom.fem._interface_law import (
     register_interface_law,
     split_gap,
 )
+from femrom.fem._law_kernels import compiled_kernels
 from femrom.fem.interface_laws.iwan import IwanLaw
 
 
@@ -96,11 +97,25 @@ class ClampedIwanLaw(InterfaceLaw):
         """Every point open (no contact): set a preloaded state with :func:`clamped_iwan_state`."""
         return np.zeros((int(n_points), self.n_elements + 1, 2))
 
-    def _sliders(self, gap, state):
+    def _checked(self, gap, state):
         g_t, g_n = split_gap(gap)
         N = self.n_elements
+        state = np.asarray(state)
         if state.ndim != 3 or state.shape[1:] != (N + 1, 2) or state.shape[0] != g_n.size:
             raise FemromValueError(f"clamped_iwan state must be ({g_n.size}, {N + 1}, 2), got shape {state.shape}")
+        return g_t, g_n, state
+
+    def _compiled(self, gap, state):
+        """``(kernels, gap, state)`` as the compiled kernels take them (checked), or ``None``: numpy evaluates."""
+        kernels = compiled_kernels()
+        if kernels is None:
+            return None
+        self._checked(gap, state)
+        return kernels, np.ascontiguousarray(gap, dtype=float), np.ascontiguousarray(state, dtype=float)
+
+    def _sliders(self, gap, state):
+        g_t, g_n, state = self._checked(gap, state)
+        N = self.n_elements
         closed = state[:, N, 1] > 0.5
         k = self.slider_stiffness[None, :, None]
         trial = k * (g_t[:, None, :] - state[:, :N])
@@ -109,6 +124,12 @@ class ClampedIwanLaw(InterfaceLaw):
         return g_t, g_n, closed, k, trial, t, ratio, direction, slipping
 
     def evaluate(self, gap, state, tangent=True):
+        compiled = self._compiled(gap, state)
+        if compiled is not None:
+            kernels, gap, state = compiled
+            traction, D = kernels.clamped_iwan(gap, state, self.slider_stiffness, self.unit_strength,
+                                               float(self.normal_stiffness), bool(tangent))
+            return traction, (D if tangent else None)
         _, g_n, closed, _, _, t, ratio, direction, slipping = self._sliders(gap, state)
         traction = np.empty((g_n.size, 3))
         traction[:, :2] = t.sum(axis=1)
@@ -131,6 +152,10 @@ class ClampedIwanLaw(InterfaceLaw):
         return traction, D
 
     def commit(self, gap, state):
+        compiled = self._compiled(gap, state)
+        if compiled is not None:
+            kernels, gap, state = compiled
+            return kernels.clamped_iwan_commit(gap, state, self.slider_stiffness, self.unit_strength)
         g_t, _, _, k, _, t, *_ = self._sliders(gap, state)
         new = np.array(state, dtype=float)
         new[:, :-1] = g_t[:, None, :] - t / k

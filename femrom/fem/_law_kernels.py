@@ -1,0 +1,55 @@
+r"""Compiled return maps of the slider interface laws: one loop over points and sliders.
+
+The numpy implementations of :class:`~femrom.fem.ParallelSliderLaw` (the ``iwan`` and
+``jenkins`` laws) and :class:`~femrom.fem.ClampedIwanLaw` build (s, N, 2) temporaries and
+(s, N, 2, 2) tangent blocks a dozen array operations deep; on the few dozen sampled pairs
+of a hyper-reduced joint their cost is numpy's per-call overhead, not arithmetic. These
+kernels do the same radial return slider by slider in one compiled loop (numba,
+``cache=True``: compiled once per machine, loaded from the on-disk cache in later
+processes) and return what the numpy code returns, equal to round-off: the traction, the
+consistent tangent ``dt/dDelta`` and the committed slider positions.
+
+The numpy code stays the reference and the fallback. The laws call these kernels through
+:func:`compiled_kernels`, which answers ``None`` (use numpy) when numba is not importable,
+when ``FEMROM_COMPILED_LAWS=0`` is set in the environment, or after
+:func:`use_compiled_laws(False) <use_compiled_laws>`. This module imports numba only on
+the first call of :func:`compiled_kernels`.
+"""
+
+from __future__ import annotations
+
+import os
+
+_ENVIRONMENT = "FEMROM_COMPILED_LAWS"
+_enabled = os.environ.get(_ENVIRONMENT, "1").strip().lower() not in ("0", "false", "no", "off", "numpy")
+_kernels = None        # the compiled module after the first successful import, False when numba is missing
+
+
+def use_compiled_laws(enabled: bool) -> bool:
+    """Switch the interface laws between the compiled kernels and numpy; returns the previous setting.
+
+    With ``enabled`` the compiled kernels run where numba is importable (numpy otherwise).
+    The default is on unless the environment sets ``FEMROM_COMPILED_LAWS=0``.
+    """
+    global _enabled
+    previous, _enabled = _enabled, bool(enabled)
+    return previous
+
+
+def compiled_laws() -> bool:
+    """Whether the interface laws evaluate with the compiled kernels (switched on and numba importable)."""
+    return compiled_kernels() is not None
+
+
+def compiled_kernels():
+    """The kernel module (:mod:`femrom.fem._law_kernels_numba`), or ``None`` when the laws use numpy."""
+    global _kernels
+    if not _enabled:
+        return None
+    if _kernels is None:
+        try:
+            from femrom.fem import _law_kernels_numba as module
+        except ImportError:
+            module = False
+        _kernels = module
+    return _kernels or None

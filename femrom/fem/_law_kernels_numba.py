@@ -1,0 +1,141 @@
+r"""numba kernels of the slider laws' return map (see :mod:`femrom.fem._law_kernels`).
+
+Every slider ``m`` of point ``i`` is an isotropic 2-D Jenkins element: trial traction
+``t^tr = k_m (g_t - z_m)``, returned radially onto ``|t| <= tau`` (:func:`femrom.fem.radial_return`,
+written here for one slider with the same comparisons, so a NaN or a zero limit takes the
+same branch), and its consistent tangent ``k_m I`` in stick, ``k_m ratio (I - d d^T)`` in
+slip. Two families:
+
+- parallel sliders (``iwan``, ``jenkins``): limit ``f_m``, normal ``t_n = k_n g_n``;
+- clamped Iwan: limit ``tau_s f_m`` where the preload closed the point (``c > 0.5``), zero
+  (every slider slipping, no traction) where it is open; normal ``c k_n g_n``.
+
+Arrays are float64 and C-contiguous (the callers make them so): ``gap`` (s, 3), ``state``
+(s, N, 2) or (s, N + 1, 2) for the clamped law. The callers check the shapes; these
+kernels do not.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True, inline="always")
+def _radial(trial0, trial1, limit):
+    """``(ratio, safe, slipping)`` of one slider: :func:`femrom.fem.radial_return` for a single point, the
+    slip direction being ``trial / safe``.
+
+    ``hypot`` as numpy's, not ``sqrt(a^2 + b^2)``: a slider committed in slip sits on ``|t^tr| = limit``
+    to round-off, and an ulp of difference in the norm would flip its tangent between stick and slip.
+    """
+    norm = math.hypot(trial0, trial1)
+    slipping = (norm > limit) or (limit <= 0.0)
+    safe = norm if norm > 0.0 else 1.0
+    ratio = limit / safe if slipping else 1.0
+    return ratio, safe, slipping
+
+
+@njit(cache=True)
+def parallel_sliders(gap, state, stiffness, strength, normal_stiffness, tangent):
+    """``(traction (s, 3), D (s, 3, 3))`` of parallel sliders; ``D`` is (0, 3, 3) without ``tangent``."""
+    s, n = state.shape[0], state.shape[1]
+    traction = np.zeros((s, 3))
+    D = np.zeros((s if tangent else 0, 3, 3))
+    for i in range(s):
+        g0, g1 = gap[i, 0], gap[i, 1]
+        t0 = t1 = 0.0
+        d00 = d01 = d11 = 0.0
+        for m in range(n):
+            k = stiffness[m]
+            trial0, trial1 = k * (g0 - state[i, m, 0]), k * (g1 - state[i, m, 1])
+            ratio, safe, slipping = _radial(trial0, trial1, strength[m])
+            t0 += ratio * trial0
+            t1 += ratio * trial1
+            if tangent:
+                if slipping:
+                    e0, e1 = trial0 / safe, trial1 / safe
+                    d00 += k * (ratio * (1.0 - e0 * e0))
+                    d01 += k * (ratio * (0.0 - e0 * e1))
+                    d11 += k * (ratio * (1.0 - e1 * e1))
+                else:
+                    d00 += k
+                    d11 += k
+        traction[i, 0], traction[i, 1] = t0, t1
+        traction[i, 2] = normal_stiffness * gap[i, 2]
+        if tangent:
+            D[i, 0, 0], D[i, 0, 1], D[i, 1, 0], D[i, 1, 1] = d00, d01, d01, d11
+            D[i, 2, 2] = normal_stiffness
+    return traction, D
+
+
+@njit(cache=True)
+def parallel_sliders_commit(gap, state, stiffness, strength):
+    """(s, N, 2) slider positions after a converged step: ``z_m = g_t - t_m / k_m``."""
+    s, n = state.shape[0], state.shape[1]
+    new = np.empty((s, n, 2))
+    for i in range(s):
+        g0, g1 = gap[i, 0], gap[i, 1]
+        for m in range(n):
+            k = stiffness[m]
+            trial0, trial1 = k * (g0 - state[i, m, 0]), k * (g1 - state[i, m, 1])
+            ratio, _, _ = _radial(trial0, trial1, strength[m])
+            new[i, m, 0] = g0 - ratio * trial0 / k
+            new[i, m, 1] = g1 - ratio * trial1 / k
+    return new
+
+
+@njit(cache=True)
+def clamped_iwan(gap, state, stiffness, unit_strength, normal_stiffness, tangent):
+    """``(traction (s, 3), D (s, 3, 3))`` of the clamped Iwan law; ``D`` is (0, 3, 3) without ``tangent``."""
+    s, n = state.shape[0], state.shape[1] - 1
+    traction = np.zeros((s, 3))
+    D = np.zeros((s if tangent else 0, 3, 3))
+    for i in range(s):
+        closed = state[i, n, 1] > 0.5
+        slip_traction = state[i, n, 0]
+        g0, g1 = gap[i, 0], gap[i, 1]
+        t0 = t1 = 0.0
+        diagonal = w00 = w01 = w11 = 0.0
+        for m in range(n):
+            k = stiffness[m]
+            trial0, trial1 = k * (g0 - state[i, m, 0]), k * (g1 - state[i, m, 1])
+            limit = slip_traction * unit_strength[m] if closed else 0.0
+            ratio, safe, slipping = _radial(trial0, trial1, limit)
+            t0 += ratio * trial0
+            t1 += ratio * trial1
+            if tangent:
+                diagonal += ratio * k
+                if slipping:
+                    e0, e1 = trial0 / safe, trial1 / safe
+                    weight = ratio * k
+                    w00 += weight * e0 * e0
+                    w01 += weight * e0 * e1
+                    w11 += weight * e1 * e1
+        traction[i, 0], traction[i, 1] = t0, t1
+        traction[i, 2] = normal_stiffness * gap[i, 2] if closed else 0.0
+        if tangent:
+            D[i, 0, 0], D[i, 0, 1], D[i, 1, 0], D[i, 1, 1] = diagonal - w00, -w01, -w01, diagonal - w11
+            D[i, 2, 2] = normal_stiffness if closed else 0.0
+    return traction, D
+
+
+@njit(cache=True)
+def clamped_iwan_commit(gap, state, stiffness, unit_strength):
+    """(s, N + 1, 2) state after a converged step: sliders ``z_m = g_t - t_m / k_m``, row ``N`` kept."""
+    s, n = state.shape[0], state.shape[1] - 1
+    new = state.copy()
+    for i in range(s):
+        closed = state[i, n, 1] > 0.5
+        slip_traction = state[i, n, 0]
+        g0, g1 = gap[i, 0], gap[i, 1]
+        for m in range(n):
+            k = stiffness[m]
+            trial0, trial1 = k * (g0 - state[i, m, 0]), k * (g1 - state[i, m, 1])
+            limit = slip_traction * unit_strength[m] if closed else 0.0
+            ratio, _, _ = _radial(trial0, trial1, limit)
+            new[i, m, 0] = g0 - ratio * trial0 / k
+            new[i, m, 1] = g1 - ratio * trial1 / k
+    return new
