@@ -27,19 +27,15 @@ import argparse
 import json
 import os
 import platform
-import sys
 import time
 from pathlib import Path
 
-import numpy as np
+
+from benchmarks.spml_systems import SYSTEMS, chain, predict, prediction_errors
+from femrom.inference import SpML, SpMLConfig
+from femrom.study import spml_error_split
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "tests"))
-
-from _spml_systems import SYSTEMS, chain, predict, prediction_errors  # noqa: E402
-
-from femrom.inference import SpML, SpMLConfig  # noqa: E402
-from femrom.study import spml_error_split  # noqa: E402
 
 FAMILIES = {**SYSTEMS, "chain8": lambda: chain(8)}
 FITS = {

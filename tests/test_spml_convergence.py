@@ -1,7 +1,7 @@
 """SpML converges where its model class contains the truth: the error split, the least-squares stage,
 the differentiable discrete-gradient rollout, and the issue's targets on exact and noisy data.
 
-The systems come from ``tests/_spml_systems.py`` (a chain of three masses with quartic springs,
+The systems come from ``benchmarks/spml_systems.py`` (a chain of three masses with quartic springs,
 two coupled Duffing oscillators: unit mass, linear damping, a polynomial potential); a held-out
 system of the same kind is one more factory there.
 """
@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from _required import extra
-from _spml_systems import SYSTEMS, predict, prediction_errors
+from benchmarks.spml_systems import SYSTEMS, predict, prediction_errors
 from femrom.inference import SpML, SpMLConfig
 from femrom.rom import SecondOrderROM
 from femrom.study import spml_error_split

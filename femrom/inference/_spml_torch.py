@@ -20,6 +20,7 @@ from dataclasses import replace
 import numpy as np
 import torch
 
+from femrom._errors import FemromValueError
 from femrom.inference._networks import (ConvexPowers, NetworkLayer, ScalarNetwork, SymmetricPolynomial, derivative_map,
                                        monomials, multi_indices)
 
@@ -779,7 +780,8 @@ class Rollout:
                 u.append(None if tr.get("u") is None else tr["u"][:, k:k + self.steps + 1].T)
                 dts.append(tr["dt"])
         if not q:
-            raise ValueError("no rollout windows: trajectories shorter than the window")
+            raise FemromValueError(f"no rollout windows: every trajectory is shorter than the window of "
+                                   f"{self.steps} steps (rollout_steps)")
         self.q = _tensor(np.stack(q))                  # (B, steps + 1, r)
         self.v = _tensor(np.stack(v))
         self.u = None if u[0] is None else _tensor(np.stack(u))
