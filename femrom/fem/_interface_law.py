@@ -138,6 +138,20 @@ def radial_return_tangent(ratio: np.ndarray, direction: np.ndarray, slipping: np
     return np.where(slipping[..., None, None], ratio[..., None, None] * projector, eye)
 
 
+def radial_return_derivative(dtrial, ratio, direction, slipping, dlimit=None) -> np.ndarray:
+    r"""(..., 2, m) forward derivative of :func:`radial_return` along ``m`` directions.
+
+    ``dtrial`` (..., 2, m) is the derivative of the trial traction, ``dlimit`` (..., m) of the
+    slip limit (``None``: a fixed limit). Stick: ``dt = dt^tr``; slip:
+    ``dt = ratio (I - d d^T) dt^tr + d dtau``.
+    """
+    along = np.einsum("...i,...im->...m", direction, dtrial)
+    slip = ratio[..., None, None] * (dtrial - direction[..., :, None] * along[..., None, :])
+    if dlimit is not None:
+        slip = slip + direction[..., :, None] * dlimit[..., None, :]
+    return np.where(slipping[..., None, None], slip, dtrial)
+
+
 class InterfaceLaw:
     r"""Traction ``t(Delta; z)`` (s, 3) of ``s`` contact points, its tangent, and a return-mapped state.
 
@@ -167,6 +181,13 @@ class InterfaceLaw:
     def commit(self, gap: np.ndarray, state: np.ndarray) -> np.ndarray:
         """The state after a converged step ending at ``gap`` (a new array; ``state`` is not changed)."""
         raise NotImplementedError
+
+    #: Optional: ``step_derivative(gap, state, dgap, dstate) -> (dtraction, dstate_new)``, the forward
+    #: derivative of one return-map step (traction and committed state) along ``m`` directions, with
+    #: ``dgap`` (s, 3, m) and ``dstate`` ``state.shape + (m,)``. A law that has it gives
+    #: :class:`~femrom.fem.JointForce` an exact harmonic-balance Jacobian
+    #: (:class:`femrom.integrators.HarmonicBalance`); ``None``: the frozen-state tangent is used.
+    step_derivative = None
 
     def dissipation(self, gap: np.ndarray, state: np.ndarray) -> np.ndarray:
         """(s,) energy per unit area the sliders dissipate in the step from ``state`` to ``commit(gap, state)``."""
@@ -260,6 +281,26 @@ class ParallelSliderLaw(InterfaceLaw):
             return kernels.parallel_sliders_commit(gap, state, self.slider_stiffness, self.slider_strength)
         g_t, _, k, _, (t, *_rest) = self._sliders(gap, state)
         return g_t[:, None, :] - t / k
+
+    def step_derivative(self, gap, state, dgap, dstate):
+        r"""Forward derivative of one return-map step along ``m`` directions.
+
+        ``dgap`` (s, 3, m) and ``dstate`` (s, N, 2, m) are the derivatives of the gap and of the
+        frozen sliders; returns ``(dtraction (s, 3, m), dz (s, N, 2, m))``: of the traction and of
+        the committed sliders. Per slider, ``dt^tr = k_m (dg_t - dz_m)``; stuck: ``dt_m = dt^tr``,
+        ``z_m`` kept; slipping: ``dt_m = ratio (I - d d^T) dt^tr`` and ``dz_m = dg_t - dt_m / k_m``
+        (the committed ``z_m = g_t - t_m / k_m``). ``dt_n = k_n dg_n``.
+        """
+        _, _, k, _, (_, ratio, direction, slipping) = self._sliders(gap, state)
+        dgap = np.asarray(dgap, dtype=float)
+        dg_t = dgap[:, None, :2, :]
+        km = k[..., None]
+        dt = radial_return_derivative(km * (dg_t - dstate), ratio, direction, slipping)
+        dtraction = np.empty((dgap.shape[0], 3, dgap.shape[2]))
+        dtraction[:, :2] = dt.sum(axis=1)
+        dtraction[:, 2] = self.normal_stiffness * dgap[:, 2]
+        dz = np.where(slipping[..., None, None], dg_t - dt / km, dstate)
+        return dtraction, dz
 
     def dissipation(self, gap, state):
         _, _, k, trial, (t, *_rest) = self._sliders(gap, state)

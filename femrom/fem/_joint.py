@@ -194,6 +194,27 @@ class JointForce(NonlinearForce):
     def initial_state(self):
         return self.law.initial_state(self.n_pairs)
 
+    @property
+    def local_step_derivative(self):
+        r"""``(x, state, dx, dstate) -> (dg, dstate_new)``, or ``None`` when the law has no step derivative.
+
+        The forward derivative of one return-map step along ``m`` directions, as
+        :meth:`femrom.fem.JenkinsForce.local_step_derivative`: ``dx`` (3 s, m) of the local
+        coordinates, ``dstate`` ``state.shape + (m,)`` of the frozen state; ``dg`` (3 s, m) of the
+        force ``A_i t_i`` and ``dstate_new`` of the committed state, from the law's
+        ``step_derivative``. :class:`femrom.integrators.HarmonicBalance` carries it over the
+        sampled period for an exact Jacobian.
+        """
+        if not callable(getattr(self.law, "step_derivative", None)):
+            return None
+        return self._local_step_derivative
+
+    def _local_step_derivative(self, x, state, dx, dstate):
+        s = self.n_pairs
+        dx = np.asarray(dx, dtype=float)
+        dtraction, dz = self.law.step_derivative(self.gaps(x), self._state(state), dx.reshape(s, 3, -1), dstate)
+        return (self.areas[:, None, None] * dtraction).reshape(3 * s, -1), dz
+
     def local_commit(self, x, xdot, state):
         return self.law.commit(self.gaps(x), self._state(state))
 

@@ -132,6 +132,17 @@ class TransformedForce(NonlinearForce):
     def checkpoint(self, state):
         return self.force_model.checkpoint(state)
 
+    @property
+    def local_step_derivative(self):
+        """The original's forward derivative of one return-map step at the shifted local coordinates
+        (:meth:`femrom.fem.JointForce.local_step_derivative`), or ``None`` when it has none."""
+        inner = getattr(self.force_model, "local_step_derivative", None)
+        if not callable(inner):
+            return None
+        if self.local_offset is None:
+            return inner
+        return lambda x, state, dx, dstate: inner(self._shifted(x), state, dx, dstate)
+
     def restore(self, data):
         return self.force_model.restore(data)
 

@@ -52,7 +52,9 @@ relative change of the state over the second pass is reported (``state_change``)
 ``K_t, C_t`` the tangents at sample ``j`` (state frozen at sample ``j-1``): exact for forces
 without memory. For a force with memory this omits how the frozen state itself depends on
 earlier samples; a force that offers ``local_step_derivative`` (the forward derivative of one
-return-map step in the coordinates and the state, :class:`femrom.fem.JenkinsForce`) has that
+return-map step in the coordinates and the state, :class:`femrom.fem.JenkinsForce`; a
+:class:`femrom.fem.JointForce` whose law has ``step_derivative``; a projected term through its
+``transformed`` force) has that
 dependence carried along the march, which makes the Jacobian the exact derivative of the
 discrete map (checked against finite differences in ``tests/test_harmonic_balance.py``).
 ``dR/dOmega`` is the derivative of ``A`` plus the velocity tangent's term.
@@ -324,10 +326,14 @@ class HarmonicBalance:
         f = self.nonlinear
         if f is None or not self.stateful or getattr(f, "velocity_dependent", False):
             return None
+        # a projected force (a reduced model's term) is its force on the reduced coordinates, same state
+        local = getattr(f, "transformed", None)
+        f = f if local is None else local
         if not callable(getattr(f, "local_step_derivative", None)) or not hasattr(f, "local_map"):
             return None
         if f.n_local * self.basis.size > 2000:     # its dense local Jacobian would be too big
             return None
+        self._stepper = f
         L = f.local_map
         return L.toarray() if self.dense else sp.csr_matrix(L)
 
@@ -380,7 +386,8 @@ class HarmonicBalance:
         state = self.initial_state
         hook = self._hook if jacobian else None
         if hook is not None:
-            s = f.n_local
+            stepper = self._stepper
+            s = stepper.n_local
             m = basis.size * s
             dstate = np.zeros(np.shape(state) + (m,))
             identity = np.eye(s)
@@ -388,7 +395,8 @@ class HarmonicBalance:
         for _ in range(self.passes - 1):
             for j in range(N):
                 if hook is not None:
-                    _, dstate = f.local_step_derivative(f.localize(q[j]), state, np.kron(E[j], identity), dstate)
+                    _, dstate = stepper.local_step_derivative(stepper.localize(q[j]), state, np.kron(E[j], identity),
+                                                             dstate)
                 state = f.commit(q[j], v[j], state)
         before = _state_vector(state) if self.stateful else None
         forces = np.empty((N, n))
@@ -408,7 +416,8 @@ class HarmonicBalance:
                 if velocity:
                     Ct[j] = _tangent_matrix(dv, n, self.dense)
             if hook is not None:
-                dg[j], dstate = f.local_step_derivative(f.localize(q[j]), state, np.kron(E[j], identity), dstate)
+                dg[j], dstate = stepper.local_step_derivative(stepper.localize(q[j]), state, np.kron(E[j], identity),
+                                                              dstate)
             state = f.commit(q[j], v[j], state) if self.stateful else state
         change = 0.0
         if self.stateful:
@@ -423,7 +432,7 @@ class HarmonicBalance:
         if not jacobian:
             return AFTResult(F, state_change=change, state=state)
         if hook is not None:
-            J_local = np.einsum("hj,jam->ham", P, dg).reshape(basis.size * f.n_local, -1)
+            J_local = np.einsum("hj,jam->ham", P, dg).reshape(basis.size * stepper.n_local, -1)
             Lk = self._kron(self._eye, hook)
             J = Lk.T @ J_local @ Lk
             return AFTResult(F, J, np.zeros(nz), change, state)

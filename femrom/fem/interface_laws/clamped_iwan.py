@@ -55,6 +55,7 @@ from femrom.fem._interface_law import (
     InterfaceLaw,
     check_parameters,
     radial_return,
+    radial_return_derivative,
     register_interface_law,
     split_gap,
 )
@@ -160,6 +161,30 @@ class ClampedIwanLaw(InterfaceLaw):
         new = np.array(state, dtype=float)
         new[:, :-1] = g_t[:, None, :] - t / k
         return new
+
+    def step_derivative(self, gap, state, dgap, dstate):
+        r"""Forward derivative of one return-map step along ``m`` directions.
+
+        ``dgap`` (s, 3, m), ``dstate`` (s, N + 1, 2, m); returns ``(dtraction (s, 3, m),
+        dstate_new (s, N + 1, 2, m))``. As :meth:`femrom.fem.IwanLaw.step_derivative` per slider,
+        with the slip limit ``c tau_s f_m`` read from the state (its derivative ``c f_m dtau_s``
+        enters a slipping slider along its direction); the row ``(tau_s, c)`` is kept, an open
+        point (``c = 0``) carries no traction and its sliders follow the gap.
+        """
+        g_t, g_n, closed, k, _, _, ratio, direction, slipping = self._sliders(gap, state)
+        N = self.n_elements
+        dgap = np.asarray(dgap, dtype=float)
+        dstate = np.asarray(dstate, dtype=float)
+        dg_t = dgap[:, None, :2, :]
+        km = k[..., None]
+        dlimit = np.where(closed[:, None, None], self.unit_strength[None, :, None] * dstate[:, N, 0][:, None, :], 0.0)
+        dt = radial_return_derivative(km * (dg_t - dstate[:, :N]), ratio, direction, slipping, dlimit)
+        dtraction = np.empty((g_n.size, 3, dgap.shape[2]))
+        dtraction[:, :2] = dt.sum(axis=1)
+        dtraction[:, 2] = np.where(closed[:, None], self.normal_stiffness * dgap[:, 2], 0.0)
+        new = dstate.copy()
+        new[:, :N] = np.where(slipping[..., None, None], dg_t - dt / km, dstate[:, :N])
+        return dtraction, new
 
     def dissipation(self, gap, state):
         _, _, _, k, trial, t, *_ = self._sliders(gap, state)
