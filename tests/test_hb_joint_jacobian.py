@@ -83,7 +83,7 @@ def test_joint_aft_jacobian_is_the_exact_derivative(law, state, regime, amplitud
     state = clamped_state() if state == "clamped" else None
     omega = 2 * np.pi
     hb = HarmonicBalance(system(joint(law)), 0, harmonics=3, samples=32, state=state)
-    frozen = HarmonicBalance(system(joint(law, FrozenJoint)), 0, harmonics=3, samples=32, state=state)
+    frozen = HarmonicBalance(system(joint(law)), 0, harmonics=3, samples=32, state=state, tangent="frozen")
     assert hb._hook is not None and frozen._hook is None
     z = motion(hb, amplitude)
     J_fd = aft_finite_differences(hb, z, omega, step * amplitude)
@@ -125,3 +125,11 @@ def test_newton_on_a_joint_converges_in_few_iterations():
     assert hb.solve(omega, 2.0).iterations <= 12
     with pytest.raises(HarmonicBalanceError):
         frozen.solve(omega, 2.0)
+
+
+def test_the_tangent_option_is_checked_and_exact_is_refused_where_the_force_gives_no_derivative():
+    with pytest.raises(ValueError, match="tangent must be one of auto, exact, frozen, got 'secant'"):
+        HarmonicBalance(system(joint(IWAN)), 0, harmonics=1, tangent="secant")
+    with pytest.raises(ValueError, match="tangent='exact': FrozenJoint gives no local_step_derivative"):
+        HarmonicBalance(system(joint(IWAN, FrozenJoint)), 0, harmonics=1, tangent="exact")
+    assert HarmonicBalance(system(joint(IWAN)), 0, harmonics=1, tangent="exact")._hook is not None

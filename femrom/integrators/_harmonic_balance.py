@@ -265,10 +265,17 @@ class HarmonicBalance:
         Marches over the sampled period of a force with memory (default 2: see the module).
     output : (p, n) array, optional
         Output rows (default the model's ``output_matrix``, else the identity).
+    tangent : {"auto", "exact", "frozen"}
+        The force part of the Jacobian of a force with memory: ``"exact"``, the derivative of the
+        march (the force must give ``local_step_derivative``; Newton converges quadratically, each
+        iteration carries the state's derivative); ``"frozen"``, each sample's tangent with the
+        state frozen (cheaper iterations, more of them, and no convergence far in slip);
+        ``"auto"`` (default): exact where the force gives the derivative and its local
+        unknowns times ``2H+1`` are at most :data:`EXACT_TANGENT_LIMIT`, frozen otherwise.
     """
 
     def __init__(self, system, force=None, *, harmonics: int = 5, samples: int | None = None, state=None,
-                 passes: int = 2, output=None):
+                 passes: int = 2, output=None, tangent: str = "auto"):
         model = getattr(system, "model", None)
         if model is not None and not hasattr(system, "mass"):
             system = model
@@ -303,7 +310,10 @@ class HarmonicBalance:
         self._A_C = None if self.damping is None else self._kron(D, self.damping)
         self._A_M = self._kron(D @ D, self.mass)
         self._DM = self._kron(D, self.mass)
-        self._hook = self._step_derivative_hook()
+        if tangent not in TANGENTS:
+            raise FemromValueError(f"tangent must be one of {', '.join(TANGENTS)}, got {tangent!r}")
+        self.tangent = tangent
+        self._hook = None if tangent == "frozen" else self._step_derivative_hook(required=tangent == "exact")
 
     # -- set-up ------------------------------------------------------------------------
     def _force_vector(self, force) -> np.ndarray | None:
@@ -322,17 +332,23 @@ class HarmonicBalance:
             raise FemromValueError(f"force must be an input index or a finite ({n},) vector, got shape {b.shape}")
         return b
 
-    def _step_derivative_hook(self):
+    def _step_derivative_hook(self, required: bool = False):
         f = self.nonlinear
-        if f is None or not self.stateful or getattr(f, "velocity_dependent", False):
+
+        def unavailable(why):
+            if required:
+                raise FemromValueError(f"tangent='exact': {why}")
             return None
+
+        if f is None or not self.stateful or getattr(f, "velocity_dependent", False):
+            return unavailable("the model has no force with memory of the coordinates alone")
         # a projected force (a reduced model's term) is its force on the reduced coordinates, same state
         local = getattr(f, "transformed", None)
         f = f if local is None else local
         if not callable(getattr(f, "local_step_derivative", None)) or not hasattr(f, "local_map"):
-            return None
-        if f.n_local * self.basis.size > 2000:     # its dense local Jacobian would be too big
-            return None
+            return unavailable(f"{type(f).__name__} gives no local_step_derivative")
+        if f.n_local * self.basis.size > EXACT_TANGENT_LIMIT and not required:
+            return None                            # its dense local Jacobian would be too big
         self._stepper = f
         L = f.local_map
         return L.toarray() if self.dense else sp.csr_matrix(L)
@@ -533,6 +549,12 @@ class HarmonicBalance:
             return np.zeros(Y.shape[1], dtype=complex)
         return Y[2] + 1j * Y[1]
 
+
+#: The Jacobian of a force with memory: see :class:`HarmonicBalance`'s ``tangent``.
+TANGENTS = ("auto", "exact", "frozen")
+#: Local unknowns times ``2H+1`` above which ``tangent="auto"`` takes the frozen tangent (the exact one
+#: carries the state's derivative as a dense array of that many directions).
+EXACT_TANGENT_LIMIT = 2000
 
 #: Harmonic-balance Newton defaults: a residual 1e-10 of the balanced forces, 40 iterations.
 HB_NEWTON = Newton(rtol=1e-10, max_iterations=40)
