@@ -51,6 +51,9 @@ class QPFormulation:
     """Base class of a formulation (module docstring)."""
 
     name = ""
+    #: (m N,) the condensed QP's gradient term ``g`` of the last :meth:`set_parameters`, for a
+    #: formulation that computes it (the MPC's accuracy certificate reuses it); ``None`` otherwise.
+    gradient_ = None
 
     def __init__(self, problem, config):
         self.mpc_problem, self.config = problem, config

@@ -189,7 +189,10 @@ class LinearMPC:
     def _certified(self, plan: np.ndarray, status: str, parameters: tuple) -> tuple[np.ndarray | None, str]:
         """``(plan, status)``: the plan as solved if certified, else repaired (``" (repaired)"``) or
         ``None`` (``" (uncertified)"``); the bound is logged in :attr:`error_bounds`."""
-        gradient = self._condensed.gradient(*parameters)
+        # the condensed formulations computed g for this solve already (``gradient_``)
+        gradient = getattr(self.formulation, "gradient_", None)
+        if gradient is None:
+            gradient = self._condensed.gradient(*parameters)
         certificate = self._certificate
         # into the bounds first (a solver's plan may leave them by its tolerance): the projection
         # onto the box is never farther from the optimum, which lies inside it

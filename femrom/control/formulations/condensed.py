@@ -45,8 +45,8 @@ class CondensedFormulation(CvxpyFormulation):
         self.compiled()
 
     def set_parameters(self, state, reference, u_previous, state_offset, output_offset, terminal_state):
-        self.gradient.value = self.qp.gradient(state, reference, u_previous, state_offset, output_offset,
-                                               terminal_state)
+        self.gradient_ = self.qp.gradient(state, reference, u_previous, state_offset, output_offset, terminal_state)
+        self.gradient.value = self.gradient_
 
     def plan(self) -> np.ndarray | None:
         value = self.inputs.value

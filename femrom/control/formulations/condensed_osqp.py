@@ -55,8 +55,8 @@ class CondensedOSQPFormulation(QPFormulation):
         self._q = np.zeros(m * N)
 
     def set_parameters(self, state, reference, u_previous, state_offset, output_offset, terminal_state):
-        self._q = 2.0 * self.scale * self.qp.gradient(state, reference, u_previous, state_offset, output_offset,
-                                                      terminal_state)
+        self.gradient_ = self.qp.gradient(state, reference, u_previous, state_offset, output_offset, terminal_state)
+        self._q = 2.0 * self.scale * self.gradient_
 
     def solve(self) -> QPSolution:
         self.solver.update(q=self._q)
