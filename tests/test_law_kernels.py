@@ -111,13 +111,19 @@ def test_parallel_sliders_match_numpy_along_a_reversing_path(name):
     compiled = reference = law.initial_state(s)
     for u in path:
         gap = np.column_stack([u * direction, rng.normal(0, SLIP, s)])
-        _check(law, gap, compiled)
-        compiled = law.commit(gap, compiled)
-        use_compiled_laws(False)
-        reference = law.commit(gap, reference)
-        use_compiled_laws(True)
-        _close(compiled, reference)
+        compiled, reference = _step_both(law, gap, compiled, reference)
     assert np.abs(reference).max() > 0.1 * SLIP           # the path slipped
+
+
+def _step_both(law, gap, compiled, reference):
+    """One step of a load path on both paths: the evaluation checked, each path committing its own state."""
+    _check(law, gap, compiled)
+    compiled = law.commit(gap, compiled)
+    use_compiled_laws(False)
+    reference = law.commit(gap, reference)
+    use_compiled_laws(True)
+    _close(compiled, reference)
+    return compiled, reference
 
 
 def _clamped(s, rng, *, open_share=0.3):
@@ -153,12 +159,7 @@ def test_clamped_iwan_matches_numpy_along_a_reversing_path():
     compiled = reference = state
     for u in SLIP * np.concatenate([np.linspace(0, 2.0, 8), np.linspace(2.0, -1.0, 12), np.linspace(-1.0, 0.5, 6)]):
         gap = np.column_stack([np.full(s, u), np.full(s, -0.3 * u), rng.normal(0, SLIP, s)])
-        _check(law, gap, compiled)
-        compiled = law.commit(gap, compiled)
-        use_compiled_laws(False)
-        reference = law.commit(gap, reference)
-        use_compiled_laws(True)
-        _close(compiled, reference)
+        compiled, reference = _step_both(law, gap, compiled, reference)
 
 
 def test_inputs_the_kernels_do_not_take_go_to_numpy():
