@@ -347,8 +347,9 @@ class HarmonicBalance:
         f = f if local is None else local
         if not callable(getattr(f, "local_step_derivative", None)) or not hasattr(f, "local_map"):
             return unavailable(f"{type(f).__name__} gives no local_step_derivative")
-        if f.n_local * self.basis.size > EXACT_TANGENT_LIMIT and not required:
-            return None                            # its dense local Jacobian would be too big
+        carried = min(f.n_local, self.n_dofs) if self.dense else f.n_local    # directions the march carries
+        if carried * self.basis.size > EXACT_TANGENT_LIMIT and not required:
+            return None                            # the state's derivative would be too big
         self._stepper = f
         L = f.local_map
         return L.toarray() if self.dense else sp.csr_matrix(L)
@@ -404,15 +405,18 @@ class HarmonicBalance:
         if hook is not None:
             stepper = self._stepper
             s = stepper.n_local
-            m = basis.size * s
+            # the directions carried through the march: the model's unknowns z when they are fewer
+            # than the force's local ones (a reduced model), else the local coefficients
+            on_dofs = self.dense and n < s
+            m = basis.size * (n if on_dofs else s)
+            seed = hook if on_dofs else np.eye(s)
+            seeds = [np.kron(E[j], seed) for j in range(N)]
             dstate = np.zeros(np.shape(state) + (m,))
-            identity = np.eye(s)
             dg = np.empty((N, s, m))
         for _ in range(self.passes - 1):
             for j in range(N):
                 if hook is not None:
-                    _, dstate = stepper.local_step_derivative(stepper.localize(q[j]), state, np.kron(E[j], identity),
-                                                             dstate)
+                    _, dstate = stepper.local_step_derivative(stepper.localize(q[j]), state, seeds[j], dstate)
                 state = f.commit(q[j], v[j], state)
         before = _state_vector(state) if self.stateful else None
         forces = np.empty((N, n))
@@ -432,8 +436,7 @@ class HarmonicBalance:
                 if velocity:
                     Ct[j] = _tangent_matrix(dv, n, self.dense)
             if hook is not None:
-                dg[j], dstate = stepper.local_step_derivative(stepper.localize(q[j]), state, np.kron(E[j], identity),
-                                                              dstate)
+                dg[j], dstate = stepper.local_step_derivative(stepper.localize(q[j]), state, seeds[j], dstate)
             state = f.commit(q[j], v[j], state) if self.stateful else state
         change = 0.0
         if self.stateful:
@@ -448,9 +451,13 @@ class HarmonicBalance:
         if not jacobian:
             return AFTResult(F, state_change=change, state=state)
         if hook is not None:
-            J_local = np.einsum("hj,jam->ham", P, dg).reshape(basis.size * stepper.n_local, -1)
-            Lk = self._kron(self._eye, hook)
-            J = Lk.T @ J_local @ Lk
+            if on_dofs:                           # dg (N, s, nz): the local force's derivative along z
+                J = np.einsum("sa,hsm->ham", hook, np.einsum("hj,jsm->hsm", P, dg, optimize=True),
+                              optimize=True).reshape(nz, nz)
+            else:
+                J_local = np.einsum("hj,jam->ham", P, dg).reshape(basis.size * stepper.n_local, -1)
+                Lk = self._kron(self._eye, hook)
+                J = Lk.T @ J_local @ Lk
             return AFTResult(F, J, np.zeros(nz), change, state)
         J, dW = self._aft_jacobian(Kt, Ct, omega, v)
         return AFTResult(F, J, dW, change, state)
