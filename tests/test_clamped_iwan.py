@@ -99,3 +99,34 @@ def test_the_law_is_registered_and_checks_its_parameters():
         clamped_iwan_state(law, np.zeros((3, 3)), np.zeros((3, 2)))
     with pytest.raises(ValueError, match=r"clamped_iwan state must be \(2, 22, 2\)"):
         law.traction(np.zeros((2, 3)), np.zeros((2, 4)))
+
+
+@pytest.mark.parametrize("compiled", [True, False])
+def test_closing_lets_an_open_point_touch_again_without_friction(compiled):
+    from femrom.fem import use_compiled_laws
+    kappa = 1e-3
+    law = ClampedIwanLaw(K_N, K_T, CHI, BETA, closing=kappa)
+    plain = ClampedIwanLaw(K_N, K_T, CHI, BETA)
+    # point 0 closed at the preload, 1 open by 2 um, 2 open by 1 um; motion closes 1 um of gap on
+    # points 1 and 2 and slides them tangentially: point 2 touches (penetration 0), then 1 um more on 2
+    gap, state = _preload(np.array([-1e-6, 2e-6, 1e-6]), law)
+    moved = gap + np.array([[1e-9, 0, 0], [5e-7, 0, -1e-6], [5e-7, 0, -2e-6]])
+    previous = use_compiled_laws(compiled)
+    try:
+        t, D = law.evaluate(moved, state)
+        t0, D0 = plain.evaluate(moved, state)
+    finally:
+        use_compiled_laws(previous)
+    # the closed point and the still-open point: the plain law's traction, bit for bit
+    assert np.array_equal(t[:2], t0[:2]) and np.array_equal(D[:2], D0[:2])
+    # the touching point: normal penalty kappa k_n on its penetration, no tangential traction (frictionless)
+    assert t[2, 2] == pytest.approx(kappa * K_N * -1e-6, rel=1e-12)
+    assert np.all(t[2, :2] == 0) and D[2, 2, 2] == pytest.approx(kappa * K_N) and np.all(D[2, :2, :2] == 0)
+    assert law.stored_energy(moved, state)[2] == pytest.approx(0.5 * kappa * K_N * 1e-12, rel=1e-12)
+    # the step derivative's normal row is the tangent's (the Jacobian harmonic balance builds)
+    dgap = np.random.default_rng(0).standard_normal((3, 3, 4)) * 1e-9
+    dstate = np.zeros(state.shape + (4,))
+    dt, _ = law.step_derivative(moved, state, dgap, dstate)
+    assert np.allclose(dt[:, 2], np.einsum("sc,scm->sm", D[:, 2], dgap), rtol=1e-12, atol=0)
+    with pytest.raises(ValueError, match="closing"):
+        ClampedIwanLaw(K_N, K_T, CHI, BETA, closing=-1.0)

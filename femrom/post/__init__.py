@@ -41,6 +41,13 @@ from femrom.post._impact import (
     read_hammer_impact,
 )
 from femrom.post._metrics import relative_error
+from femrom.post._response_controlled import (
+    SteppedSineLevel,
+    phase_resonance,
+    phase_resonance_backbone,
+    read_response_controlled,
+    resonance_force,
+)
 from femrom.post._output import OutputFolderError, staged_output
 from femrom.post._plots import (
     plot_accuracy_cost,
@@ -70,7 +77,7 @@ __all__ = [
     "BandIntegrals", "band_limited_integrals", "band_weights", "ModalRecord", "modal_record",
            "accuracy_cost_table", "Backbone", "brb_data_dir", "default_trim", "export_prediction",
            "hilbert_backbone", "ImpactRecord", "jsonable", "machine_description", "masing_damping", "measured_backbone",
-           "measured_spectral_peaks", "mesh_arrays", "OutputFolderError", "peak_backbone",
+           "measured_spectral_peaks", "phase_resonance", "phase_resonance_backbone", "read_response_controlled", "resonance_force", "SteppedSineLevel", "mesh_arrays", "OutputFolderError", "peak_backbone",
            "plot_accuracy_cost", "plot_accuracy_cost_groups", "plot_backbones", "plot_response", "plot_space_time",
            "plot_time_series", "pyplot", "QuasiStaticBackbone", "quasi_static_modal_analysis",
            "read_hammer_impact", "render_available", "render_grid",

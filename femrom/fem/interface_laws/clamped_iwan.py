@@ -12,7 +12,7 @@ Iwan element (:class:`femrom.fem.IwanLaw`) whose macro-slip traction is the poin
 .. math::
 
     t_t = c \sum_m \operatorname{proj}_{|t| \le \tau_s f_m}\big(k_m (g_t - z_m)\big), \qquad
-    t_n = c\, k_n g_n, \qquad c \in \{0, 1\} \text{ (closed at the preload)}.
+    t_n = c\, k_n g_n + (1 - c)\, \kappa\, k_n \min(g_n, 0), \qquad c \in \{0, 1\} \text{ (closed at the preload)}.
 
 The slider stiffnesses ``k_m`` and the unit-traction strengths ``f_m`` are those of
 :class:`~femrom.fem.IwanLaw` with ``F_S = 1`` and ``K_T = k_t``: for the power-law
@@ -23,6 +23,15 @@ it (``phi_max ~ F_S``, ``R ~ F_S^{-(chi+1)}``), so every point has the stuck sti
 the weakest sliders (early onset), ``beta`` weighs the delta at ``phi_max`` (the share of
 the traction carried to macro-slip). Like :mod:`clamped_friction`, the law is piecewise
 linear with dissipative sliders, so the average-acceleration step stays energy-stable.
+
+``closing = kappa > 0`` lets a point open at the preload close again: a frictionless
+unilateral penalty ``kappa k_n`` on its normal gap (the gap it had at the preload plus the
+motion), the contact closing of the full ``dry_friction`` law without its friction;
+``kappa < 1`` is a softer re-closing contact (a rough surface touching at low pressure). Points
+near the edge of the clamped region close in bending and stiffen the joint at large
+amplitudes (docs/cases/jointed_beam.md). The term is conservative and convex but kinked:
+the trapezoidal rule can gain energy when a point opens inside a step, as with
+``dry_friction``; harmonic balance has no such issue.
 
 Parameters
 ----------
@@ -38,6 +47,9 @@ n_sliders : int
     Jenkins elements of the power-law part (default 20; one more for the delta when ``beta > 0``).
 alpha : float
     ``>= 1``: ratio of successive slip-displacement intervals (default 1.3).
+closing : float
+    ``kappa >= 0``: ``0`` (default) a point open at the preload stays open; otherwise it closes
+    again under a frictionless penalty ``kappa k_n`` when its normal gap closes.
 
 State: (s, N + 1, 2): rows ``0..N-1`` the slider positions ``z_m``, row ``N`` the
 point's ``(tau_s [Pa], c)``; set from a ``dry_friction`` preload by
@@ -75,6 +87,7 @@ class ClampedIwanLaw(InterfaceLaw):
     beta: float
     n_sliders: int = 20
     alpha: float = 1.3
+    closing: float = 0.0
 
     def __post_init__(self):
         check_parameters(self, (("normal_stiffness", "> 0", lambda v: v > 0),
@@ -82,7 +95,8 @@ class ClampedIwanLaw(InterfaceLaw):
                                 ("chi", "> -1", lambda v: v > -1),
                                 ("beta", ">= 0", lambda v: v >= 0),
                                 ("n_sliders", "an integer >= 1", lambda v: v >= 1 and v == int(v)),
-                                ("alpha", ">= 1", lambda v: v >= 1)))
+                                ("alpha", ">= 1", lambda v: v >= 1),
+                                ("closing", ">= 0", lambda v: v >= 0)))
         unit = IwanLaw(1.0, self.tangential_stiffness, self.chi, self.beta, n_sliders=self.n_sliders,
                        alpha=self.alpha)
         object.__setattr__(self, "slider_stiffness", unit.slider_stiffness)
@@ -130,12 +144,16 @@ class ClampedIwanLaw(InterfaceLaw):
             kernels, gap, state = compiled
             traction, D = kernels.clamped_iwan(gap, state, self.slider_stiffness, self.unit_strength,
                                                float(self.normal_stiffness), bool(tangent))
+            if self.closing:
+                self._add_closing(gap, state, traction, D if tangent else None)
             return traction, (D if tangent else None)
         _, g_n, closed, _, _, t, ratio, direction, slipping = self._sliders(gap, state)
         traction = np.empty((g_n.size, 3))
         traction[:, :2] = t.sum(axis=1)
         traction[:, 2] = np.where(closed, self.normal_stiffness * g_n, 0.0)
         if not tangent:
+            if self.closing:
+                self._add_closing(gap, state, traction, None)
             return traction, None
         D = np.zeros((g_n.size, 3, 3))
         # sum_m k_m dt_m/dt_trial: k_m I when stuck, k_m ratio_m (I - d_m d_m^T) when slipping (an open
@@ -150,7 +168,23 @@ class ClampedIwanLaw(InterfaceLaw):
         D[:, 0, 1] = D[:, 1, 0] = -(weighted * d2).sum(axis=1)
         D[:, 1, 1] = diagonal - (slip_weight * d2 * d2).sum(axis=1)
         D[:, 2, 2] = np.where(closed, self.normal_stiffness, 0.0)
+        if self.closing:
+            self._add_closing(gap, state, traction, D)
         return traction, D
+
+    def _reclosed(self, gap, state) -> np.ndarray:
+        """(s,) bool: points open at the preload whose normal gap is closed (``closing = 1``)."""
+        state = np.asarray(state)
+        return (state[:, self.n_elements, 1] <= 0.5) & (np.asarray(gap)[:, 2] < 0.0)
+
+    def _add_closing(self, gap, state, traction, D) -> None:
+        """Add the reclosed points' normal penalty to ``traction`` (s, 3) and ``D`` (s, 3, 3) in place."""
+        hit = self._reclosed(gap, state)
+        if hit.any():
+            k = self.closing * self.normal_stiffness
+            traction[hit, 2] += k * np.asarray(gap)[hit, 2]
+            if D is not None:
+                D[hit, 2, 2] += k
 
     def commit(self, gap, state):
         compiled = self._compiled(gap, state)
@@ -181,7 +215,10 @@ class ClampedIwanLaw(InterfaceLaw):
         dt = radial_return_derivative(km * (dg_t - dstate[:, :N]), ratio, direction, slipping, dlimit)
         dtraction = np.empty((g_n.size, 3, dgap.shape[2]))
         dtraction[:, :2] = dt.sum(axis=1)
-        dtraction[:, 2] = np.where(closed[:, None], self.normal_stiffness * dgap[:, 2], 0.0)
+        k_normal = np.where(closed, self.normal_stiffness, 0.0)
+        if self.closing:
+            k_normal = k_normal + np.where(self._reclosed(gap, state), self.closing * self.normal_stiffness, 0.0)
+        dtraction[:, 2] = k_normal[:, None] * dgap[:, 2]
         new = dstate.copy()
         new[:, :N] = np.where(slipping[..., None, None], dg_t - dt / km, dstate[:, :N])
         return dtraction, new
@@ -195,8 +232,12 @@ class ClampedIwanLaw(InterfaceLaw):
         N = self.n_elements
         closed = state[:, N, 1] > 0.5
         slip = g_t[:, None, :] - state[:, :N]
-        return np.where(closed, 0.5 * np.einsum("m,smi,smi->s", self.slider_stiffness, slip, slip)
-                        + 0.5 * self.normal_stiffness * g_n**2, 0.0)
+        stored = np.where(closed, 0.5 * np.einsum("m,smi,smi->s", self.slider_stiffness, slip, slip)
+                          + 0.5 * self.normal_stiffness * g_n**2, 0.0)
+        if self.closing:
+            stored = stored + np.where(self._reclosed(gap, state), 0.5 * self.closing * self.normal_stiffness * g_n**2,
+                                       0.0)
+        return stored
 
     def backbone(self, u, slip_traction) -> np.ndarray:
         """The continuous element's virgin traction at tangential displacement ``u`` for a point of
