@@ -130,3 +130,36 @@ def test_closing_lets_an_open_point_touch_again_without_friction(compiled):
     assert np.allclose(dt[:, 2], np.einsum("sc,scm->sm", D[:, 2], dgap), rtol=1e-12, atol=0)
     with pytest.raises(ValueError, match="closing"):
         ClampedIwanLaw(K_N, K_T, CHI, BETA, closing=-1.0)
+
+
+def test_reclosed_friction_tangent_and_step_derivative_are_the_derivatives():
+    # a reclosed point's slip limit follows its penetration (kappa mu_c k_n (-g_n) f_m): the tangent's
+    # coupling column and the step derivative against central differences of the traction and of the
+    # committed state, in micro-slip (some sliders slipping); with the coupling dropped the normal
+    # column of dt_t would be zero and the check fails (it is 2e-2 of K_T kappa here)
+    kappa, mu_c = 1e-2, 0.5
+    law = ClampedIwanLaw(K_N, K_T, CHI, BETA, closing=kappa, closing_friction=mu_c)
+    gap, state = _preload(np.array([-1e-6, 2e-7]), law)
+    state = law.commit(gap, state)
+    tau = kappa * mu_c * K_N * 3e-7                      # macro-slip traction at 3e-7 m of penetration
+    moved = gap + np.array([[0.3, 0.1, -0.2], [0.0, 0.0, -5e-7 / (tau / (kappa * K_T))]]) * tau / (kappa * K_T)
+    moved[1, :2] = np.array([0.35, -0.25]) * tau / (kappa * K_T)
+    assert law._reclosed(moved, state)[1]
+    _, D = law.evaluate(moved, state)
+    h = 1e-7 * tau / (kappa * K_T)
+    for c in range(3):
+        step = np.zeros(3)
+        step[c] = h
+        fd = (law.traction(moved + step, state) - law.traction(moved - step, state)) / (2 * h)
+        assert np.allclose(D[:, :, c], fd, rtol=1e-5, atol=1e-7 * K_T * kappa)
+    assert abs(D[1, 0, 2]) > 1e-3 * kappa * K_T           # the coupling is there
+    rng = np.random.default_rng(1)
+    dgap = rng.standard_normal((2, 3, 2))
+    dstate = np.zeros(state.shape + (2,))
+    dt, dz = law.step_derivative(moved, state, dgap, dstate)
+    for m in range(2):
+        e = h * dgap[:, :, m]
+        fd_t = (law.traction(moved + e, state) - law.traction(moved - e, state)) / (2 * h)
+        fd_z = (law.commit(moved + e, state) - law.commit(moved - e, state)) / (2 * h)
+        assert np.allclose(dt[:, :, m], fd_t, rtol=1e-5, atol=1e-7 * K_T * kappa)
+        assert np.allclose(dz[..., m], fd_z, rtol=1e-5, atol=1e-6)

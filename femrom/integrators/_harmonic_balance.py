@@ -545,6 +545,28 @@ class HarmonicBalance:
                                        iterations, norm, aft.state_change)
 
     # -- reading a solution ---------------------------------------------------------------------
+    def periodic_states(self, Z: np.ndarray, omega: float) -> tuple[np.ndarray, np.ndarray, list]:
+        """``(q (N, n), v (N, n), states)``: the sampled coordinates and velocities of a solution ``Z``
+        (2H+1, n) at ``omega`` and the force's state at each sample of the last pass of the AFT's
+        march (module docstring), as the force sees it there (committed at the sample before): the
+        periodic loop's ``(q_j, state_j)`` pairs, e.g. to train a hyper-reduction on the motions
+        harmonic balance computes. ``states`` is a list of N states (empty for a force without memory)."""
+        Z = np.asarray(Z, dtype=float).reshape(self.basis.size, self.n_dofs)
+        q = self.basis.synthesis @ Z
+        v = omega * (self.basis.synthesis_derivative @ Z)
+        f = self.nonlinear
+        if f is None or not self.stateful:
+            return q, v, []
+        state = self.initial_state
+        for _ in range(self.passes - 1):
+            for j in range(self.basis.samples):
+                state = f.commit(q[j], v[j], state)
+        states = []
+        for j in range(self.basis.samples):
+            states.append(state)
+            state = f.commit(q[j], v[j], state)
+        return q, v, states
+
     def output_coefficients(self, Z: np.ndarray) -> np.ndarray:
         """(2H+1, p) coefficients of the outputs ``y = E q``."""
         return np.asarray(Z) @ self.output_matrix.T

@@ -127,7 +127,7 @@ def calibrate_law_parameter(model: PrestressedModel, name: str, target_hz: float
 
 
 def clamped_iwan_joint(system, displacement, state, supports, *, friction_coefficient: float, chi: float,
-                       beta: float, closing: float = 0.0):
+                       beta: float, closing: float = 0.0, closing_friction: float = 0.0):
     """``(system, q0, z0)``: ``system``'s ``dry_friction`` joint replaced by the ``clamped_iwan`` law about a
     preload (``displacement``, ``state``), at its static equilibrium.
 
@@ -138,14 +138,16 @@ def clamped_iwan_joint(system, displacement, state, supports, *, friction_coeffi
     ``q0`` is an equilibrium of the returned system and ``z0`` its committed state there. ``chi`` and
     ``beta``: the Iwan density's exponent and the weight of its delta (:class:`~femrom.fem.ClampedIwanLaw`);
     the normal and tangential stiffnesses are the dry-friction law's. ``closing``: ``kappa``, points open at the
-    preload close again under the normal penalty ``kappa k_n`` (the law's ``closing``; 0: they stay open).
+    preload close again under the normal penalty ``kappa k_n`` (the law's ``closing``; 0: they stay open), with Coulomb
+    coefficient ``closing_friction``.
     """
     joint = system.nonlinear
     law = joint.law.parameters()
     gaps = joint.gaps(joint.localize(displacement))
     clamped = clamped_state(gaps, state, normal_stiffness=law["normal_stiffness"],
                             friction_coefficient=friction_coefficient)
-    iwan = ClampedIwanLaw(law["normal_stiffness"], law["tangential_stiffness"], chi, beta, closing=closing)
+    iwan = ClampedIwanLaw(law["normal_stiffness"], law["tangential_stiffness"], chi, beta, closing=closing,
+                          closing_friction=closing_friction)
     force = JointForce.from_parameters({**joint.parameters(), "law": iwan.parameters()})
     model = dataclasses.replace(system, nonlinear=force)
     static = solve_static(model, system.load, supports=supports, state=clamped_iwan_state(iwan, gaps, clamped),

@@ -12,7 +12,7 @@ Iwan element (:class:`femrom.fem.IwanLaw`) whose macro-slip traction is the poin
 .. math::
 
     t_t = c \sum_m \operatorname{proj}_{|t| \le \tau_s f_m}\big(k_m (g_t - z_m)\big), \qquad
-    t_n = c\, k_n g_n + (1 - c)\, \kappa\, k_n \min(g_n, 0), \qquad c \in \{0, 1\} \text{ (closed at the preload)}.
+    t_n = c\, k_n g_n, \qquad c \in \{0, 1\} \text{ (closed at the preload)}.
 
 The slider stiffnesses ``k_m`` and the unit-traction strengths ``f_m`` are those of
 :class:`~femrom.fem.IwanLaw` with ``F_S = 1`` and ``K_T = k_t``: for the power-law
@@ -24,14 +24,16 @@ the weakest sliders (early onset), ``beta`` weighs the delta at ``phi_max`` (the
 the traction carried to macro-slip). Like :mod:`clamped_friction`, the law is piecewise
 linear with dissipative sliders, so the average-acceleration step stays energy-stable.
 
-``closing = kappa > 0`` lets a point open at the preload close again: a frictionless
-unilateral penalty ``kappa k_n`` on its normal gap (the gap it had at the preload plus the
-motion), the contact closing of the full ``dry_friction`` law without its friction;
-``kappa < 1`` is a softer re-closing contact (a rough surface touching at low pressure). Points
+``closing = kappa > 0`` lets a point open at the preload close again: a unilateral penalty
+``kappa k_n`` on its normal gap (the gap it had at the preload plus the motion), and with
+``closing_friction = mu_c > 0`` Coulomb friction at the pressure that penalty gives, spread over
+the same Iwan element (stiffnesses scaled by ``kappa``, macro-slip traction
+``mu_c kappa k_n (-g_n)``): the contact closing of the full ``dry_friction`` law, with
+``kappa < 1`` a softer re-closing contact (rough surfaces touching at low pressure).
+The reclosed points are evaluated by numpy (the compiled kernels take the others). Points
 near the edge of the clamped region close in bending and stiffen the joint at large
-amplitudes (docs/cases/jointed_beam.md). The term is conservative and convex but kinked:
-the trapezoidal rule can gain energy when a point opens inside a step, as with
-``dry_friction``; harmonic balance has no such issue.
+amplitudes (docs/cases/jointed_beam.md). The penalty is kinked: the trapezoidal rule can gain energy when a
+point opens inside a step, as with ``dry_friction``; harmonic balance has no such issue.
 
 Parameters
 ----------
@@ -49,7 +51,11 @@ alpha : float
     ``>= 1``: ratio of successive slip-displacement intervals (default 1.3).
 closing : float
     ``kappa >= 0``: ``0`` (default) a point open at the preload stays open; otherwise it closes
-    again under a frictionless penalty ``kappa k_n`` when its normal gap closes.
+    again under a penalty ``kappa k_n`` when its normal gap closes.
+closing_friction : float
+    ``mu_c >= 0``: the Coulomb coefficient of a reclosed point (default 0: frictionless).
+    Its sliders are the closed points' scaled by ``kappa`` (stiffness ``kappa k_m``, macro-slip
+    traction ``mu_c kappa k_n (-g_n)``, following the penetration).
 
 State: (s, N + 1, 2): rows ``0..N-1`` the slider positions ``z_m``, row ``N`` the
 point's ``(tau_s [Pa], c)``; set from a ``dry_friction`` preload by
@@ -88,6 +94,7 @@ class ClampedIwanLaw(InterfaceLaw):
     n_sliders: int = 20
     alpha: float = 1.3
     closing: float = 0.0
+    closing_friction: float = 0.0
 
     def __post_init__(self):
         check_parameters(self, (("normal_stiffness", "> 0", lambda v: v > 0),
@@ -96,7 +103,8 @@ class ClampedIwanLaw(InterfaceLaw):
                                 ("beta", ">= 0", lambda v: v >= 0),
                                 ("n_sliders", "an integer >= 1", lambda v: v >= 1 and v == int(v)),
                                 ("alpha", ">= 1", lambda v: v >= 1),
-                                ("closing", ">= 0", lambda v: v >= 0)))
+                                ("closing", ">= 0", lambda v: v >= 0),
+                                ("closing_friction", ">= 0", lambda v: v >= 0)))
         unit = IwanLaw(1.0, self.tangential_stiffness, self.chi, self.beta, n_sliders=self.n_sliders,
                        alpha=self.alpha)
         object.__setattr__(self, "slider_stiffness", unit.slider_stiffness)
@@ -128,70 +136,92 @@ class ClampedIwanLaw(InterfaceLaw):
         self._checked(gap, state)
         return kernels, np.ascontiguousarray(gap, dtype=float), np.ascontiguousarray(state, dtype=float)
 
+    def _reclosed(self, gap, state) -> np.ndarray:
+        """(s,) bool: points open at the preload whose normal gap is closed (``closing > 0``)."""
+        state = np.asarray(state)
+        if not self.closing:
+            return np.zeros(state.shape[0], dtype=bool)
+        return (state[:, self.n_elements, 1] <= 0.5) & (np.asarray(gap)[:, 2] < 0.0)
+
     def _sliders(self, gap, state):
+        """The return map of every slider: ``closed`` (s,) at the preload, ``scale`` (s,) of the points'
+        stiffnesses (1, ``kappa`` where reclosed, 0 where open), the sliders' stiffness ``k`` (s, N, 1),
+        trial and returned tractions (s, N, 2) and the radial return's ``ratio``, ``direction``, ``slipping``."""
         g_t, g_n, state = self._checked(gap, state)
         N = self.n_elements
         closed = state[:, N, 1] > 0.5
-        k = self.slider_stiffness[None, :, None]
+        reclosed = self._reclosed(gap, state)
+        scale = np.where(reclosed, self.closing, 1.0)
+        k = scale[:, None, None] * self.slider_stiffness[None, :, None]
         trial = k * (g_t[:, None, :] - state[:, :N])
-        limit = state[:, N, 0][:, None] * self.unit_strength[None, :]
-        t, ratio, direction, slipping = radial_return(trial, np.where(closed[:, None], limit, 0.0))
-        return g_t, g_n, closed, k, trial, t, ratio, direction, slipping
+        tau = np.where(closed, state[:, N, 0],
+                       np.where(reclosed, self.closing * self.closing_friction * self.normal_stiffness * -g_n, 0.0))
+        t, ratio, direction, slipping = radial_return(trial, tau[:, None] * self.unit_strength[None, :])
+        return g_t, g_n, closed, reclosed, k, trial, t, ratio, direction, slipping
 
-    def evaluate(self, gap, state, tangent=True):
-        compiled = self._compiled(gap, state)
-        if compiled is not None:
-            kernels, gap, state = compiled
-            traction, D = kernels.clamped_iwan(gap, state, self.slider_stiffness, self.unit_strength,
-                                               float(self.normal_stiffness), bool(tangent))
-            if self.closing:
-                self._add_closing(gap, state, traction, D if tangent else None)
-            return traction, (D if tangent else None)
-        _, g_n, closed, _, _, t, ratio, direction, slipping = self._sliders(gap, state)
+    def _normal_stiffness(self, closed, reclosed) -> np.ndarray:
+        """(s,) the points' normal stiffness: ``k_n`` closed at the preload, ``kappa k_n`` reclosed, else 0."""
+        return np.where(closed, self.normal_stiffness, np.where(reclosed, self.closing * self.normal_stiffness, 0.0))
+
+    def _evaluate(self, gap, state, tangent):
+        """The numpy reference of :meth:`evaluate` (every point, reclosed ones included)."""
+        _, g_n, closed, reclosed, k, _, t, ratio, direction, slipping = self._sliders(gap, state)
+        k_normal = self._normal_stiffness(closed, reclosed)
         traction = np.empty((g_n.size, 3))
         traction[:, :2] = t.sum(axis=1)
-        traction[:, 2] = np.where(closed, self.normal_stiffness * g_n, 0.0)
+        traction[:, 2] = k_normal * g_n
         if not tangent:
-            if self.closing:
-                self._add_closing(gap, state, traction, None)
             return traction, None
         D = np.zeros((g_n.size, 3, 3))
         # sum_m k_m dt_m/dt_trial: k_m I when stuck, k_m ratio_m (I - d_m d_m^T) when slipping (an open
         # point's sliders all slip at zero limit: ratio 0, tangent zero); summed without forming the
         # (s, N, 2, 2) blocks
-        k = self.slider_stiffness
+        k = k[:, :, 0]
         slip_weight = np.where(slipping, ratio, 0.0) * k
-        diagonal = np.where(slipping, ratio, 1.0) @ k
+        diagonal = (np.where(slipping, ratio, 1.0) * k).sum(axis=1)
         d1, d2 = direction[..., 0], direction[..., 1]
         weighted = slip_weight * d1
         D[:, 0, 0] = diagonal - (weighted * d1).sum(axis=1)
         D[:, 0, 1] = D[:, 1, 0] = -(weighted * d2).sum(axis=1)
         D[:, 1, 1] = diagonal - (slip_weight * d2 * d2).sum(axis=1)
-        D[:, 2, 2] = np.where(closed, self.normal_stiffness, 0.0)
-        if self.closing:
-            self._add_closing(gap, state, traction, D)
+        D[:, 2, 2] = k_normal
+        if self.closing and self.closing_friction and reclosed.any():
+            # a reclosed point's slip limit kappa mu k_n (-g_n) f_m: a slipping slider's traction
+            # tau f_m d_m follows the penetration, dt_t / dg_n = -kappa mu k_n sum_m f_m d_m
+            along = np.einsum("sm,smi->si", np.where(slipping, self.unit_strength[None, :], 0.0), direction)
+            D[:, :2, 2] = np.where(reclosed[:, None],
+                                   -self.closing * self.closing_friction * self.normal_stiffness * along, 0.0)
         return traction, D
 
-    def _reclosed(self, gap, state) -> np.ndarray:
-        """(s,) bool: points open at the preload whose normal gap is closed (``closing = 1``)."""
-        state = np.asarray(state)
-        return (state[:, self.n_elements, 1] <= 0.5) & (np.asarray(gap)[:, 2] < 0.0)
-
-    def _add_closing(self, gap, state, traction, D) -> None:
-        """Add the reclosed points' normal penalty to ``traction`` (s, 3) and ``D`` (s, 3, 3) in place."""
+    def evaluate(self, gap, state, tangent=True):
+        compiled = self._compiled(gap, state)
+        if compiled is None:
+            return self._evaluate(gap, state, tangent)
+        kernels, gap, state = compiled
+        traction, D = kernels.clamped_iwan(gap, state, self.slider_stiffness, self.unit_strength,
+                                           float(self.normal_stiffness), bool(tangent))
+        D = D if tangent else None
         hit = self._reclosed(gap, state)
-        if hit.any():
-            k = self.closing * self.normal_stiffness
-            traction[hit, 2] += k * np.asarray(gap)[hit, 2]
-            if D is not None:
-                D[hit, 2, 2] += k
+        if hit.any():                    # the few reclosed points: the reference
+            t_hit, D_hit = self._evaluate(gap[hit], state[hit], tangent)
+            traction[hit] = t_hit
+            if tangent:
+                D[hit] = D_hit
+        return traction, D
 
     def commit(self, gap, state):
         compiled = self._compiled(gap, state)
         if compiled is not None:
             kernels, gap, state = compiled
-            return kernels.clamped_iwan_commit(gap, state, self.slider_stiffness, self.unit_strength)
-        g_t, _, _, k, _, t, *_ = self._sliders(gap, state)
+            new = kernels.clamped_iwan_commit(gap, state, self.slider_stiffness, self.unit_strength)
+            hit = self._reclosed(gap, state)
+            if hit.any():
+                new[hit] = self._commit(gap[hit], state[hit])
+            return new
+        return self._commit(gap, state)
+
+    def _commit(self, gap, state):
+        g_t, _, _, _, k, _, t, *_ = self._sliders(gap, state)
         new = np.array(state, dtype=float)
         new[:, :-1] = g_t[:, None, :] - t / k
         return new
@@ -203,41 +233,38 @@ class ClampedIwanLaw(InterfaceLaw):
         dstate_new (s, N + 1, 2, m))``. As :meth:`femrom.fem.IwanLaw.step_derivative` per slider,
         with the slip limit ``c tau_s f_m`` read from the state (its derivative ``c f_m dtau_s``
         enters a slipping slider along its direction); the row ``(tau_s, c)`` is kept, an open
-        point (``c = 0``) carries no traction and its sliders follow the gap.
+        point (``c = 0``) carries no traction and its sliders follow the gap. A reclosed point's
+        limit ``kappa mu k_n (-g_n) f_m`` follows the normal gap.
         """
-        g_t, g_n, closed, k, _, _, ratio, direction, slipping = self._sliders(gap, state)
+        g_t, g_n, closed, reclosed, k, _, _, ratio, direction, slipping = self._sliders(gap, state)
         N = self.n_elements
         dgap = np.asarray(dgap, dtype=float)
         dstate = np.asarray(dstate, dtype=float)
         dg_t = dgap[:, None, :2, :]
         km = k[..., None]
-        dlimit = np.where(closed[:, None, None], self.unit_strength[None, :, None] * dstate[:, N, 0][:, None, :], 0.0)
+        dtau = np.where(closed[:, None], dstate[:, N, 0],
+                        np.where(reclosed[:, None],
+                                 -self.closing * self.closing_friction * self.normal_stiffness * dgap[:, 2], 0.0))
+        dlimit = self.unit_strength[None, :, None] * dtau[:, None, :]
         dt = radial_return_derivative(km * (dg_t - dstate[:, :N]), ratio, direction, slipping, dlimit)
         dtraction = np.empty((g_n.size, 3, dgap.shape[2]))
         dtraction[:, :2] = dt.sum(axis=1)
-        k_normal = np.where(closed, self.normal_stiffness, 0.0)
-        if self.closing:
-            k_normal = k_normal + np.where(self._reclosed(gap, state), self.closing * self.normal_stiffness, 0.0)
-        dtraction[:, 2] = k_normal[:, None] * dgap[:, 2]
+        dtraction[:, 2] = self._normal_stiffness(closed, reclosed)[:, None] * dgap[:, 2]
         new = dstate.copy()
         new[:, :N] = np.where(slipping[..., None, None], dg_t - dt / km, dstate[:, :N])
         return dtraction, new
 
     def dissipation(self, gap, state):
-        _, _, _, k, trial, t, *_ = self._sliders(gap, state)
+        *_, k, trial, t, _, _, _ = self._sliders(gap, state)
         return np.einsum("smi,smi->s", t, (trial - t) / k)
 
     def stored_energy(self, gap, state):
-        g_t, g_n = split_gap(gap)
-        N = self.n_elements
-        closed = state[:, N, 1] > 0.5
-        slip = g_t[:, None, :] - state[:, :N]
-        stored = np.where(closed, 0.5 * np.einsum("m,smi,smi->s", self.slider_stiffness, slip, slip)
-                          + 0.5 * self.normal_stiffness * g_n**2, 0.0)
-        if self.closing:
-            stored = stored + np.where(self._reclosed(gap, state), 0.5 * self.closing * self.normal_stiffness * g_n**2,
-                                       0.0)
-        return stored
+        """(s,) the sliders' springs ``sum_m |t_m|^2 / (2 k_m)`` after the return map (with a committed
+        state: ``k_m |g_t - z_m|^2 / 2``) and the normal penalty's ``k_n g_n^2 / 2``, at points in contact."""
+        _, g_n, closed, reclosed, k, _, t, *_ = self._sliders(gap, state)
+        springs = 0.5 * np.einsum("smi,smi->s", t, t / k)
+        k_normal = self._normal_stiffness(closed, reclosed)
+        return np.where(closed | reclosed, springs + 0.5 * k_normal * g_n**2, 0.0)
 
     def backbone(self, u, slip_traction) -> np.ndarray:
         """The continuous element's virgin traction at tangential displacement ``u`` for a point of
