@@ -10,6 +10,7 @@ from femrom.fem._interface_law import (
     InterfaceLaw,
     check_parameters,
     radial_return,
+    radial_return_derivative,
     radial_return_tangent,
     register_interface_law,
     split_gap,
@@ -101,8 +102,10 @@ class DryFrictionLaw(InterfaceLaw):
         .. math::
 
             ar t_n = rac{\Psi(g_{n,1}) - \Psi(g_{n,0})}{g_{n,1} - g_{n,0}}, \qquad
-            ar t_t = rac{ho}{2} k_t e_0 + \Big(rac12 + rac{\sigma^2}{1 + \sigma}\Big) t_1,
-            \qquad \sigma = \sqrt{1 - ho},
+            ar t_t = rac{
+ho}{2} k_t e_0 + \Big(rac12 + rac{\sigma^2}{1 + \sigma}\Big) t_1,
+            \qquad \sigma = \sqrt{1 - 
+ho},
 
         the normal part the discrete gradient (Gonzalez, J. Nonlinear Sci. 6, 1996) of ``Psi``
         (``Psi'`` of the midpoint when both ends are closed, zero when both are open), so that
@@ -181,6 +184,29 @@ class DryFrictionLaw(InterfaceLaw):
     def commit(self, gap, state):
         g_t, *_rest, (t, _, _, _) = self._slider(gap, state)
         return g_t - t / self.tangential_stiffness
+
+    def step_derivative(self, gap, state, dgap, dstate):
+        r"""Forward derivative of one return-map step along ``m`` directions.
+
+        ``dgap`` (s, 3, m) and ``dstate`` (s, 2, m) are the derivatives of the gap and of the frozen
+        sliders; returns ``(dtraction (s, 3, m), dz (s, 2, m))``: of the traction and of the committed
+        sliders. ``dt^tr = k_t (dg_t - dz)``, the limit's ``d(mu p) = -mu k_n dg_n`` at a closed point;
+        stuck: ``dt_t = dt^tr``, ``z`` kept; slipping: ``dt_t = rho (I - d d^T) dt^tr + d d(mu p)`` and
+        ``dz = dg_t - dt_t / k_t`` (the committed ``z = g_t - t_t / k_t``); ``dt_n = k_n dg_n`` where closed,
+        zero where open (an open point's slider follows the gap).
+        """
+        _, _, closed, _, _, (_, ratio, direction, slipping) = self._slider(gap, state)
+        dgap = np.asarray(dgap, dtype=float)
+        dstate = np.asarray(dstate, dtype=float)
+        k_t = self.tangential_stiffness
+        dg_t = dgap[:, :2, :]
+        dlimit = np.where(closed[:, None], -self.friction_coefficient * self.normal_stiffness * dgap[:, 2], 0.0)
+        dt = radial_return_derivative(k_t * (dg_t - dstate), ratio, direction, slipping, dlimit)
+        dtraction = np.empty_like(dgap)
+        dtraction[:, :2] = dt
+        dtraction[:, 2] = np.where(closed[:, None], self.normal_stiffness * dgap[:, 2], 0.0)
+        dz = np.where(slipping[:, None, None], dg_t - dt / k_t, dstate)
+        return dtraction, dz
 
     def dissipation(self, gap, state):
         *_rest, trial, (t, _, _, _) = self._slider(gap, state)
