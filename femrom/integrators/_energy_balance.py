@@ -152,7 +152,7 @@ class EnergyBalance:
 
     @property
     def external_work(self) -> np.ndarray:
-        """Cumulated ``sum (f_k + f_{k+1})/2 . (q_{k+1} - q_k)``."""
+        """Cumulated ``sum (f_k + f_{k+1})/2 . (q_{k+1} - q_k)`` (``f(t_k + h/2)`` for a midpoint scheme)."""
         return self._column(3, cumulative=True)
 
     @property
