@@ -189,6 +189,15 @@ class InterfaceLaw:
     #: (:class:`femrom.integrators.HarmonicBalance`); ``None``: the frozen-state tangent is used.
     step_derivative = None
 
+    #: Optional: ``step_traction(gap0, gap1, state, tangent=True) -> (traction (s, 3), d/dgap1 (s, 3, 3) or
+    #: None)``, the traction of a whole step from ``gap0`` to ``gap1`` (``state`` committed at ``gap0``) whose
+    #: work never exceeds what the law stores and dissipates: ``traction . (gap1 - gap0) >= stored_energy(gap1,
+    #: commit(gap1, state)) - stored_energy(gap0, state) + dissipation(gap1, state)``, with equality for an
+    #: elastic step. A law that has it gives :class:`~femrom.fem.JointForce` a step force
+    #: (:attr:`~femrom.fem.NonlinearForce.step_force`), which
+    #: :class:`femrom.integrators.DiscreteGradient` balances in place of the midpoint force.
+    step_traction = None
+
     def dissipation(self, gap: np.ndarray, state: np.ndarray) -> np.ndarray:
         """(s,) energy per unit area the sliders dissipate in the step from ``state`` to ``commit(gap, state)``."""
         raise NotImplementedError

@@ -215,6 +215,30 @@ class JointForce(NonlinearForce):
         dtraction, dz = self.law.step_derivative(self.gaps(x), self._state(state), dx.reshape(s, 3, -1), dstate)
         return (self.areas[:, None, None] * dtraction).reshape(3 * s, -1), dz
 
+    @property
+    def local_step_force(self):
+        r"""``(x0, x1, state) -> (g (3 s,), dg/dx1 (3 s, 3 s) csr)``, or ``None`` when the law has no step traction.
+
+        The force of a whole step from local coordinates ``x0`` to ``x1``, ``g_i = A_i bar t_i``
+        with the law's ``step_traction`` (:meth:`femrom.fem.DryFrictionLaw.step_traction`): its
+        work ``g . (x1 - x0)`` is at least the change of :meth:`stored_energy` plus
+        :meth:`dissipation` over the step. :meth:`local_step_force_and_blocks` gives the tangent
+        as (s, 3, 3) blocks.
+        """
+        if not callable(getattr(self.law, "step_traction", None)):
+            return None
+        return self._local_step_force
+
+    def _local_step_force(self, x0, x1, state=None):
+        g, blocks = self.local_step_force_and_blocks(x0, x1, state)
+        return g, sp.csr_matrix((blocks.ravel(), self._tangent_indices, self._tangent_indptr),
+                                shape=(3 * self.n_pairs,) * 2)
+
+    def local_step_force_and_blocks(self, x0, x1, state=None):
+        """``(g (3 s,), A_i d bar t_i / d Delta_{i,1} (s, 3, 3))`` of the step from ``x0`` to ``x1`` (one law call)."""
+        traction, D = self.law.step_traction(self.gaps(x0), self.gaps(x1), self._state(state), tangent=True)
+        return (self.areas[:, None] * traction).ravel(), self.areas[:, None, None] * D
+
     def local_commit(self, x, xdot, state):
         return self.law.commit(self.gaps(x), self._state(state))
 

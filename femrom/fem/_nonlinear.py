@@ -186,6 +186,13 @@ class NonlinearForce:
         """``U(x)`` with ``g = grad U`` (conservative forces only)."""
         raise NotImplementedError(f"{type(self).__name__} has no potential")
 
+    #: Optional (a stateful force): ``local_step_force(x0, x1, state) -> (g, dg/dx1)``, the local force of a
+    #: whole step from ``x0`` to ``x1`` with ``state`` committed at ``x0``, whose work ``g . (x1 - x0)`` is at
+    #: least what the force stores and dissipates over the step (a joint with an energy-consistent law,
+    #: :attr:`femrom.fem.JointForce.local_step_force`); the tangent as :meth:`local_tangent`'s. ``None``: the
+    #: force has none. :attr:`step_force` is its global view.
+    local_step_force = None
+
     def initial_state(self) -> Any:
         """Internal state at t = 0 (``None`` for a stateless force)."""
         return None
@@ -225,6 +232,22 @@ class NonlinearForce:
         local = sp.diags(D) if np.ndim(D) == 1 and not sp.issparse(D) else sp.csr_matrix(D)
         L = self.local_map
         return (L.T @ local @ L).tocsr()
+
+    @property
+    def step_force(self):
+        r"""``(q0, q1, state) -> (f (n,), df/dq1 (n, n) sparse)``: ``L^T g`` of :attr:`local_step_force`, or ``None``.
+
+        The force a time step from ``q0`` to ``q1`` balances in place of ``f(q_m)`` when it is to
+        keep the discrete energy balance (:class:`femrom.integrators.DiscreteGradient`)."""
+        local = self.local_step_force
+        if not callable(local):
+            return None
+
+        def step_force(q0, q1, state=None):
+            g, D = local(self.localize(q0), self.localize(q1), state)
+            return self.globalize(g), self._global_matrix(_as_diagonal_or_matrix(D, self.n_local))
+
+        return step_force
 
     def potential(self, q: np.ndarray) -> float:
         """``U(L q)`` (conservative forces only)."""

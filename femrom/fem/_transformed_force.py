@@ -143,6 +143,31 @@ class TransformedForce(NonlinearForce):
             return inner
         return lambda x, state, dx, dstate: inner(self._shifted(x), state, dx, dstate)
 
+    @property
+    def local_step_force(self):
+        """The original's step force (:attr:`femrom.fem.NonlinearForce.local_step_force`) at the shifted local
+        coordinates, or ``None`` when it has none."""
+        inner = getattr(self.force_model, "local_step_force", None)
+        if not callable(inner):
+            return None
+        if self.local_offset is None:
+            return inner
+        return lambda x0, x1, state: inner(self._shifted(x0), self._shifted(x1), state)
+
+    def dense_step_force(self, W: np.ndarray, q0_hat, q1_hat, state=None):
+        r"""``(W^T g, W^T (dg/dx1) W)`` as dense arrays of the step force at ``x = W q^`` (``W``: (s, k), ``L T``).
+
+        A joint's 3 x 3 blocks are multiplied pair by pair, as :func:`dense_projection` does."""
+        x0, x1 = self._shifted(W @ q0_hat), self._shifted(W @ q1_hat)
+        blocks = getattr(self.force_model, "local_step_force_and_blocks", None)
+        if callable(blocks):
+            g, D = blocks(x0, x1, state)
+            s = D.shape[0]
+            return W.T @ g, W.T @ np.matmul(D, W.reshape(s, 3, -1)).reshape(3 * s, -1)
+        g, D = self.force_model.local_step_force(x0, x1, state)
+        D = sp.diags(D) if np.ndim(D) == 1 and not sp.issparse(D) else D
+        return W.T @ g, W.T @ np.asarray(D @ W)
+
     def restore(self, data):
         return self.force_model.restore(data)
 

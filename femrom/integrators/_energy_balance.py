@@ -28,7 +28,17 @@ the energy stored in the interface springs plus what the sliders dissipate
 ``epsilon_k`` vanishes in steps that stick or slip throughout; in a step that
 switches between the two, the trapezoidal mean ``bar g`` is not the return
 map's work, and ``epsilon_k`` is of the order of ``dt^2`` relative to the
-step's work (measured in ``docs/joint.md``).
+step's work (measured in ``docs/joint.md``); when a penalty contact opens or
+closes within a step it can be negative and large: the trapezoidal rule then
+creates energy.
+
+A midpoint scheme (:class:`femrom.integrators.DiscreteGradient`) balances the
+input at the step's middle: given the scheme, the external work is
+``F(t_k + h/2) . Delta q``. Its :attr:`EnergyBalance.residual` is then zero for
+conservative steps and positive where the step dissipates more than the law
+reports (a joint's step force, :attr:`femrom.fem.NonlinearForce.step_force`);
+:attr:`~EnergyBalance.scheme_residual` and :attr:`~EnergyBalance.joint_residual`
+split it by the trapezoid's nonlinear work, which is not that scheme's.
 """
 
 from __future__ import annotations
@@ -45,6 +55,10 @@ class EnergyBalance:
         The system being integrated by Newmark average acceleration (the
         identity is that scheme's; another scheme's run gives a nonzero
         :attr:`scheme_residual` of its own order).
+    scheme : Scheme, optional
+        The scheme of the run: one that samples the input at the step's middle
+        (``input_time = 0.5``, the midpoint family) has its external work taken
+        there. Default: the trapezoid's ``(f_k + f_{k+1}) / 2``.
 
     Attributes (after the run; (k + 1,) ndarrays over the steps, cumulative from step 0)
     ------------------------------------------------------------------------------------
@@ -56,8 +70,9 @@ class EnergyBalance:
     report it. The external work includes a constant load ``f_0``.
     """
 
-    def __init__(self, system):
+    def __init__(self, system, scheme=None):
         self.system = system
+        self._midpoint_input = scheme is not None and float(scheme.input_time) == 0.5
         forces = system.nonlinear_forces
         self._stored = [f for f in forces if hasattr(f, "stored_energy") or f.conservative]
         self._dissipative = [f for f in forces if hasattr(f, "dissipation")]
@@ -97,7 +112,12 @@ class EnergyBalance:
         else:
             p = self._previous
             dq = q - p["q"]
-            work = 0.0 if f is None else 0.5 * float((f + p["f"]) @ dq)
+            if f is None:
+                work = 0.0
+            elif self._midpoint_input:
+                work = float(system.external_force(0.5 * (t + p["t"])) @ dq)
+            else:
+                work = 0.5 * float((f + p["f"]) @ dq)
             if system.damping is not None:
                 v_mean = 0.5 * (v + p["v"])
                 rayleigh = (t - p["t"]) * float(v_mean @ (system.damping @ v_mean))
@@ -132,7 +152,7 @@ class EnergyBalance:
 
     @property
     def external_work(self) -> np.ndarray:
-        """Cumulated ``sum (f_k + f_{k+1})/2 . (q_{k+1} - q_k)``."""
+        """Cumulated ``sum (f_k + f_{k+1})/2 . (q_{k+1} - q_k)`` (``f(t_k + h/2)`` for a midpoint scheme)."""
         return self._column(3, cumulative=True)
 
     @property

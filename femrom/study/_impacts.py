@@ -57,10 +57,12 @@ class OutputRingDown:
         return 1e3 * self.seconds / max(self.accelerations.shape[1] - 1, 1)
 
 
-def output_ring_down(system, rest_state, duration: float, dt: float, *, keep_every: int = 0) -> OutputRingDown:
+def output_ring_down(system, rest_state, duration: float, dt: float, *, keep_every: int = 0,
+                     scheme=None) -> OutputRingDown:
     """``system`` from rest (``q = q' = q'' = 0``, force state ``rest_state``) under its own inputs for
-    ``round(duration / dt)`` Newmark steps (average acceleration). The inputs must vanish at ``t = 0``
-    (a blow that starts there), so that rest is the initial state."""
+    ``round(duration / dt)`` steps of ``scheme`` (default Newmark, average acceleration; e.g.
+    :class:`~femrom.integrators.DiscreteGradient` for a joint with a step force). The inputs must
+    vanish at ``t = 0`` (a blow that starts there), so that rest is the initial state."""
     r = system.n_dofs
     n_steps = int(round(duration / dt))
     trajectory = Trajectory(fields=("a",))
@@ -72,8 +74,8 @@ def output_ring_down(system, rest_state, duration: float, dt: float, *, keep_eve
 
     rest = StepResult.at_rest(r, state=rest_state)
     tic = time.perf_counter()
-    summary = integrate(system, Newmark(), None, None, dt, n_steps, consumers=[trajectory, keep], start=rest,
-                        progress=None)
+    summary = integrate(system, scheme or Newmark(), None, None, dt, n_steps, consumers=[trajectory, keep],
+                        start=rest, progress=None)
     accelerations = np.asarray(system.output_matrix @ trajectory.a)
     return OutputRingDown(accelerations, time.perf_counter() - tic, summary.newton_iterations, kept)
 
@@ -87,16 +89,16 @@ class ImpactTraining:
 
 
 def ecsw_training(system, rest_state, peaks, *, width: float, window: float, dt: float, input: int = 0,
-                  keep_every: int = 4, progress=None) -> ImpactTraining:
+                  keep_every: int = 4, progress=None, scheme=None) -> ImpactTraining:
     """One :func:`output_ring_down` of ``window`` seconds per blow of ``peaks`` [N] (half-sines of duration
-    ``width`` on input ``input``), every ``keep_every``-th step's ``(q, state)`` kept for ECSW
-    (:func:`femrom.rom.ecsw_joint`)."""
+    ``width`` on input ``input``, steps of ``scheme``, default Newmark), every ``keep_every``-th step's
+    ``(q, state)`` kept for ECSW (:func:`femrom.rom.ecsw_joint`)."""
     snapshots, runs = [], {}
     for peak in peaks:
         if progress is not None:
             progress(f"ECSW training: {peak:g} N blow, {window:g} s ...")
         run = output_ring_down(with_impulse(system, peak, width, input=input), rest_state, window, dt,
-                               keep_every=keep_every)
+                               keep_every=keep_every, scheme=scheme)
         snapshots += run.snapshots
         runs[peak] = run
     return ImpactTraining(snapshots, runs)

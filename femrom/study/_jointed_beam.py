@@ -209,12 +209,13 @@ class JointedBeamModel:
         """``1 / (steps_per_period f_1)``."""
         return 1.0 / (calibrated.f1 * self.steps_per_period)
 
-    def hyper_reduced(self, reduced, z0, dt: float, *, progress=None):
+    def hyper_reduced(self, reduced, z0, dt: float, *, progress=None, scheme=None):
         """``(training, sampling, hyper, z_hyper)``: :func:`ecsw_training` at :attr:`training_impacts` over
-        :attr:`training_window` (every 4th step), ECSW at :attr:`ecsw_tolerance`, the hyper-reduced model and
-        its rest state."""
+        :attr:`training_window` (every 4th step; ``scheme``: default Newmark), ECSW at :attr:`ecsw_tolerance`,
+        the hyper-reduced model and its rest state."""
         training: ImpactTraining = ecsw_training(reduced, z0, self.training_impacts, width=self.impact_width,
-                                                 window=self.training_window, dt=dt, progress=progress)
+                                                 window=self.training_window, dt=dt, progress=progress,
+                                                 scheme=scheme)
         sampling = ecsw_joint(reduced, training.snapshots, z0, tolerance=self.ecsw_tolerance)
         hyper, z_hyper = hyper_reduced_system(reduced, sampling, z0)
         return training, sampling, hyper, z_hyper

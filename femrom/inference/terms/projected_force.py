@@ -106,6 +106,26 @@ class ProjectedNonlinearForce(ReducedTerm):
             return (self.force(q, v, state), *self.tangent(q, v, state))
         return dense_projection(W, self.transformed, q, v, state)
 
+    @property
+    def step_force(self):
+        """``(q0, q1, state) -> (f^ (r,), df^/dq1 (r, r))`` as dense arrays: the projected force's step force
+        (:attr:`femrom.fem.NonlinearForce.step_force`), or ``None`` when it has none."""
+        W = self._local
+        if W is None:
+            inner = getattr(self.force_model, "step_force", None)
+            if not callable(inner):
+                return None
+            V = self.basis
+
+            def step_force(q0, q1, state=None):
+                f, D = inner(V @ q0, V @ q1, state)
+                return V.T @ f, V.T @ np.asarray(D @ V)
+
+            return step_force
+        if not callable(self.transformed.local_step_force):
+            return None
+        return lambda q0, q1, state=None: self.transformed.dense_step_force(W, q0, q1, state)
+
     def potential(self, q) -> float:
         if not self.conservative:
             return 0.0

@@ -20,6 +20,20 @@ without them. (Multiply the step by ``q_{k+1} - q_k = h v_m``: ``(v_{k+1} - v_k)
 v_m`` is the kinetic, ``(q_{k+1} - q_k)^T K q_m`` the quadratic and the discrete
 gradient the nonlinear potential's difference.) Second order; a linear model is the
 midpoint rule, and its frequency map is the midpoint rule's.
+
+A stateful force with a *step force* (:attr:`femrom.fem.NonlinearForce.step_force`: a joint
+whose law has an energy-consistent ``step_traction``, e.g. ``dry_friction``) enters with it,
+``bar f(q_k, q_{k+1}; s_k)`` in place of ``f(q_m, v_m; s_k)``. Its work ``bar f . (q_{k+1} -
+q_k)`` is at least the change of the energy it stores plus what it dissipates, so that
+
+.. math::
+
+    E_{k+1} - E_k + D_k \le h\, v_m \cdot \big(F_{k+1/2} - C v_m\big)
+
+with ``E`` including the joint's stored energy and ``D_k`` its dissipation: a penalty contact
+that opens or closes, sticks or slips within a step takes energy out or keeps it, never
+adds it (:meth:`femrom.fem.DryFrictionLaw.step_traction`). The trapezoidal rule's mean
+``(f_k + f_{k+1}) / 2`` has no such bound, and gains energy when a pair opens within a step.
 """
 
 from __future__ import annotations
@@ -81,6 +95,13 @@ def discrete_gradient(term, q0: np.ndarray, q1: np.ndarray, potential0: float | 
         u0 = term.potential(q0) if potential0 is None else potential0
         grad = grad + ((term.potential(q1) - u0 - float(grad @ delta)) / dd) * delta
     return grad, jac
+
+
+def _added(J, B, sparse: bool):
+    """``J + B``: sparse for a sparse step matrix, else a dense ndarray (never ``np.matrix``)."""
+    if sparse:
+        return J + B
+    return J + (B.toarray() if sp.issparse(B) else np.asarray(B))
 
 
 def forces_of(nonlinear) -> tuple:
@@ -163,7 +184,10 @@ class DiscreteGradient(ImplicitMidpoint):
             if states is None:
                 states = (None,) * len(forces)
             conservative = [(f, f.potential(q)) for f in forces if f.conservative]
-            other = [(f, s) for f, s in zip(forces, states) if not f.conservative]
+            stepped = [(f.step_force, s) for f, s in zip(forces, states)
+                       if not f.conservative and callable(getattr(f, "step_force", None))]
+            other = [(f, s) for f, s in zip(forces, states)
+                     if not f.conservative and not callable(getattr(f, "step_force", None))]
             sparse = sp.issparse(cache.matrix)
 
             def evaluate(x):
@@ -181,13 +205,19 @@ class DiscreteGradient(ImplicitMidpoint):
                     parts.append(grad)
                     if Jq is not None:
                         J = J + h * Jq
+                for step_force, s in stepped:
+                    # the step's force from q to q1 (its work bounds the stored energy's change plus
+                    # the dissipation), d q1 / d v_m = h
+                    fbar, J1 = step_force(q, q1, s)
+                    parts.append(fbar)
+                    J = _added(J, h * J1, sparse)
                 for f, s in other:
                     parts.append(f.force(qm, x, s))
                     Jq, Jv = f.tangent(qm, x, s)
                     if Jv is not None:
-                        J = J + Jv
+                        J = _added(J, Jv, sparse)
                     if Jq is not None:
-                        J = J + 0.5 * h * Jq
+                        J = _added(J, 0.5 * h * Jq, sparse)
                 R = sum(parts)
                 scale = 0.0                     # the update test below, not the residual's
                 if sparse:
