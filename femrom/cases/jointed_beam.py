@@ -23,12 +23,20 @@ The bolted half Brake-Reuss beam of ``jointed_beam.toml`` (free-free, three bolt
    acc1's band-passed backbone (60-100 Hz, Hilbert, 0.2 s windows) with Newmark's period
    error removed (:func:`femrom.post.period_corrected`: ``f = tan(pi f_h dt) / (pi dt)``).
 6. **The measured backbone** of the same processing (``data/brb/hammer_impact.npz``).
-7. The stepped-sine forced response of the hyper-reduced model at the shaker (``shaker1``):
-   by default 0.2 and 1.5 N at 79.6-80.6 Hz in 0.1 Hz steps; ``--full-sweep`` the
-   issue's 0.2, 0.5, 1 and 1.5 N at 79-81.5 Hz in 0.05 Hz steps; beside each point the stuck
-   joint's linear response at that force (:func:`femrom.study.stepped_sine_response`).
+7. **The measured range** (:class:`femrom.study.MeasuredRangeJoint`): the ``clamped_iwan`` joint whose
+   points open at the preload touch again (``closing``), ``mu``, ``beta`` and ``closing`` fitted on the
+   response-controlled stepped sine (5-80 m/s^2 at acc3) and the hammer's backbone at acc3
+   (``--fit-range`` refits, about 20-30 min; the defaults are that fit's result), with the shaker's
+   attached mass read off the data; its modal model hyper-reduced by ECSW trained on periodic
+   solutions (:func:`femrom.study.periodic_training`).
+8. **The forced response** at the shaker (``shaker1``) by harmonic balance
+   (:func:`femrom.study.harmonic_balance_sweep`): 0.2, 0.5, 1 and 1.5 N over 79-81.5 Hz by 0.05 Hz,
+   swept upwards as the test does, beside the measured response-controlled levels; and the EPMC
+   backbone of mode 1 at acc3 to 90 m/s^2 beside the measured phase-resonance backbone
+   (:func:`femrom.post.phase_resonance_backbone`). ``--time-domain`` adds the marched stepped sine of
+   the hammer model at 0.2 and 1.5 N (79.6-80.6 Hz by 0.1 Hz; a few minutes).
 
-Run ``python -m femrom run jointed_beam [-o results/jointed_beam] [--full-sweep] [--quick] [--no-fit]``.
+Run ``python -m femrom run jointed_beam [-o results/jointed_beam] [--quick] [--no-fit] [--fit-range] [--time-domain]``.
 """
 
 
@@ -43,10 +51,13 @@ from pathlib import Path
 import numpy as np
 
 from femrom.cases import case_parser
-from femrom.post import Backbone, hilbert_backbone, measured_backbone, period_corrected, plot_backbones, \
-    read_hammer_impact, staged_output, static_qsma, with_linear_damping, write_metrics
-from femrom.study import JointedBeamModel, backbone_shift, compare_backbones, modal_qsma, output_ring_down, \
-    stepped_sine_response, with_impulse
+from femrom.integrators import HarmonicBalance
+from femrom.post import Backbone, hilbert_backbone, measured_backbone, period_corrected, phase_resonance_backbone, \
+    plot_backbones, plot_forced_response, read_hammer_impact, read_response_controlled, resonance_force, \
+    staged_output, static_qsma, with_linear_damping, write_metrics
+from femrom.rom import ecsw_joint, hyper_reduced_system
+from femrom.study import JointedBeamModel, MeasuredRangeJoint, backbone_shift, compare_backbones, \
+    harmonic_balance_sweep, modal_qsma, output_ring_down, periodic_training, stepped_sine_response, with_impulse
 
 SCENE = Path(__file__).with_suffix(".toml")
 BAND, WINDOW = (60.0, 100.0), 0.2
@@ -60,8 +71,17 @@ class JointedBeamCase(JointedBeamModel):
     ring_down: float = 3.0                      #: simulated seconds after the blow
     qsma_amplitudes: tuple = tuple(np.round(np.logspace(0, np.log10(32.0), 16), 4))  #: acc1 [m/s^2]
     forced: bool = True
-    forced_levels: tuple = (0.2, 1.5)            #: shaker force amplitudes [N] (--full-sweep: 0.2, 0.5, 1, 1.5)
-    forced_frequencies: tuple = tuple(np.round(np.arange(79.6, 80.6 + 1e-9, 0.1), 3))  #: (--full-sweep: 79-81.5 by 0.05)
+    forced_levels: tuple = (0.2, 0.5, 1.0, 1.5)  #: shaker force amplitudes [N]
+    forced_frequencies: tuple = tuple(np.round(np.arange(79.0, 81.5 + 1e-9, 0.05), 3))  #: [Hz], swept upwards
+    forced_harmonics: int = 1                    #: harmonic balance's H (docs/cases/jointed_beam.md: accuracy)
+    forced_samples: int = 16                     #: its AFT samples per period
+    measured_range_joint: MeasuredRangeJoint = MeasuredRangeJoint()
+    fit_range: bool = False                      #: refit the measured-range joint (--fit-range)
+    range_training_forces: tuple = (0.2, 0.8, 2.0)   #: periodic solutions at 80.3 Hz ECSW trains on [N]
+    range_ecsw_tolerance: float = 3e-3
+    time_domain: bool = False                    #: also the marched stepped sine of the hammer model
+    time_domain_levels: tuple = (0.2, 1.5)
+    time_domain_frequencies: tuple = tuple(np.round(np.arange(79.6, 80.6 + 1e-9, 0.1), 3))
     forced_steps_per_period: int = 32
     forced_tolerance: float = 1e-2
     fit_iwan: bool = True                       #: fit chi and beta on the measured backbone (when the data are there)
@@ -87,6 +107,109 @@ def shift_1_to_30(backbone: Backbone) -> dict:
     """Frequency shift and damping ratios from 1 to 30 m/s^2 at acc1 (inside the backbone's range)."""
     s = backbone_shift(backbone, 1.0, 30.0)
     return {"from_m_s2": s.pop("from_amplitude"), "to_m_s2": s.pop("to_amplitude"), **s}
+
+
+def response_controlled_peaks(levels, forces) -> list[dict]:
+    """What the response-controlled levels say a force-controlled test would peak at: per force ``F``, the
+    level amplitude whose smallest force is ``F`` (log-log interpolation between the levels) and the
+    frequency of that smallest force (:func:`femrom.post.resonance_force`); ``None`` outside the levels."""
+    table = sorted((resonance_force(level)[1], level.level_m_s2, resonance_force(level)[0]) for level in levels)
+    force, amplitude, frequency = (np.array(column) for column in zip(*table))
+    rows = []
+    for F in forces:
+        if not force[0] <= F <= force[-1]:
+            rows.append({"force_n": float(F), "amplitude_m_s2": None, "frequency_hz": None})
+            continue
+        x = np.log(F)
+        rows.append({"force_n": float(F), "amplitude_m_s2": float(np.exp(np.interp(x, np.log(force), np.log(amplitude)))),
+                     "frequency_hz": float(np.interp(x, np.log(force), frequency))})
+    return rows
+
+
+def measured_range_section(config: JointedBeamCase, setup, damping: float, data_dir, progress, seconds: dict,
+                           notes: list) -> dict:
+    """Steps 7 and 8 of the module docstring: the measured-range joint, its hyper-reduced modal model, the EPMC
+    backbone and the forced response by harmonic balance, against the response-controlled data."""
+    levels = None
+    try:
+        levels = read_response_controlled(data_dir)
+    except FileNotFoundError as exc:
+        notes.append(f"response-controlled data not found ({exc}); the model's curves are computed without them")
+    joint = config.measured_range_joint
+    fit = None
+    if config.fit_range:
+        if levels is None:
+            raise FileNotFoundError("--fit-range needs the response-controlled data (femrom data fetch brb)")
+        progress("jointed beam: fitting the measured-range joint (mu, beta, kappa) on the response-controlled "
+                 "and hammer backbones at acc3 (EPMC per evaluation) ...")
+        hammer = measured_backbone(read_hammer_impact(None if data_dir is None else Path(data_dir)), channel="acc3")
+        fit = config.fit_measured_range(setup, phase_resonance_backbone(levels), hammer, damping, start=joint,
+                                        progress=progress)
+        joint = fit.pop("joint")
+        seconds["fit_measured_range"] = fit["seconds"]
+    progress(f"jointed beam: measured-range joint (mu {joint.friction_coefficient:.3g}, chi {joint.chi:+.3g}, "
+             f"beta {joint.beta:.3g}, closing {joint.closing:.3g}, shaker mass {1e3 * joint.shaker_mass:.3g} g) ...")
+    clock = time.perf_counter()
+    reduced, z0 = config.measured_range(setup, joint, damping)
+    peak_frequency = 80.3
+    snapshots = periodic_training(reduced, z0, 1, peak_frequency, config.range_training_forces,
+                                  harmonics=config.forced_harmonics, samples=config.forced_samples)
+    sampling = ecsw_joint(reduced, snapshots, z0, tolerance=config.range_ecsw_tolerance)
+    hyper, z_hyper = hyper_reduced_system(reduced, sampling, z0)
+    seconds["measured_range_model"] = time.perf_counter() - clock
+    progress(f"  ECSW on {len(snapshots)} periodic states: {sampling.pairs.size} of {sampling.n_pairs} pairs, "
+             f"residual {sampling.residual:.2g} ({seconds['measured_range_model']:.1f} s)")
+    # the sampled joint against every pair at the largest force, near its peak
+    check = {}
+    for name, model, state in (("all_pairs", reduced, z0), ("hyper", hyper, z_hyper)):
+        hb = HarmonicBalance(model, 1, harmonics=config.forced_harmonics, samples=config.forced_samples, state=state)
+        omega = 2 * np.pi * 80.4
+        check[name] = float(omega**2 * abs(hb.phasor(hb.solve(omega, max(config.forced_levels)).coefficients)[2]))
+    validation = {"force_n": max(config.forced_levels), "frequency_hz": 80.4, "acc3_all_pairs_m_s2": check["all_pairs"],
+                  "acc3_hyper_m_s2": check["hyper"],
+                  "relative_difference": check["hyper"] / check["all_pairs"] - 1.0}
+    progress("jointed beam: EPMC backbone of mode 1 at acc3 (H = 3) ...")
+    clock = time.perf_counter()
+    _, backbone = config.measured_range_backbone(hyper, z_hyper, harmonics=3, samples=16)
+    seconds["epmc_backbone"] = time.perf_counter() - clock
+    progress(f"jointed beam: forced response by harmonic balance (H = {config.forced_harmonics}, "
+             f"{config.forced_samples} samples), {len(config.forced_levels)} levels x "
+             f"{len(config.forced_frequencies)} frequencies ...")
+    sweep = harmonic_balance_sweep(hyper, z_hyper, 1, config.forced_frequencies, config.forced_levels,
+                                   harmonics=config.forced_harmonics, samples=config.forced_samples,
+                                   progress=lambda line: progress(f"  {line}"))
+    seconds["forced_response_hb"] = sweep["seconds"]
+    peaks = []
+    for row in sweep["rows"]:
+        points = row["outputs"]["acc3"]
+        k = int(np.argmax([p["amplitude_m_s2"] for p in points]))
+        peaks.append({"force_n": row["force_n"], "amplitude_m_s2": points[k]["amplitude_m_s2"],
+                      "frequency_hz": points[k]["frequency_hz"]})
+    backbones = {"epmc (model, shaker attached)": backbone}
+    result = {"joint": joint.parameters(), "fit": fit, "hyper_reduction": {**sampling.describe(),
+              "training": f"periodic solutions at {peak_frequency} Hz, forces {list(config.range_training_forces)} N",
+              "validation": validation},
+              "backbone_epmc_acc3": [{"amplitude_m_s2": float(a), "frequency_hz": float(f), "damping_ratio": float(z)}
+                                     for a, f, z in zip(backbone.amplitude, backbone.frequency_hz,
+                                                        backbone.damping_ratio)],
+              "peaks": peaks, "newton_iterations_per_point": float(np.mean(sweep["iterations"])),
+              "forced_response": sweep["rows"], "_backbones": backbones, "_measured_levels": levels}
+    if levels is not None:
+        measured = phase_resonance_backbone(levels)
+        backbones["measured, response-controlled (phase resonance)"] = measured
+        la = np.log(backbone.amplitude)
+        f_model = np.interp(np.log(measured.amplitude), la, backbone.frequency_hz)
+        z_model = np.interp(np.log(measured.amplitude), la, backbone.damping_ratio)
+        result["against_response_controlled"] = [
+            {"amplitude_m_s2": float(a), "frequency_measured_hz": float(fm), "frequency_model_hz": float(f),
+             "frequency_difference_hz": float(f - fm), "damping_measured": float(zm), "damping_model": float(z),
+             "damping_relative_error": float(z / zm - 1.0)}
+            for a, fm, f, zm, z in zip(measured.amplitude, measured.frequency_hz, f_model, measured.damping_ratio,
+                                       z_model)]
+        expected = response_controlled_peaks(levels, [p["force_n"] for p in peaks])
+        for peak, estimate in zip(peaks, expected):
+            peak["response_controlled_estimate"] = estimate
+    return result
 
 
 def run(config: JointedBeamCase, out: Path, progress=print, data_dir=None) -> dict:
@@ -160,18 +283,20 @@ def run(config: JointedBeamCase, out: Path, progress=print, data_dir=None) -> di
     acc = blow.accelerations
     seconds["ring_down"] = blow.seconds
     backbones["transient"] = period_corrected(hilbert_backbone(acc[0], 1.0 / dt, BAND, window=WINDOW), dt)
-    forced = None
-    if config.forced:
-        progress(f"jointed beam: stepped sine, {len(config.forced_levels)} levels x "
-                 f"{len(config.forced_frequencies)} frequencies ...")
+    time_domain = None
+    if config.time_domain:
+        progress(f"jointed beam: marched stepped sine of the hammer model, {len(config.time_domain_levels)} levels x "
+                 f"{len(config.time_domain_frequencies)} frequencies ...")
         tic_forced = time.perf_counter()
-        # beside each point the stuck joint's (linear) response at that force: the nonlinearity is their
-        # difference; at small forces they agree to the steady-state tolerance
-        _, forced = stepped_sine_response(hyper, z_hyper, 1, config.forced_frequencies, config.forced_levels,
-                                          steps_per_period=config.forced_steps_per_period,
-                                          tolerance=config.forced_tolerance, linear_key="linear_amplitude_m_s2",
-                                          progress=lambda line: progress(f"  {line}"))
-        seconds["stepped_sine"] = time.perf_counter() - tic_forced
+        # beside each point the stuck joint's (linear) response at that force
+        _, time_domain = stepped_sine_response(hyper, z_hyper, 1, config.time_domain_frequencies,
+                                               config.time_domain_levels,
+                                               steps_per_period=config.forced_steps_per_period,
+                                               tolerance=config.forced_tolerance, linear_key="linear_amplitude_m_s2",
+                                               progress=lambda line: progress(f"  {line}"))
+        seconds["stepped_sine_time_domain"] = time.perf_counter() - tic_forced
+    measured_range = measured_range_section(config, setup, damping, data_dir, progress, seconds, notes) \
+        if config.forced else None
 
     out.mkdir(parents=True, exist_ok=True)
     plot_backbones(out / "backbone.png", backbones, title="jointed beam, mode 1 at acc1",
@@ -204,28 +329,40 @@ def run(config: JointedBeamCase, out: Path, progress=print, data_dir=None) -> di
         "seconds": {**seconds, "total": time.perf_counter() - tic},
         "notes": notes,
     }
-    if forced is not None:
-        metrics["forced_response"] = forced
+    if time_domain is not None:
+        metrics["stepped_sine_time_domain"] = time_domain
+    if measured_range is not None:
+        metrics["forced_response"] = measured_range.pop("forced_response")
+        metrics["measured_range"] = {k: v for k, v in measured_range.items() if not k.startswith("_")}
+        plot_forced_response(out / "forced_response.png", metrics["forced_response"], output="acc3",
+                             measured=measured_range["_measured_levels"],
+                             title="jointed beam: acc3 at the shaker, harmonic balance")
+        plot_backbones(out / "backbone_acc3.png", measured_range["_backbones"],
+                       title="jointed beam, mode 1 at acc3: measured range", amplitude_label="acc3 amplitude [m/s^2]")
+    metrics["seconds"]["total"] = time.perf_counter() - tic
     write_metrics(out / "metrics.json", metrics)
     return metrics
 
 
 def main(argv=None) -> int:
     parser = case_parser("jointed_beam", __doc__, quick="short ring-down and few QSMA loads (tests)")
-    parser.add_argument("--full-sweep", action="store_true",
-                        help="the stepped sine at 0.2, 0.5, 1, 1.5 N over 79-81.5 Hz by 0.05 Hz (about 40 min)")
-    parser.add_argument("--no-forced", action="store_true", help="skip the stepped sine")
+    parser.add_argument("--no-forced", action="store_true",
+                        help="skip the measured-range joint, its forced response and EPMC backbone")
+    parser.add_argument("--fit-range", action="store_true",
+                        help="refit the measured-range joint on the response-controlled and hammer data (20-30 min)")
+    parser.add_argument("--time-domain", action="store_true",
+                        help="also march the hammer model's stepped sine at 0.2 and 1.5 N (a few minutes)")
     parser.add_argument("--no-fit", action="store_true", help="the Iwan joint's chi and beta as given, not fitted")
-    parser.add_argument("--data", type=Path, help="the folder of hammer_impact.npz (default: femrom.post.brb_data_dir())")
+    parser.add_argument("--data", type=Path,
+                        help="the folder of the jointed-beam data (default: femrom.post.brb_data_dir())")
     args = parser.parse_args(argv)
-    config = JointedBeamCase(forced=not args.no_forced, fit_iwan=not args.no_fit)
-    if args.full_sweep:
-        config = dataclasses.replace(config, forced_levels=(0.2, 0.5, 1.0, 1.5),
-                                     forced_frequencies=tuple(np.round(np.arange(79.0, 81.5 + 1e-9, 0.05), 3)))
+    config = JointedBeamCase(forced=not args.no_forced, fit_iwan=not args.no_fit, fit_range=args.fit_range,
+                             time_domain=args.time_domain)
     if args.quick:
         config = dataclasses.replace(config, ring_down=1.0, qsma_amplitudes=(1.0, 3.0, 10.0, 30.0), fit_iwan=False,
                                      training_impacts=(300.0,), training_window=0.1,
-                                     forced_levels=(1.5,), forced_frequencies=(80.3, 80.4))
+                                     forced_levels=(0.2, 1.5), forced_frequencies=(80.2, 80.3, 80.4),
+                                     time_domain_levels=(1.5,), time_domain_frequencies=(80.3, 80.4))
     with staged_output(args.out) as folder:
         metrics = run(config, folder, progress=lambda line: print(line, file=sys.stderr, flush=True),
                       data_dir=args.data)

@@ -55,7 +55,7 @@ from femrom.integrators._hamiltonian import (
     CanonicalTrajectory,
     integrate_canonical,
 )
-from femrom.integrators._epmc import NonlinearModes, epmc
+from femrom.integrators._epmc import NonlinearModes, epmc, linear_mode
 from femrom.integrators._harmonic_balance import (
     AFTResult,
     FourierBasis,
@@ -109,6 +109,6 @@ __all__ = [
     "SteppedSine", "SteppedSineResult", "first_harmonic", "parabolic_peak",
     "prewarped_frequency",
     "AFTResult", "FourierBasis", "HarmonicBalance", "HarmonicBalanceCurve", "HarmonicBalanceError",
-    "HarmonicBalanceSolution", "NonlinearModes", "default_samples", "epmc", "force_response",
+    "HarmonicBalanceSolution", "NonlinearModes", "default_samples", "epmc", "force_response", "linear_mode",
     "frequency_response",
 ]

@@ -179,6 +179,56 @@ def plot_accuracy_cost_groups(path, rows: list[dict], cost: str, error: str, lab
     return save_figure(fig, path, dpi=100)
 
 
+def plot_forced_response(path, levels: list, *, output: str, measured=None, title: str = "") -> Path:
+    """Amplitude (top) and phase (bottom) of one output's fundamental against frequency, one curve per
+    force level, beside measured response-controlled levels; returns the path written (PNG, Agg).
+
+    Parameters
+    ----------
+    path : str or Path
+    levels : list of dict
+        Stepped-sine rows (``force_n``, ``outputs[output]``: points with ``frequency_hz``,
+        ``amplitude_m_s2``, ``phase_rad``), as :func:`femrom.study.harmonic_balance_sweep` gives.
+    output : str
+    measured : list of SteppedSineLevel, optional
+        Drawn as points coloured by their force (:func:`read_response_controlled`); their phase is
+        the response's relative to the force as the file gives it, and the models' acceleration phase
+        is drawn turned by ``-pi`` to the same convention.
+    """
+    if not levels:
+        raise FemromValueError("levels must hold at least one stepped-sine row")
+    plt = pyplot()
+    fig, (ax_a, ax_p) = plt.subplots(2, 1, figsize=(6.8, 6.4), sharex=True)
+    forces = [float(level["force_n"]) for level in levels]
+    if measured:
+        top = max(max(forces), max(float(np.max(m.force_n)) for m in measured))
+    else:
+        top = max(forces)
+    colour = plt.get_cmap("viridis")
+    for level in levels:
+        points = level["outputs"][output]
+        f = [p["frequency_hz"] for p in points]
+        c = colour(float(level["force_n"]) / top)
+        ax_a.plot(f, [p["amplitude_m_s2"] for p in points], "-", color=c, lw=1.4, label=f"model {level['force_n']:g} N")
+        ax_p.plot(f, np.mod(np.array([p["phase_rad"] for p in points]), 2 * np.pi) - np.pi, "-", color=c, lw=1.4)
+    if measured:
+        for m in measured:
+            ax_a.scatter(m.frequency_hz, m.amplitude_m_s2, c=m.force_n, cmap=colour, vmin=0, vmax=top, s=9,
+                         marker="o", edgecolors="none")
+            ax_p.scatter(m.frequency_hz, m.phase_rad, c=m.force_n, cmap=colour, vmin=0, vmax=top, s=9, marker="o",
+                         edgecolors="none")
+        ax_a.plot([], [], "o", color="grey", ms=3, label="measured, constant amplitude (colour: force)")
+    ax_a.set_ylabel(f"{output} amplitude [m/s^2]")
+    ax_p.set_ylabel("phase of response to force [rad]")
+    ax_p.set_xlabel("frequency [Hz]")
+    for ax in (ax_a, ax_p):
+        ax.grid(alpha=0.3)
+    ax_a.legend(fontsize=7)
+    if title:
+        ax_a.set_title(title)
+    return save_figure(fig, path, dpi=110)
+
+
 def plot_backbones(path, backbones: dict, *, title: str = "", amplitude_label: str = "amplitude") -> Path:
     """Frequency (top) and damping ratio in % (bottom) against amplitude (log axis), one
     labelled curve per backbone, on shared axes; returns the path written (PNG, Agg).

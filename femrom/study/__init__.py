@@ -98,7 +98,7 @@ from femrom.study._models import ModelSpec
 from femrom.study._compare import compare_models
 from femrom.study._metrics import Projection, invariant_drift, mass_norm
 from femrom.study._pipeline import ROW_COLUMNS, StudyState, peak_rss_gb, run_study, swapped_rows
-from femrom.study._forced import compare_stepped_sines, stepped_sine_response
+from femrom.study._forced import compare_stepped_sines, harmonic_balance_sweep, periodic_training, stepped_sine_response
 from femrom.study._ring_downs import (
     RING_DOWN_COLUMNS,
     RingDown,
@@ -115,7 +115,8 @@ from femrom.study._impacts import (
     step_cost,
     with_impulse,
 )
-from femrom.study._jointed_beam import JOINTED_BEAM, CalibratedBeam, JointedBeamModel, modal_qsma
+from femrom.study._jointed_beam import JOINTED_BEAM, CalibratedBeam, JointedBeamModel, MeasuredRangeJoint, modal_qsma, \
+    with_attached_mass
 from femrom.study._closed_loops import CLOSED_LOOP_COLUMNS, closed_loop_rows, closed_loop_section
 from femrom.study._linear_model_figures import linear_model_section
 from femrom.study._scene_run import scene_run
@@ -152,7 +153,7 @@ __all__ = [
     "register_experiment", "registered_experiments", "repeated_cost", "repeated_costs", "rest_start",
     "RING_DOWN_COLUMNS", "ring_down_data", "RingDown", "RingDownComparison", "RingDownTest", "rom_table",
     "ROW_COLUMNS", "run_canonical", "run_study", "run_sweep", "run_sweep_point", "scene_run",
-    "scored_columns", "state_energy", "step_cost", "stepped_sine_response", "SteppedSineTest", "study_rows", "swapped_rows",
+    "scored_columns", "state_energy", "step_cost", "stepped_sine_response", "harmonic_balance_sweep", "periodic_training", "MeasuredRangeJoint", "with_attached_mass", "SteppedSineTest", "study_rows", "swapped_rows",
     "StudyState", "subsampled_rows", "subsampled_section", "sweep_runs", "time_step_ladder",
     "time_step_section", "UnseenInput", "with_impulse",
 ]

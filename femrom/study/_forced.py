@@ -19,7 +19,7 @@ import time
 
 import numpy as np
 
-from femrom.integrators import Shaker, SteadyStateCriterion, SteppedSine, StepResult
+from femrom.integrators import HarmonicBalance, HarmonicBalanceError, Shaker, SteadyStateCriterion, SteppedSine, StepResult
 from femrom.post import linear_accelerance
 from femrom.study.experiments.stepped_sine import peak_rows
 
@@ -73,3 +73,94 @@ def compare_stepped_sines(reference, plants: dict, sweep: SteppedSine, levels, *
     rows = [{"model": name, **row, "seconds": seconds[name]}
             for name in plants for row in peak_rows(results[name], results["reference"], output)]
     return {"results": results, "rows": rows, "seconds": seconds}
+
+
+def harmonic_balance_sweep(system, rest_state, input: int, frequencies, levels, *, harmonics: int = 3,
+                           samples: int | None = None, progress=None) -> dict:
+    r"""The stepped sine of ``system`` by harmonic balance: per force level [N] the periodic solution at each of
+    ``frequencies`` [Hz] in the given order (a sweep, as the test does it), each from the previous one with its Jacobian (chord steps:
+    :meth:`~femrom.integrators.HarmonicBalance.solve`).
+
+    :class:`~femrom.integrators.HarmonicBalance` with ``harmonics`` and ``samples`` (AFT), the force
+    ``F sin(Omega t)`` on input column ``input``, the force's march starting from ``rest_state``. Where a
+    fold makes Newton fail from the previous point, the step is split in two, then the point is solved
+    from the model linearised at rest; a point that still fails raises
+    :class:`~femrom.integrators.HarmonicBalanceError`.
+
+    Returns ``{"rows": [...], "iterations": [...], "seconds": s}``: ``rows`` in the stepped sine's format
+    (:func:`stepped_sine_response`): per level ``force_n``, ``quantity`` "acceleration" and per output the
+    points ``frequency_hz``, ``amplitude_m_s2`` (``Omega^2 |Y|``), ``phase_rad`` (the acceleration's
+    fundamental relative to the force, in ``(-pi, pi]``), ``linear_amplitude_m_s2`` (the model
+    linearised at rest), ``harmonics_ratio`` (the higher harmonics' acceleration amplitude over the
+    fundamental's); ``iterations`` per level the Newton iterations per point.
+    """
+    tic = time.perf_counter()
+    hb = HarmonicBalance(system, input, harmonics=harmonics, samples=samples, state=rest_state)
+    frequencies = np.asarray(frequencies, dtype=float).reshape(-1)
+    names = list(system.output_names or [f"y{i}" for i in range(hb.output_matrix.shape[0])])
+    per_newton = linear_accelerance(system, rest_state, hb.force_vector, frequencies)
+    H = hb.basis.harmonics
+    order = np.repeat(np.arange(1, H + 1), 2)
+    rows, iterations = [], []
+    for level in levels:
+        level = float(level)
+        points = {name: [] for name in names}
+        counts, z, chord = [], None, {}
+        for j, f in enumerate(frequencies):
+            omega = 2 * np.pi * f
+            solution = _sweep_point(hb, omega, level, z, None if j == 0 else 2 * np.pi * frequencies[j - 1], chord)
+            z = solution.coefficients.reshape(-1)
+            counts.append(solution.iterations)
+            Y = hb.phasor(solution.coefficients)
+            coefficients = hb.output_coefficients(solution.coefficients)[1:]        # (2H, p)
+            accelerations = (order[:, None] * omega) ** 2 * np.abs(coefficients)
+            for i, name in enumerate(names):
+                fundamental = omega**2 * abs(Y[i])
+                pairs = accelerations[:, i].reshape(H, 2)
+                higher = float(np.sqrt(np.sum(pairs[1:] ** 2))) if H > 1 else 0.0
+                phase = float(np.angle(-Y[i]))             # acceleration -Omega^2 y: the phasor turned by pi
+                points[name].append({"frequency_hz": float(f), "amplitude_m_s2": float(fundamental),
+                                     "phase_rad": phase,
+                                     "linear_amplitude_m_s2": float(level * per_newton[i, j]),
+                                     "harmonics_ratio": higher / fundamental if fundamental > 0 else 0.0})
+        rows.append({"force_n": level, "quantity": "acceleration", "method": f"harmonic balance, H = {H}",
+                     "outputs": points})
+        iterations.append(counts)
+        if progress is not None:
+            peak = max(p["amplitude_m_s2"] for p in points[names[-1]])
+            progress(f"{level:g} N: {len(frequencies)} frequencies, {np.mean(counts):.1f} Newton iterations a point, "
+                     f"peak {names[-1]} {peak:.3g} m/s^2 ({time.perf_counter() - tic:.1f} s)")
+    return {"rows": rows, "iterations": iterations, "seconds": time.perf_counter() - tic}
+
+
+def _sweep_point(hb, omega, force, z, previous_omega, chord, depth: int = 0):
+    """One point of :func:`harmonic_balance_sweep`: from ``z`` (the previous point) reusing its Jacobian
+    (``chord``), splitting the step on failure."""
+    try:
+        return hb.solve(omega, force, initial=z, chord=chord)
+    except HarmonicBalanceError:
+        if z is None or depth >= 2:
+            if z is not None:
+                return hb.solve(omega, force)
+            raise
+    middle = 0.5 * (omega + previous_omega)
+    half = _sweep_point(hb, middle, force, z, previous_omega, chord, depth + 1)
+    return _sweep_point(hb, omega, force, half.coefficients.reshape(-1), middle, chord, depth + 1)
+
+
+def periodic_training(system, rest_state, input: int, frequency: float, forces, *, harmonics: int = 1,
+                      samples: int | None = None) -> list:
+    """Training states of a hyper-reduction from periodic solutions: ``[(q (n,), state), ...]``.
+
+    The periodic solution of ``system`` under ``F sin(2 pi frequency t)`` on input ``input`` at each of
+    ``forces`` (harmonic balance, each from the previous), and at every AFT sample the coordinates
+    with the force's state there (:meth:`~femrom.integrators.HarmonicBalance.periodic_states`): the
+    motions a frequency-domain study computes, for :func:`femrom.rom.ecsw_joint`."""
+    hb = HarmonicBalance(system, input, harmonics=harmonics, samples=samples, state=rest_state)
+    omega, z, snapshots = 2 * np.pi * float(frequency), None, []
+    for force in forces:
+        solution = hb.solve(omega, float(force), initial=z)
+        z = solution.coefficients.reshape(-1)
+        q, _, states = hb.periodic_states(solution.coefficients, omega)
+        snapshots.extend(zip(q, states))
+    return snapshots
