@@ -22,6 +22,8 @@ import math
 import numpy as np
 from numba import njit
 
+from femrom.fem._law_kernels import CLAMPED_IWAN
+
 
 @njit(cache=True, inline="always")
 def _radial(trial0, trial1, limit):
@@ -38,36 +40,73 @@ def _radial(trial0, trial1, limit):
     return ratio, safe, slipping
 
 
+CLAMPED = CLAMPED_IWAN          # a law's ``kind`` in the joint kernels below (else parallel sliders)
+
+
+@njit(cache=True, inline="always")
+def _parallel_point(i, g0, g1, g2, state, stiffness, strength, normal_stiffness, tangent):
+    """``(t0, t1, t2, d00, d01, d11, d22)`` of point ``i`` of parallel sliders (tangent entries 0 without it)."""
+    t0 = t1 = 0.0
+    d00 = d01 = d11 = 0.0
+    for m in range(state.shape[1]):
+        k = stiffness[m]
+        trial0, trial1 = k * (g0 - state[i, m, 0]), k * (g1 - state[i, m, 1])
+        ratio, safe, slipping = _radial(trial0, trial1, strength[m])
+        t0 += ratio * trial0
+        t1 += ratio * trial1
+        if tangent:
+            if slipping:
+                e0, e1 = trial0 / safe, trial1 / safe
+                d00 += k * (ratio * (1.0 - e0 * e0))
+                d01 += k * (ratio * (0.0 - e0 * e1))
+                d11 += k * (ratio * (1.0 - e1 * e1))
+            else:
+                d00 += k
+                d11 += k
+    return t0, t1, normal_stiffness * g2, d00, d01, d11, (normal_stiffness if tangent else 0.0)
+
+
+@njit(cache=True, inline="always")
+def _clamped_point(i, g0, g1, g2, state, stiffness, unit_strength, normal_stiffness, tangent):
+    """``(t0, t1, t2, d00, d01, d11, d22)`` of point ``i`` of the clamped Iwan law."""
+    n = state.shape[1] - 1
+    closed = state[i, n, 1] > 0.5
+    slip_traction = state[i, n, 0]
+    t0 = t1 = 0.0
+    diagonal = w00 = w01 = w11 = 0.0
+    for m in range(n):
+        k = stiffness[m]
+        trial0, trial1 = k * (g0 - state[i, m, 0]), k * (g1 - state[i, m, 1])
+        limit = slip_traction * unit_strength[m] if closed else 0.0
+        ratio, safe, slipping = _radial(trial0, trial1, limit)
+        t0 += ratio * trial0
+        t1 += ratio * trial1
+        if tangent:
+            diagonal += ratio * k
+            if slipping:
+                e0, e1 = trial0 / safe, trial1 / safe
+                weight = ratio * k
+                w00 += weight * e0 * e0
+                w01 += weight * e0 * e1
+                w11 += weight * e1 * e1
+    t2 = normal_stiffness * g2 if closed else 0.0
+    d22 = normal_stiffness if (tangent and closed) else 0.0
+    return t0, t1, t2, diagonal - w00, -w01, diagonal - w11, d22
+
+
 @njit(cache=True)
 def parallel_sliders(gap, state, stiffness, strength, normal_stiffness, tangent):
     """``(traction (s, 3), D (s, 3, 3))`` of parallel sliders; ``D`` is (0, 3, 3) without ``tangent``."""
-    s, n = state.shape[0], state.shape[1]
+    s = state.shape[0]
     traction = np.zeros((s, 3))
     D = np.zeros((s if tangent else 0, 3, 3))
     for i in range(s):
-        g0, g1 = gap[i, 0], gap[i, 1]
-        t0 = t1 = 0.0
-        d00 = d01 = d11 = 0.0
-        for m in range(n):
-            k = stiffness[m]
-            trial0, trial1 = k * (g0 - state[i, m, 0]), k * (g1 - state[i, m, 1])
-            ratio, safe, slipping = _radial(trial0, trial1, strength[m])
-            t0 += ratio * trial0
-            t1 += ratio * trial1
-            if tangent:
-                if slipping:
-                    e0, e1 = trial0 / safe, trial1 / safe
-                    d00 += k * (ratio * (1.0 - e0 * e0))
-                    d01 += k * (ratio * (0.0 - e0 * e1))
-                    d11 += k * (ratio * (1.0 - e1 * e1))
-                else:
-                    d00 += k
-                    d11 += k
-        traction[i, 0], traction[i, 1] = t0, t1
-        traction[i, 2] = normal_stiffness * gap[i, 2]
+        t0, t1, t2, d00, d01, d11, d22 = _parallel_point(i, gap[i, 0], gap[i, 1], gap[i, 2], state, stiffness,
+                                                         strength, normal_stiffness, tangent)
+        traction[i, 0], traction[i, 1], traction[i, 2] = t0, t1, t2
         if tangent:
             D[i, 0, 0], D[i, 0, 1], D[i, 1, 0], D[i, 1, 1] = d00, d01, d01, d11
-            D[i, 2, 2] = normal_stiffness
+            D[i, 2, 2] = d22
     return traction, D
 
 
@@ -90,35 +129,16 @@ def parallel_sliders_commit(gap, state, stiffness, strength):
 @njit(cache=True)
 def clamped_iwan(gap, state, stiffness, unit_strength, normal_stiffness, tangent):
     """``(traction (s, 3), D (s, 3, 3))`` of the clamped Iwan law; ``D`` is (0, 3, 3) without ``tangent``."""
-    s, n = state.shape[0], state.shape[1] - 1
+    s = state.shape[0]
     traction = np.zeros((s, 3))
     D = np.zeros((s if tangent else 0, 3, 3))
     for i in range(s):
-        closed = state[i, n, 1] > 0.5
-        slip_traction = state[i, n, 0]
-        g0, g1 = gap[i, 0], gap[i, 1]
-        t0 = t1 = 0.0
-        diagonal = w00 = w01 = w11 = 0.0
-        for m in range(n):
-            k = stiffness[m]
-            trial0, trial1 = k * (g0 - state[i, m, 0]), k * (g1 - state[i, m, 1])
-            limit = slip_traction * unit_strength[m] if closed else 0.0
-            ratio, safe, slipping = _radial(trial0, trial1, limit)
-            t0 += ratio * trial0
-            t1 += ratio * trial1
-            if tangent:
-                diagonal += ratio * k
-                if slipping:
-                    e0, e1 = trial0 / safe, trial1 / safe
-                    weight = ratio * k
-                    w00 += weight * e0 * e0
-                    w01 += weight * e0 * e1
-                    w11 += weight * e1 * e1
-        traction[i, 0], traction[i, 1] = t0, t1
-        traction[i, 2] = normal_stiffness * gap[i, 2] if closed else 0.0
+        t0, t1, t2, d00, d01, d11, d22 = _clamped_point(i, gap[i, 0], gap[i, 1], gap[i, 2], state, stiffness,
+                                                        unit_strength, normal_stiffness, tangent)
+        traction[i, 0], traction[i, 1], traction[i, 2] = t0, t1, t2
         if tangent:
-            D[i, 0, 0], D[i, 0, 1], D[i, 1, 0], D[i, 1, 1] = diagonal - w00, -w01, -w01, diagonal - w11
-            D[i, 2, 2] = normal_stiffness if closed else 0.0
+            D[i, 0, 0], D[i, 0, 1], D[i, 1, 0], D[i, 1, 1] = d00, d01, d01, d11
+            D[i, 2, 2] = d22
     return traction, D
 
 
@@ -139,3 +159,78 @@ def clamped_iwan_commit(gap, state, stiffness, unit_strength):
             new[i, m, 0] = g0 - ratio * trial0 / k
             new[i, m, 1] = g1 - ratio * trial1 / k
     return new
+
+
+# -- a projected joint: gaps from k coordinates, the law on every pair, force and tangent back --------------
+
+@njit(cache=True)
+def joint_gaps(W, local_offset, gap_offset, q, gap):
+    """Fill ``gap`` (s, 3) with ``(W q + local_offset).reshape(s, 3) + gap_offset``, as
+    :meth:`femrom.fem.TransformedForce.local_force_and_blocks` forms it (``W`` (3 s, k))."""
+    k = W.shape[1]
+    for i in range(gap.shape[0]):
+        for c in range(3):
+            row = 3 * i + c
+            x = 0.0
+            for j in range(k):
+                x += W[row, j] * q[j]
+            gap[i, c] = (x + local_offset[row]) + gap_offset[i, c]
+
+
+@njit(cache=True)
+def joint_law(kind, gap, state, stiffness, strength, normal_stiffness, areas, g, D):
+    """Fill ``g`` (3 s,) with the pairs' forces ``A_i t_i`` and ``D`` (s, 3, 3) with ``A_i dt_i/dDelta_i``."""
+    for i in range(gap.shape[0]):
+        if kind == CLAMPED:
+            t0, t1, t2, d00, d01, d11, d22 = _clamped_point(i, gap[i, 0], gap[i, 1], gap[i, 2], state, stiffness,
+                                                            strength, normal_stiffness, True)
+        else:
+            t0, t1, t2, d00, d01, d11, d22 = _parallel_point(i, gap[i, 0], gap[i, 1], gap[i, 2], state, stiffness,
+                                                             strength, normal_stiffness, True)
+        area = areas[i]
+        g[3 * i], g[3 * i + 1], g[3 * i + 2] = area * t0, area * t1, area * t2
+        D[i, 0, 0], D[i, 0, 1], D[i, 0, 2] = area * d00, area * d01, 0.0
+        D[i, 1, 0], D[i, 1, 1], D[i, 1, 2] = area * d01, area * d11, 0.0
+        D[i, 2, 0], D[i, 2, 1], D[i, 2, 2] = 0.0, 0.0, area * d22
+
+
+@njit(cache=True)
+def joint_project_force(W, g, f):
+    """``f = W^T g`` (k,)."""
+    k = W.shape[1]
+    for j in range(k):
+        f[j] = 0.0
+    for row in range(W.shape[0]):
+        x = g[row]
+        for j in range(k):
+            f[j] += W[row, j] * x
+    return f
+
+
+@njit(cache=True)
+def joint_project_tangent(W, D, P, work):
+    """``P = W^T blockdiag(D_i) W`` (k, k) for symmetric blocks ``D_i`` (s, 3, 3); ``work`` (3, k)."""
+    k = W.shape[1]
+    for a in range(k):
+        for b in range(k):
+            P[a, b] = 0.0
+    for i in range(D.shape[0]):
+        for c in range(3):
+            for b in range(k):
+                work[c, b] = D[i, c, 0] * W[3 * i, b] + D[i, c, 1] * W[3 * i + 1, b] + D[i, c, 2] * W[3 * i + 2, b]
+        for a in range(k):
+            w0, w1, w2 = W[3 * i, a], W[3 * i + 1, a], W[3 * i + 2, a]
+            for b in range(a, k):
+                P[a, b] += w0 * work[0, b] + w1 * work[1, b] + w2 * work[2, b]
+    for a in range(k):
+        for b in range(a):
+            P[a, b] = P[b, a]
+    return P
+
+
+@njit(cache=True)
+def joint_commit(kind, gap, state, stiffness, strength):
+    """The law's committed state at ``gap`` (:func:`clamped_iwan_commit` or :func:`parallel_sliders_commit`)."""
+    if kind == CLAMPED:
+        return clamped_iwan_commit(gap, state, stiffness, strength)
+    return parallel_sliders_commit(gap, state, stiffness, strength)

@@ -59,7 +59,7 @@ from femrom.fem._interface_law import (
     register_interface_law,
     split_gap,
 )
-from femrom.fem._law_kernels import compiled_kernels
+from femrom.fem._law_kernels import CLAMPED_IWAN, compiled_kernels
 from femrom.fem.interface_laws.iwan import IwanLaw
 
 
@@ -123,6 +123,11 @@ class ClampedIwanLaw(InterfaceLaw):
         limit = state[:, N, 0][:, None] * self.unit_strength[None, :]
         t, ratio, direction, slipping = radial_return(trial, np.where(closed[:, None], limit, 0.0))
         return g_t, g_n, closed, k, trial, t, ratio, direction, slipping
+
+    def kernel_arguments(self):
+        """``(kind, stiffness (N,), unit strength (N,), normal_stiffness)``: the law as the compiled joint kernels
+        take it (:class:`femrom.fem.CompiledJoint`)."""
+        return CLAMPED_IWAN, self.slider_stiffness, self.unit_strength, float(self.normal_stiffness)
 
     def evaluate(self, gap, state, tangent=True):
         compiled = self._compiled(gap, state)

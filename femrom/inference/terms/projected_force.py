@@ -106,6 +106,12 @@ class ProjectedNonlinearForce(ReducedTerm):
             return (self.force(q, v, state), *self.tangent(q, v, state))
         return dense_projection(W, self.transformed, q, v, state)
 
+    def compiled_joint(self):
+        """The projected joint as compiled step kernels take it (:meth:`femrom.fem.TransformedForce.compiled_joint`),
+        or ``None`` (no joint, no compiled law, or the compiled laws switched off)."""
+        offer = getattr(self.transformed, "compiled_joint", None)
+        return offer() if callable(offer) else None
+
     def potential(self, q) -> float:
         if not self.conservative:
             return 0.0

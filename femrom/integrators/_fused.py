@@ -1,0 +1,124 @@
+r"""A whole Newmark-family step of a small model with a projected joint in one compiled call.
+
+The dense Newton of a reduced model with a joint (:class:`~femrom.integrators.ImplicitSolve`,
+``method = "dense"``) spends most of a step in Python around its few hundred floating-point
+operations: the law's and the force's wrappers, the ``(L V)^T D (L V)`` products, norms and
+``r x r`` solves on tiny arrays, the scheme's bookkeeping. When the model's force offers a
+:class:`~femrom.fem.CompiledJoint` (:meth:`femrom.fem.TransformedForce.compiled_joint`: a joint
+whose law has compiled kernels), :class:`FusedJointStep` runs the predictor, the Newton
+iterations (gaps, law, projection, solve, convergence tests) and the commit of the slider
+states as one numba call (:mod:`._fused_numba`), with the tolerances, tests and iteration
+counts of the reference path.
+
+The numpy path stays the reference: the scheme takes it whenever the force offers no compiled
+joint, and at every step where the compiled laws are switched off
+(``FEMROM_COMPILED_LAWS=0``, :func:`femrom.fem.use_compiled_laws`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+
+from femrom.fem import compiled_laws
+from femrom.integrators._newton import ConvergenceError
+
+
+def _dense(A) -> np.ndarray:
+    return np.ascontiguousarray(A.toarray() if sp.issparse(A) else A, dtype=float)
+
+
+def _frozen(x) -> np.ndarray:
+    """``x`` as a read-only float C array (the driver's own vectors are; one compiled signature for all)."""
+    if x.flags.writeable or x.dtype != np.float64 or not x.flags.c_contiguous:
+        x = np.array(x, dtype=float)
+        x.setflags(write=False)
+    return x
+
+
+class FusedJointStep:
+    """One Newmark-family step (``scheme``'s coefficients, ``dt``) of ``system`` in one compiled call.
+
+    Parameters
+    ----------
+    scheme : NewmarkFamily
+    system : SecondOrderSystem
+        Small (dense matrices), whose force gave ``joint``.
+    dt : float
+    effective_matrix : (n, n) array
+        ``S`` of the scheme.
+    joint : CompiledJoint
+    initial_state : callable
+        The force's ``initial_state`` (for a ``None`` state).
+    """
+
+    def __init__(self, scheme, system, dt: float, effective_matrix, joint, initial_state):
+        from femrom.integrators import _fused_numba
+
+        self._kernel = _fused_numba.newmark_joint_step
+        self._status = {_fused_numba.NOT_CONVERGED: "not converged", _fused_numba.NOT_FINITE: "not finite",
+                        _fused_numba.SINGULAR: "singular"}
+        h = float(dt)
+        beta, gamma = float(scheme.beta), float(scheme.gamma)
+        am, af = float(scheme.alpha_m), float(scheme.alpha_f)
+        newton = scheme.newton
+        r = system.n_dofs
+        self.joint, self._initial_state, self._newton = joint, initial_state, newton
+        damping = system.damping
+        self._matrices = (_dense(system.mass), _dense(damping) if damping is not None else np.zeros((r, r)),
+                          damping is not None, _dense(system.stiffness), _dense(effective_matrix))
+        # the coefficients exactly as the reference forms them (NewmarkFamily.init, ImplicitSolve)
+        c_q = float((1.0 - af) * beta * h * h)
+        self._scalars = (h, beta, gamma, am, af, c_q, 1.0, float(newton.rtol), float(newton.atol),
+                         int(newton.max_iterations))
+        self._law = (joint.kind, joint.dense_map, joint.local_offset, joint.gap_offset, joint.areas,
+                     joint.stiffness, joint.strength, joint.normal_stiffness)
+        self._no_force = np.zeros(r)
+
+    @staticmethod
+    def enabled() -> bool:
+        """Whether the compiled laws are on now (the fused step follows the same switch)."""
+        return compiled_laws()
+
+    def __call__(self, q, v, a, state, force):
+        """``(q1, v1, a1, state1, newton_iterations)`` of the step from ``(q, v, a)``, ``state`` and ``force``."""
+        if state is None:
+            state = self._initial_state()
+        if not (state.flags.writeable and state.flags.c_contiguous and state.dtype == np.float64):
+            state = np.array(state, dtype=float)
+        if force is None:
+            force, has_force = self._no_force, False
+        else:
+            has_force = True
+            if not (force.flags.writeable and force.flags.c_contiguous and force.dtype == np.float64):
+                force = np.array(force, dtype=float)
+        M, C, has_C, K, S = self._matrices
+        q1, v1, a1, state1, iterations, status, norm, tolerance = self._kernel(
+            _frozen(q), _frozen(v), _frozen(a), force, has_force, M, C, has_C, K, S, *self._scalars, *self._law,
+            state)
+        if status:
+            self._raise(status, iterations, norm, tolerance)
+        return q1, v1, a1, state1, iterations
+
+    def _raise(self, status, iteration, norm, tolerance):
+        options = self._newton
+        what = self._status[status]
+        if what == "not finite":
+            raise ConvergenceError(f"Newton residual is not finite at iteration {iteration}")
+        if what == "singular":
+            raise ConvergenceError(f"Newton's matrix is singular at iteration {iteration}")
+        raise ConvergenceError(
+            f"Newton did not converge in {options.max_iterations} iterations: residual "
+            f"{norm:.3g} > tolerance {tolerance:.3g} (atol={options.atol:g}, rtol={options.rtol:g})")
+
+
+def fused_joint_step(scheme, system, dt: float, effective_matrix, implicit) -> FusedJointStep | None:
+    """A :class:`FusedJointStep` when ``implicit`` (the step's :class:`ImplicitSolve`) runs dense Newton and
+    ``system``'s force offers a compiled joint (compiled laws on), else ``None``."""
+    offer = getattr(system.nonlinear, "compiled_joint", None)
+    if implicit.method != "dense" or not callable(offer):
+        return None
+    joint = offer()
+    if joint is None:
+        return None
+    return FusedJointStep(scheme, system, dt, effective_matrix, joint, system.nonlinear.initial_state)
