@@ -7,8 +7,10 @@ operations: the law's and the force's wrappers, the ``(L V)^T D (L V)`` products
 :class:`~femrom.fem.CompiledJoint` (:meth:`femrom.fem.TransformedForce.compiled_joint`: a joint
 whose law has compiled kernels), :class:`FusedJointStep` runs the predictor, the Newton
 iterations (gaps, law, projection, solve, convergence tests) and the commit of the slider
-states as one numba call (:mod:`._fused_numba`), with the tolerances, tests and iteration
-counts of the reference path.
+states as one numba call (``newmark_joint_step`` of :func:`femrom.fem.compiled_kernels`, kept
+in the file of the law kernels it calls so that numba's on-disk cache cannot go stale), with
+the tolerances, tests and iteration counts of the reference path. Sums run in loops where
+numpy calls BLAS, so the two paths agree to round-off, not bit for bit.
 
 The numpy path stays the reference: the scheme takes it whenever the force offers no compiled
 joint, and at every step where the compiled laws are switched off
@@ -20,7 +22,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from femrom.fem import compiled_laws
+from femrom.fem import compiled_kernels, compiled_laws
 from femrom.integrators._newton import ConvergenceError
 
 
@@ -53,11 +55,10 @@ class FusedJointStep:
     """
 
     def __init__(self, scheme, system, dt: float, effective_matrix, joint, initial_state):
-        from femrom.integrators import _fused_numba
-
-        self._kernel = _fused_numba.newmark_joint_step
-        self._status = {_fused_numba.NOT_CONVERGED: "not converged", _fused_numba.NOT_FINITE: "not finite",
-                        _fused_numba.SINGULAR: "singular"}
+        kernels = compiled_kernels()
+        self._kernel = kernels.newmark_joint_step
+        self._status = {kernels.NOT_CONVERGED: "not converged", kernels.NOT_FINITE: "not finite",
+                        kernels.SINGULAR: "singular"}
         h = float(dt)
         beta, gamma = float(scheme.beta), float(scheme.gamma)
         am, af = float(scheme.alpha_m), float(scheme.alpha_f)
