@@ -45,18 +45,22 @@ def _radial(trial0, trial1, limit):
     return ratio, safe, slipping
 
 
+_NO_RATIOS = np.zeros((1, 1))     # what the law kernels pass when they keep no ratios
 CLAMPED = CLAMPED_IWAN          # a law's ``kind`` in the joint kernels below (else parallel sliders)
 
 
 @njit(cache=True, inline="always")
-def _parallel_point(i, g0, g1, g2, state, stiffness, strength, normal_stiffness, tangent):
-    """``(t0, t1, t2, d00, d01, d11, d22)`` of point ``i`` of parallel sliders (tangent entries 0 without it)."""
+def _parallel_point(i, g0, g1, g2, state, stiffness, strength, normal_stiffness, tangent, ratios, keep):
+    """``(t0, t1, t2, d00, d01, d11, d22)`` of point ``i`` of parallel sliders (tangent entries 0 without it);
+    with ``keep``, the sliders' return ratios go to ``ratios[i]``."""
     t0 = t1 = 0.0
     d00 = d01 = d11 = 0.0
     for m in range(state.shape[1]):
         k = stiffness[m]
         trial0, trial1 = k * (g0 - state[i, m, 0]), k * (g1 - state[i, m, 1])
         ratio, safe, slipping = _radial(trial0, trial1, strength[m])
+        if keep:
+            ratios[i, m] = ratio
         t0 += ratio * trial0
         t1 += ratio * trial1
         if tangent:
@@ -72,8 +76,9 @@ def _parallel_point(i, g0, g1, g2, state, stiffness, strength, normal_stiffness,
 
 
 @njit(cache=True, inline="always")
-def _clamped_point(i, g0, g1, g2, state, stiffness, unit_strength, normal_stiffness, tangent):
-    """``(t0, t1, t2, d00, d01, d11, d22)`` of point ``i`` of the clamped Iwan law."""
+def _clamped_point(i, g0, g1, g2, state, stiffness, unit_strength, normal_stiffness, tangent, ratios, keep):
+    """``(t0, t1, t2, d00, d01, d11, d22)`` of point ``i`` of the clamped Iwan law (``ratios``, ``keep``: as
+    :func:`_parallel_point`)."""
     n = state.shape[1] - 1
     closed = state[i, n, 1] > 0.5
     slip_traction = state[i, n, 0]
@@ -84,6 +89,8 @@ def _clamped_point(i, g0, g1, g2, state, stiffness, unit_strength, normal_stiffn
         trial0, trial1 = k * (g0 - state[i, m, 0]), k * (g1 - state[i, m, 1])
         limit = slip_traction * unit_strength[m] if closed else 0.0
         ratio, safe, slipping = _radial(trial0, trial1, limit)
+        if keep:
+            ratios[i, m] = ratio
         t0 += ratio * trial0
         t1 += ratio * trial1
         if tangent:
@@ -107,7 +114,7 @@ def parallel_sliders(gap, state, stiffness, strength, normal_stiffness, tangent)
     D = np.zeros((s if tangent else 0, 3, 3))
     for i in range(s):
         t0, t1, t2, d00, d01, d11, d22 = _parallel_point(i, gap[i, 0], gap[i, 1], gap[i, 2], state, stiffness,
-                                                         strength, normal_stiffness, tangent)
+                                                         strength, normal_stiffness, tangent, _NO_RATIOS, False)
         traction[i, 0], traction[i, 1], traction[i, 2] = t0, t1, t2
         if tangent:
             D[i, 0, 0], D[i, 0, 1], D[i, 1, 0], D[i, 1, 1] = d00, d01, d01, d11
@@ -139,7 +146,7 @@ def clamped_iwan(gap, state, stiffness, unit_strength, normal_stiffness, tangent
     D = np.zeros((s if tangent else 0, 3, 3))
     for i in range(s):
         t0, t1, t2, d00, d01, d11, d22 = _clamped_point(i, gap[i, 0], gap[i, 1], gap[i, 2], state, stiffness,
-                                                        unit_strength, normal_stiffness, tangent)
+                                                        unit_strength, normal_stiffness, tangent, _NO_RATIOS, False)
         traction[i, 0], traction[i, 1], traction[i, 2] = t0, t1, t2
         if tangent:
             D[i, 0, 0], D[i, 0, 1], D[i, 1, 0], D[i, 1, 1] = d00, d01, d01, d11
@@ -183,15 +190,16 @@ def joint_gaps(W, local_offset, gap_offset, q, gap):
 
 
 @njit(cache=True)
-def joint_law(kind, gap, state, stiffness, strength, normal_stiffness, areas, g, D):
-    """Fill ``g`` (3 s,) with the pairs' forces ``A_i t_i`` and ``D`` (s, 3, 3) with ``A_i dt_i/dDelta_i``."""
+def joint_law(kind, gap, state, stiffness, strength, normal_stiffness, areas, g, D, ratios):
+    """Fill ``g`` (3 s,) with the pairs' forces ``A_i t_i``, ``D`` (s, 3, 3) with ``A_i dt_i/dDelta_i`` and
+    ``ratios`` (s, N) with the sliders' return ratios (what :func:`joint_commit_ratios` commits with)."""
     for i in range(gap.shape[0]):
         if kind == CLAMPED:
             t0, t1, t2, d00, d01, d11, d22 = _clamped_point(i, gap[i, 0], gap[i, 1], gap[i, 2], state, stiffness,
-                                                            strength, normal_stiffness, True)
+                                                            strength, normal_stiffness, True, ratios, True)
         else:
             t0, t1, t2, d00, d01, d11, d22 = _parallel_point(i, gap[i, 0], gap[i, 1], gap[i, 2], state, stiffness,
-                                                             strength, normal_stiffness, True)
+                                                             strength, normal_stiffness, True, ratios, True)
         area = areas[i]
         g[3 * i], g[3 * i + 1], g[3 * i + 2] = area * t0, area * t1, area * t2
         D[i, 0, 0], D[i, 0, 1], D[i, 0, 2] = area * d00, area * d01, 0.0
@@ -231,6 +239,24 @@ def joint_project_tangent(W, D, P, work):
         for b in range(a):
             P[a, b] = P[b, a]
     return P
+
+
+@njit(cache=True)
+def joint_commit_ratios(gap, state, stiffness, ratios):
+    """The committed state at ``gap`` from the return ratios :func:`joint_law` kept at that same ``gap``:
+    ``z_m = g_t - ratio_m t^tr_m / k_m`` for the ``ratios.shape[1]`` sliders (a clamped law's last row
+    kept), the commit kernels' arithmetic without a second return map."""
+    s, n = ratios.shape[0], ratios.shape[1]
+    new = state.copy()
+    for i in range(s):
+        g0, g1 = gap[i, 0], gap[i, 1]
+        for m in range(n):
+            k = stiffness[m]
+            trial0, trial1 = k * (g0 - state[i, m, 0]), k * (g1 - state[i, m, 1])
+            ratio = ratios[i, m]
+            new[i, m, 0] = g0 - ratio * trial0 / k
+            new[i, m, 1] = g1 - ratio * trial1 / k
+    return new
 
 
 @njit(cache=True)
@@ -348,7 +374,9 @@ def newmark_joint_step(q, v, a, force, has_force, mass, damping, has_damping, st
     P = np.empty((r, r))
     J = np.empty((r, r))
     rows = np.empty((3, r))
+    ratios = np.empty((s, slider_stiffness.size))
     at = np.empty(r)
+    evaluated = False                     # whether gap and ratios are those of the final x
     eps = np.finfo(np.float64).eps
     c = w * c_q
     iterations = -1
@@ -357,7 +385,7 @@ def newmark_joint_step(q, v, a, force, has_force, mass, damping, has_damping, st
         for i in range(r):
             at[i] = q_bal[i] + c_q * x[i]
         joint_gaps(W, local_offset, gap_offset, at, gap)
-        joint_law(kind, gap, state, slider_stiffness, strength, normal_stiffness, areas, g, D)
+        joint_law(kind, gap, state, slider_stiffness, strength, normal_stiffness, areas, g, D, ratios)
         joint_project_force(W, g, f)
         _matvec(S, x, Sx)
         scale = _norm(Sx) + norm_b + w * _norm(f)
@@ -369,6 +397,7 @@ def newmark_joint_step(q, v, a, force, has_force, mass, damping, has_damping, st
         tolerance = atol + rtol * scale
         if norm <= tolerance:
             iterations = iteration
+            evaluated = True
             break
         if iteration == max_iterations:
             return q_pred, v_pred, x, state.copy(), iteration, NOT_CONVERGED, norm, tolerance
@@ -389,6 +418,13 @@ def newmark_joint_step(q, v, a, force, has_force, mass, damping, has_damping, st
     for i in range(r):
         q1[i] = q_pred[i] + (beta * h * h) * x[i]
         v1[i] = v_pred[i] + (gamma * h) * x[i]
-    joint_gaps(W, local_offset, gap_offset, q1, gap)
-    state1 = joint_commit(kind, gap, state, slider_stiffness, strength)
+    if evaluated:                         # the last evaluation's gaps are q1's when q1 is that iterate, bit for bit
+        for i in range(r):
+            if q1[i] != at[i]:
+                evaluated = False
+    if evaluated:
+        state1 = joint_commit_ratios(gap, state, slider_stiffness, ratios)
+    else:
+        joint_gaps(W, local_offset, gap_offset, q1, gap)
+        state1 = joint_commit(kind, gap, state, slider_stiffness, strength)
     return q1, v1, x, state1, iterations, CONVERGED, norm, tolerance
