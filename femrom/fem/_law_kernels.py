@@ -103,3 +103,28 @@ class CompiledJoint:
     def n_pairs(self) -> int:
         """``s``."""
         return self.areas.size
+
+
+@dataclass(frozen=True, eq=False)
+class CompiledSliders:
+    r"""Jenkins sliders along one reduced direction, ``f^(q^; e) = a sum_i k_i e_i``, as compiled step kernels
+    take them.
+
+    What :meth:`femrom.inference.LearnedHysteresis.compiled_sliders` returns: the stretches
+    return-map as ``e_i = clip(e_i^0 + (a . q^ - x^0), -phi_i, phi_i)`` (stuck where
+    ``|trial| < phi_i``); the state is ``(e^0 (p,), x^0)``, rebuilt into the force's own state
+    object by :attr:`state` (whose ``stretch`` and ``coordinate`` are the two parts). The kernels
+    are ``newmark_sliders_step`` and ``newmark_sliders_march`` of :func:`compiled_kernels`.
+
+    Attributes
+    ----------
+    direction : (r,) ndarray
+    thresholds, weights : (p,) ndarray
+    state : callable
+        ``(stretch, coordinate) -> state``.
+    """
+
+    direction: np.ndarray
+    thresholds: np.ndarray
+    weights: np.ndarray
+    state: object

@@ -273,7 +273,7 @@ def joint_commit(kind, gap, state, stiffness, strength):
 # kernels above after they change. Its Python side is femrom.integrators' FusedJointStep.
 
 #: ``status`` of :func:`newmark_joint_step`.
-CONVERGED, NOT_CONVERGED, NOT_FINITE, SINGULAR = 0, 1, 2, 3
+CONVERGED, NOT_CONVERGED, NOT_FINITE, SINGULAR, STATE_NOT_FINITE = 0, 1, 2, 3, 4
 
 
 @njit(cache=True)
@@ -324,25 +324,11 @@ def _lu_solve(A, b):
 
 
 @njit(cache=True)
-def newmark_joint_step(q, v, a, force, has_force, mass, damping, has_damping, stiffness, S,
-                       h, beta, gamma, alpha_m, alpha_f, c_q, w, rtol, atol, max_iterations,
-                       kind, W, local_offset, gap_offset, areas, slider_stiffness, strength, normal_stiffness,
-                       state):
-    """One step from ``(q, v, a)`` with the joint's ``state`` frozen in Newton and committed after.
-
-    What ``NewmarkFamily.step`` does with the dense Newton of ``ImplicitSolve`` on a projected
-    joint (:mod:`femrom.integrators`), in the same order of operations: the predictors, the
-    linear right-hand side ``force - K q_bal - C v_bal - alpha_m M a``, Newton on the new
-    acceleration from ``a`` (gaps ``W q + x_0``, the law on every pair and slider, ``W^T g``,
-    the residual test ``|R| <= atol + rtol (|S x| + |b| + w |f|)``, ``S + w c_q W^T D W``
-    solved by LU with partial pivoting, the update test ``|dx| <= 4 eps |x|``), the new ``q``
-    and ``v``, and the commit of the sliders at the new ``q``.
-
-    Returns ``(q1, v1, a1, state1, iterations, status, residual, tolerance)``; ``status`` is
-    :data:`CONVERGED` or why not (then ``residual`` and ``tolerance`` are the last test's).
-    """
+def _newmark_predict(q, v, a, force, has_force, mass, damping, has_damping, stiffness, h, beta, gamma, alpha_m,
+                     alpha_f):
+    """``(q_pred, v_pred, q_bal, b)``: the Newmark-family predictors, the balance point's displacement before
+    the new acceleration's part, and the linear right-hand side ``force - K q_bal - C v_bal - alpha_m M a``."""
     r = q.size
-    s = areas.size
     q_pred = np.empty(r)
     v_pred = np.empty(r)
     for i in range(r):
@@ -362,6 +348,31 @@ def newmark_joint_step(q, v, a, force, has_force, mass, damping, has_damping, st
         b -= alpha_m * _matvec(mass, a, work)
     if has_force:
         b = b + force
+    return q_pred, v_pred, q_bal, b
+
+
+@njit(cache=True)
+def newmark_joint_step(q, v, a, force, has_force, mass, damping, has_damping, stiffness, S,
+                       h, beta, gamma, alpha_m, alpha_f, c_q, w, rtol, atol, max_iterations,
+                       kind, W, local_offset, gap_offset, areas, slider_stiffness, strength, normal_stiffness,
+                       state):
+    """One step from ``(q, v, a)`` with the joint's ``state`` frozen in Newton and committed after.
+
+    What ``NewmarkFamily.step`` does with the dense Newton of ``ImplicitSolve`` on a projected
+    joint (:mod:`femrom.integrators`), in the same order of operations: the predictors, the
+    linear right-hand side ``force - K q_bal - C v_bal - alpha_m M a``, Newton on the new
+    acceleration from ``a`` (gaps ``W q + x_0``, the law on every pair and slider, ``W^T g``,
+    the residual test ``|R| <= atol + rtol (|S x| + |b| + w |f|)``, ``S + w c_q W^T D W``
+    solved by LU with partial pivoting, the update test ``|dx| <= 4 eps |x|``), the new ``q``
+    and ``v``, and the commit of the sliders at the new ``q``.
+
+    Returns ``(q1, v1, a1, state1, iterations, status, residual, tolerance)``; ``status`` is
+    :data:`CONVERGED` or why not (then ``residual`` and ``tolerance`` are the last test's).
+    """
+    r = q.size
+    s = areas.size
+    q_pred, v_pred, q_bal, b = _newmark_predict(q, v, a, force, has_force, mass, damping, has_damping, stiffness,
+                                                h, beta, gamma, alpha_m, alpha_f)
     norm_b = _norm(b)
 
     x = a.copy()
@@ -428,3 +439,123 @@ def newmark_joint_step(q, v, a, force, has_force, mass, damping, has_damping, st
         joint_gaps(W, local_offset, gap_offset, q1, gap)
         state1 = joint_commit(kind, gap, state, slider_stiffness, strength)
     return q1, v1, x, state1, iterations, CONVERGED, norm, tolerance
+
+
+# -- the same step with learned Jenkins sliders along one reduced direction ---------------------------------
+
+@njit(cache=True)
+def _sliders_force(direction, thresholds, weights, stretch, coordinate, q):
+    """``(x, sum_i k_i e_i, sum of the stuck sliders' k_i)`` at ``q``: the return map
+    ``e_i = clip(e_i^0 + (x - x^0), -phi_i, phi_i)``, ``x = a . q``, stuck where ``|trial| < phi_i``."""
+    x = 0.0
+    for j in range(q.size):
+        x += direction[j] * q[j]
+    total = 0.0
+    stuck = 0.0
+    for i in range(thresholds.size):
+        trial = stretch[i] + (x - coordinate)
+        phi = thresholds[i]
+        e = min(max(trial, -phi), phi)
+        total += weights[i] * e
+        if abs(trial) < phi:
+            stuck += weights[i]
+    return x, total, stuck
+
+
+@njit(cache=True)
+def newmark_sliders_step(q, v, a, force, has_force, mass, damping, has_damping, stiffness, S,
+                         h, beta, gamma, alpha_m, alpha_f, c_q, w, rtol, atol, max_iterations,
+                         direction, thresholds, weights, stretch, coordinate):
+    """:func:`newmark_joint_step` for the force ``a sum_i k_i e_i`` of learned Jenkins sliders along the
+    direction ``a`` (:class:`femrom.inference.LearnedHysteresis`), tangent ``(sum of the stuck k_i) a a^T``;
+    state: stretches ``e`` (p,) and coordinate ``x^0``.
+
+    Returns ``(q1, v1, a1, stretch1, coordinate1, iterations, status, residual, tolerance)``.
+    """
+    r = q.size
+    q_pred, v_pred, q_bal, b = _newmark_predict(q, v, a, force, has_force, mass, damping, has_damping, stiffness,
+                                                h, beta, gamma, alpha_m, alpha_f)
+    norm_b = _norm(b)
+    x = a.copy()
+    f = np.empty(r)
+    Sx = np.empty(r)
+    R = np.empty(r)
+    J = np.empty((r, r))
+    at = np.empty(r)
+    eps = np.finfo(np.float64).eps
+    c = w * c_q
+    iterations = -1
+    norm = tolerance = np.nan
+    for iteration in range(max_iterations + 1):
+        for i in range(r):
+            at[i] = q_bal[i] + c_q * x[i]
+        _, total, stuck = _sliders_force(direction, thresholds, weights, stretch, coordinate, at)
+        for i in range(r):
+            f[i] = direction[i] * total
+        _matvec(S, x, Sx)
+        scale = _norm(Sx) + norm_b + w * _norm(f)
+        for i in range(r):
+            R[i] = Sx[i] - b[i] + w * f[i]
+        norm = _norm(R)
+        if not math.isfinite(norm):
+            return q_pred, v_pred, x, stretch.copy(), coordinate, iteration, NOT_FINITE, norm, tolerance
+        tolerance = atol + rtol * scale
+        if norm <= tolerance:
+            iterations = iteration
+            break
+        if iteration == max_iterations:
+            return q_pred, v_pred, x, stretch.copy(), coordinate, iteration, NOT_CONVERGED, norm, tolerance
+        for i in range(r):
+            for j in range(r):
+                J[i, j] = S[i, j] + c * (stuck * (direction[i] * direction[j]))
+        if not _lu_solve(J, R):
+            return q_pred, v_pred, x, stretch.copy(), coordinate, iteration, SINGULAR, norm, tolerance
+        for i in range(r):
+            x[i] = x[i] - R[i]
+        if _norm(R) <= 4.0 * eps * _norm(x):
+            iterations = iteration + 1
+            break
+    q1 = np.empty(r)
+    v1 = np.empty(r)
+    for i in range(r):
+        q1[i] = q_pred[i] + (beta * h * h) * x[i]
+        v1[i] = v_pred[i] + (gamma * h) * x[i]
+    x1 = 0.0
+    for j in range(r):
+        x1 += direction[j] * q1[j]
+    stretch1 = np.empty(thresholds.size)
+    for i in range(thresholds.size):
+        phi = thresholds[i]
+        stretch1[i] = min(max(stretch[i] + (x1 - coordinate), -phi), phi)
+    return q1, v1, x, stretch1, x1, iterations, CONVERGED, norm, tolerance
+
+
+@njit(cache=True)
+def newmark_sliders_march(q, v, a, forces, has_force, mass, damping, has_damping, stiffness, S,
+                          h, beta, gamma, alpha_m, alpha_f, c_q, w, rtol, atol, max_iterations,
+                          direction, thresholds, weights, stretch, coordinate, Q, V, A):
+    """``n`` steps of :func:`newmark_sliders_step` from ``(q, v, a)``, the forcing of step ``k`` in
+    ``forces[:, k]``, the states in the columns ``1 .. n`` of ``Q``, ``V``, ``A`` (r, n + 1).
+
+    Returns ``(stretch, coordinate, step, iterations, status, residual, tolerance)``: a step that
+    fails stops the march with its status and index (``STATE_NOT_FINITE``: its new ``q`` is not
+    finite, as the step-by-step march checks); else ``step`` is ``n``.
+    """
+    n = Q.shape[1] - 1
+    iterations = 0
+    qk, vk, ak, ek, xk = q.copy(), v.copy(), a.copy(), stretch.copy(), coordinate
+    for k in range(n):
+        qk, vk, ak, ek, xk, its, status, norm, tolerance = newmark_sliders_step(
+            qk, vk, ak, forces[:, k].copy(), has_force, mass, damping, has_damping, stiffness, S,
+            h, beta, gamma, alpha_m, alpha_f, c_q, w, rtol, atol, max_iterations,
+            direction, thresholds, weights, ek, xk)
+        if status != CONVERGED:
+            return ek, xk, k, iterations, status, norm, tolerance
+        finite = True
+        for i in range(qk.size):
+            Q[i, k + 1], V[i, k + 1], A[i, k + 1] = qk[i], vk[i], ak[i]
+            finite = finite and math.isfinite(qk[i])
+        iterations += its
+        if not finite:
+            return ek, xk, k, iterations, STATE_NOT_FINITE, norm, tolerance
+    return ek, xk, n, iterations, CONVERGED, np.nan, np.nan

@@ -40,7 +40,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from femrom._errors import FemromValueError
-from femrom.integrators._fused import fused_joint_step
+from femrom.integrators._fused import fused_step
 from femrom.integrators._implicit import ImplicitSolve
 from femrom.integrators._newton import Newton
 from femrom.integrators._scheme import Scheme, register_scheme, solve_matrix
@@ -107,7 +107,7 @@ class NewmarkFamily(Scheme):
             cache.nonlinear = ImplicitSolve(system, S, (1.0 - af) * self.beta * dt * dt,
                                             (1.0 - af) * self.gamma * dt, 1.0, make_solver, self.newton)
             cache.details = cache.nonlinear.details   # the same dict: running totals show in the summary
-            cache.fused = fused_joint_step(self, system, dt, S, cache.nonlinear)
+            cache.fused = fused_step(self, system, dt, S, cache.nonlinear)
             if cache.fused is not None:
                 cache.details["compiled_step"] = True
         return cache
