@@ -35,7 +35,8 @@ import numpy as np
 
 from femrom._errors import FemromValueError
 from femrom._registry import Registry
-from femrom.fem._law_kernels import PARALLEL_SLIDERS, compiled_kernels
+from femrom.fem._law_kernels import compiled_kernels
+from femrom.fem._law_kinds import PARALLEL_SLIDERS
 
 #: The interface laws by name (the modules of :mod:`femrom.fem.interface_laws` are imported on first read).
 INTERFACE_LAWS = Registry("interface law", "femrom.fem.interface_laws", order=lambda name, cls: name,

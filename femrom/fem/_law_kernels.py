@@ -27,9 +27,6 @@ _ENVIRONMENT = "FEMROM_COMPILED_LAWS"
 _enabled = os.environ.get(_ENVIRONMENT, "1").strip().lower() not in ("0", "false", "no", "off", "numpy")
 _kernels = None        # the compiled module after the first successful import, False when numba is missing
 
-#: ``kind`` of a law in the compiled joint kernels: parallel sliders (``iwan``, ``jenkins``), clamped Iwan.
-PARALLEL_SLIDERS, CLAMPED_IWAN = 0, 1
-
 
 def use_compiled_laws(enabled: bool) -> bool:
     """Switch the interface laws between the compiled kernels and numpy; returns the previous setting.
@@ -68,7 +65,7 @@ class CompiledJoint:
     What :meth:`femrom.fem.TransformedForce.compiled_joint` returns for a joint whose law has
     compiled kernels: the pair gaps are ``Delta = (W q^ + local_offset).reshape(s, 3) +
     gap_offset``, the pair forces ``A_i t_i(Delta_i; z_i)`` and their tangent blocks come from
-    the law's kernel ``kind`` (:data:`PARALLEL_SLIDERS` or :data:`CLAMPED_IWAN`), and a
+    the law's kernel ``kind`` (``PARALLEL_SLIDERS`` or ``CLAMPED_IWAN`` of :mod:`femrom.fem._law_kinds`), and a
     compiled caller (an integrator's fused step) projects them back with ``W``. The kernels
     are the functions ``joint_gaps``, ``joint_law``, ``joint_project_force``,
     ``joint_project_tangent`` and ``joint_commit`` of :func:`compiled_kernels`; the numpy path

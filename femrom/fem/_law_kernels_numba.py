@@ -27,7 +27,7 @@ import math
 import numpy as np
 from numba import njit
 
-from femrom.fem._law_kernels import CLAMPED_IWAN
+from femrom.fem._law_kinds import CLAMPED_IWAN
 
 
 @njit(cache=True, inline="always")

@@ -59,7 +59,8 @@ from femrom.fem._interface_law import (
     register_interface_law,
     split_gap,
 )
-from femrom.fem._law_kernels import CLAMPED_IWAN, compiled_kernels
+from femrom.fem._law_kernels import compiled_kernels
+from femrom.fem._law_kinds import CLAMPED_IWAN
 from femrom.fem.interface_laws.iwan import IwanLaw
 
 
