@@ -1,4 +1,4 @@
-r"""A whole Newmark-family step of a small model with a projected joint in one compiled call.
+r"""A whole Newmark-family step of a small model with a joint or learned sliders in one compiled call.
 
 The dense Newton of a reduced model with a joint (:class:`~femrom.integrators.ImplicitSolve`,
 ``method = "dense"``) spends most of a step in Python around its few hundred floating-point
@@ -27,8 +27,8 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from femrom.fem import compiled_kernels, compiled_laws
 from femrom._errors import FemromRuntimeError, FemromValueError
+from femrom.fem import compiled_kernels, compiled_laws
 from femrom.integrators._newton import ConvergenceError
 
 

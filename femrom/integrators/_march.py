@@ -9,7 +9,9 @@ prediction's inputs, a controller's moves), and the states are kept in arrays:
   ``(1 - theta) F_k + theta F_{k+1}``);
 - :func:`march`: a whole trajectory with any registered scheme. A linear model with
   dense operators runs the scheme's precomputed step map, one small matrix-vector
-  product a step (:func:`run_linear`); any other model calls the scheme's ``step``;
+  product a step (:func:`run_linear`); a model whose fused step can march (learned
+  sliders, :mod:`._fused`) runs in one compiled call; any other model calls the
+  scheme's ``step``;
 - :class:`Stepper`: one step at a time, ``y = stepper.step(u)``, for a controller
   in the loop or a stepped sine; the same two paths.
 """
@@ -176,7 +178,9 @@ def march(system, scheme, times, q0, v0, *, inputs=None, state0=None, solver=Non
     Returns
     -------
     dict with ``q``, ``v``, ``a`` ((n, k) ndarrays), ``state`` (at the end), ``newton_iterations``,
-    ``stepping_seconds`` (the loop alone) and ``path`` (``"linear map"`` or ``"steps"``).
+    ``stepping_seconds`` (the loop alone) and ``path`` (``"linear map"``, ``"steps"``, or ``"compiled
+    steps"``: a scheme whose step is one compiled call for this model and that can march the whole
+    trajectory in one, learned sliders under the Newmark family, :mod:`._fused`).
     """
     scheme = time_scheme(scheme)
     scheme.check(system)

@@ -27,8 +27,9 @@ factorised once per ``dt`` (sparse for the full model, dense for a reduced one);
 nonlinear model solves ``S a + f(q^* + c_q a, v^* + c_v a) = rhs`` by Newton
 (:class:`~femrom.integrators.ImplicitSolve`: on all dofs, condensed onto the force's
 own coordinates, or dense for a small model). A small model whose force is a projected
-joint with a compiled law takes the whole step, Newton and commit included, in one
-compiled call (:mod:`femrom.integrators._fused`), the same step to round-off.
+joint with a compiled law, or learned Jenkins sliders, takes the whole step, Newton and
+commit included, in one compiled call (:mod:`femrom.integrators._fused`), the same step to
+round-off.
 """
 
 from __future__ import annotations
@@ -79,7 +80,7 @@ def _finish(S):
 class NewmarkCache:
     """What a Newmark-family step reuses: ``dt``, the effective matrix and its solver
     (linear models) or the nonlinear step's :class:`ImplicitSolve`, and the whole step as one
-    compiled call when the force offers it (:class:`~femrom.integrators._fused.FusedJointStep`)."""
+    compiled call when the force offers it (:func:`~femrom.integrators._fused.fused_step`)."""
 
     dt: float
     effective_matrix: Any
