@@ -15,6 +15,10 @@ the same at every step.
 """
 
 import dataclasses
+import os
+import subprocess
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -180,3 +184,17 @@ def test_a_step_that_does_not_converge_fails_as_the_numpy_one_does():
             run(system, z0, scheme, compiled, steps=40)
         messages.append((failure.value.step, str(failure.value).split(":")[0]))
     assert messages[0] == messages[1]
+
+
+def test_the_environment_switches_the_fused_step_off():
+    code = ("from tests.test_fused_step import lap_joint\n"
+            "from femrom.integrators import Newmark, StepResult, integrate\n"
+            "system, z0 = lap_joint('jenkins')\n"
+            "summary = integrate(system, Newmark(), None, None, 2e-4, 3, progress=False,\n"
+            "                    start=StepResult.at_rest(system.n_dofs, state=z0))\n"
+            "print(system.nonlinear.compiled_joint() is None, 'compiled_step' in summary.details)\n")
+    root = Path(__file__).resolve().parents[1]
+    env = {**os.environ, "FEMROM_COMPILED_LAWS": "0",
+           "PYTHONPATH": os.pathsep.join([str(root), os.environ.get("PYTHONPATH", "")])}
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True, cwd=root)
+    assert out.stdout.split() == ["True", "False"]
