@@ -17,7 +17,8 @@ kernels do not.
 The joint kernels (``joint_*``) evaluate a projected joint
 (:class:`femrom.fem.CompiledJoint`) pair by pair into preallocated arrays, and
 :func:`newmark_joint_step` is a whole Newmark-family step of a small model with one, Newton
-and commit included (its Python side is ``FusedJointStep`` in :mod:`femrom.integrators._fused`).
+and commit included (its Python side is ``FusedJointStep`` in :mod:`femrom.integrators._fused`; the
+learned sliders' ``newmark_sliders_step`` and ``newmark_sliders_march`` are ``FusedSlidersStep``'s).
 """
 
 from __future__ import annotations
@@ -269,8 +270,8 @@ def joint_commit(kind, gap, state, stiffness, strength):
 
 # -- a whole Newmark-family step of a small model with a projected joint --------------------------------------
 # It lives here, not with the integrators, because numba's on-disk cache keys a compiled function on
-# its own source file only: a caller in another file would keep running a stale copy of the joint
-# kernels above after they change. Its Python side is femrom.integrators' FusedJointStep.
+# kernels above after they change. Python side: femrom.integrators' FusedJointStep (FusedSlidersStep below).
+# kernels above after they change. Its Python side is femrom.integrators' FusedJointStep (FusedSlidersStep below).
 
 #: ``status`` of :func:`newmark_joint_step`.
 CONVERGED, NOT_CONVERGED, NOT_FINITE, SINGULAR, STATE_NOT_FINITE = 0, 1, 2, 3, 4
