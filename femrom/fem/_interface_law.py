@@ -36,6 +36,7 @@ import numpy as np
 from femrom._errors import FemromValueError
 from femrom._registry import Registry
 from femrom.fem._law_kernels import compiled_kernels
+from femrom.fem._law_kinds import PARALLEL_SLIDERS
 
 #: The interface laws by name (the modules of :mod:`femrom.fem.interface_laws` are imported on first read).
 INTERFACE_LAWS = Registry("interface law", "femrom.fem.interface_laws", order=lambda name, cls: name,
@@ -263,6 +264,11 @@ class ParallelSliderLaw(InterfaceLaw):
         if gap.ndim != 2 or gap.shape[1] != 3 or state.shape != (gap.shape[0], self.slider_stiffness.size, 2):
             return None                                      # numpy broadcasts or raises as it always has
         return kernels, gap, state
+
+    def kernel_arguments(self):
+        """``(kind, stiffness (N,), strength (N,), normal_stiffness)``: the law as the compiled joint kernels take it
+        (:class:`femrom.fem.CompiledJoint`)."""
+        return PARALLEL_SLIDERS, self.slider_stiffness, self.slider_strength, float(self.normal_stiffness)
 
     def evaluate(self, gap, state, tangent=True):
         compiled = self._compiled(gap, state)

@@ -19,6 +19,9 @@ the first call of :func:`compiled_kernels`.
 from __future__ import annotations
 
 import os
+from dataclasses import dataclass
+
+import numpy as np
 
 _ENVIRONMENT = "FEMROM_COMPILED_LAWS"
 _enabled = os.environ.get(_ENVIRONMENT, "1").strip().lower() not in ("0", "false", "no", "off", "numpy")
@@ -53,3 +56,72 @@ def compiled_kernels():
             module = False
         _kernels = module
     return _kernels or None
+
+
+@dataclass(frozen=True, eq=False)
+class CompiledJoint:
+    r"""A projected joint ``f^(q^; z) = W^T g(W q^ + x_0; z)`` as compiled step kernels take it.
+
+    What :meth:`femrom.fem.TransformedForce.compiled_joint` returns for a joint whose law has
+    compiled kernels: the pair gaps are ``Delta = (W q^ + local_offset).reshape(s, 3) +
+    gap_offset``, the pair forces ``A_i t_i(Delta_i; z_i)`` and their tangent blocks come from
+    the law's kernel ``kind`` (``PARALLEL_SLIDERS`` or ``CLAMPED_IWAN`` of :mod:`femrom.fem._law_kinds`), and a
+    compiled caller (an integrator's fused step) projects them back with ``W``. The kernels
+    are the functions ``joint_gaps``, ``joint_law``, ``joint_project_force``,
+    ``joint_project_tangent`` and ``joint_commit`` of :func:`compiled_kernels`; the numpy path
+    (:meth:`~femrom.fem.TransformedForce.dense_force_and_tangent`, the law's ``evaluate`` and
+    ``commit``) is the reference they reproduce to round-off.
+
+    Attributes
+    ----------
+    kind : int
+    dense_map : (3 s, k) ndarray
+        ``W = L T``, C-contiguous.
+    local_offset : (3 s,) ndarray
+        ``L q_0`` of the reference (zeros without one).
+    gap_offset : (s, 3) ndarray
+        The joint's initial gaps (normal components).
+    areas : (s,) ndarray
+    stiffness, strength : (N,) ndarray
+        The sliders' stiffnesses and slip limits (unit limits for the clamped law).
+    normal_stiffness : float
+    """
+
+    kind: int
+    dense_map: np.ndarray
+    local_offset: np.ndarray
+    gap_offset: np.ndarray
+    areas: np.ndarray
+    stiffness: np.ndarray
+    strength: np.ndarray
+    normal_stiffness: float
+
+    @property
+    def n_pairs(self) -> int:
+        """``s``."""
+        return self.areas.size
+
+
+@dataclass(frozen=True, eq=False)
+class CompiledSliders:
+    r"""Jenkins sliders along one reduced direction, ``f^(q^; e) = a sum_i k_i e_i``, as compiled step kernels
+    take them.
+
+    What :meth:`femrom.inference.LearnedHysteresis.compiled_sliders` returns: the stretches
+    return-map as ``e_i = clip(e_i^0 + (a . q^ - x^0), -phi_i, phi_i)`` (stuck where
+    ``|trial| < phi_i``); the state is ``(e^0 (p,), x^0)``, rebuilt into the force's own state
+    object by :attr:`state` (whose ``stretch`` and ``coordinate`` are the two parts). The kernels
+    are ``newmark_sliders_step`` and ``newmark_sliders_march`` of :func:`compiled_kernels`.
+
+    Attributes
+    ----------
+    direction : (r,) ndarray
+    thresholds, weights : (p,) ndarray
+    state : callable
+        ``(stretch, coordinate) -> state``.
+    """
+
+    direction: np.ndarray
+    thresholds: np.ndarray
+    weights: np.ndarray
+    state: object

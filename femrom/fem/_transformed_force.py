@@ -25,6 +25,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from femrom._errors import FemromValueError
+from femrom.fem._law_kernels import CompiledJoint, compiled_kernels
 from femrom.fem._nonlinear import NonlinearForce, force_from_parameters, register_force
 
 #: Up to this many new coordinates the tangent ``(L T)^T D (L T)`` is formed with a dense ``L T``:
@@ -221,6 +222,35 @@ class TransformedForce(NonlinearForce):
             raise FemromValueError(f"dense_force_and_tangent is for at most {DENSE_COORDINATES} coordinates, "
                              f"this force has {self.n_dofs}")
         return dense_projection(self.dense_map(), self, q_hat, v_hat, state)
+
+    def compiled_joint(self):
+        """A :class:`~femrom.fem.CompiledJoint` of this force for compiled step kernels, or ``None``.
+
+        ``None`` unless the compiled law kernels are on (:func:`~femrom.fem.compiled_laws`), the
+        original is a :class:`~femrom.fem.JointForce` whose law has them (``kernel_arguments``:
+        ``iwan``, ``jenkins``, ``clamped_iwan``) and this force has at most
+        :data:`DENSE_COORDINATES` coordinates. Asked once per run: the switch
+        :func:`~femrom.fem.use_compiled_laws` is read again by whoever steps with it.
+        """
+        joint = self.force_model
+        arguments = getattr(getattr(joint, "law", None), "kernel_arguments", None)
+        if compiled_kernels() is None or not callable(arguments) or self.n_dofs > DENSE_COORDINATES \
+                or not hasattr(joint, "initial_gap") or not self.has_blocks:
+            return None
+        given = arguments()
+        if given is None:                        # the law has no kernel in this setting (clamped_iwan's closing)
+            return None
+        kind, stiffness, strength, normal_stiffness = given
+        s = joint.areas.size
+        gap_offset = np.zeros((s, 3))
+        gap_offset[:, 2] = joint.initial_gap
+        offset = np.zeros(3 * s) if self.local_offset is None else self.local_offset
+        return CompiledJoint(kind=int(kind), dense_map=np.ascontiguousarray(self.dense_map(), dtype=float),
+                             local_offset=np.ascontiguousarray(offset, dtype=float), gap_offset=gap_offset,
+                             areas=np.ascontiguousarray(joint.areas, dtype=float),
+                             stiffness=np.ascontiguousarray(stiffness, dtype=float),
+                             strength=np.ascontiguousarray(strength, dtype=float),
+                             normal_stiffness=float(normal_stiffness))
 
     # -- the original's own view ---------------------------------------------------------
     def embed(self, q_hat: np.ndarray) -> np.ndarray:

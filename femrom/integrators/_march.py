@@ -9,7 +9,9 @@ prediction's inputs, a controller's moves), and the states are kept in arrays:
   ``(1 - theta) F_k + theta F_{k+1}``);
 - :func:`march`: a whole trajectory with any registered scheme. A linear model with
   dense operators runs the scheme's precomputed step map, one small matrix-vector
-  product a step (:func:`run_linear`); any other model calls the scheme's ``step``;
+  product a step (:func:`run_linear`); a model whose fused step can march (learned
+  sliders, :mod:`._fused`) runs in one compiled call; any other model calls the
+  scheme's ``step``;
 - :class:`Stepper`: one step at a time, ``y = stepper.step(u)``, for a controller
   in the loop or a stepped sine; the same two paths.
 """
@@ -23,6 +25,7 @@ from typing import Callable
 import numpy as np
 
 from femrom._errors import FemromRuntimeError, FemromValueError
+from femrom.integrators._fused import NonFiniteState
 from femrom.integrators._newton import ConvergenceError
 from femrom.integrators._scheme import LinearParts, dense_model, time_scheme
 from femrom.solvers import make_solver
@@ -175,7 +178,9 @@ def march(system, scheme, times, q0, v0, *, inputs=None, state0=None, solver=Non
     Returns
     -------
     dict with ``q``, ``v``, ``a`` ((n, k) ndarrays), ``state`` (at the end), ``newton_iterations``,
-    ``stepping_seconds`` (the loop alone) and ``path`` (``"linear map"`` or ``"steps"``).
+    ``stepping_seconds`` (the loop alone) and ``path`` (``"linear map"``, ``"steps"``, or ``"compiled
+    steps"``: a scheme whose step is one compiled call for this model and that can march the whole
+    trajectory in one, learned sliders under the Newmark family, :mod:`._fused`).
     """
     scheme = time_scheme(scheme)
     scheme.check(system)
@@ -214,6 +219,19 @@ def march(system, scheme, times, q0, v0, *, inputs=None, state0=None, solver=Non
         rhs = rhs - nonlinear.force(q0, v0, state)
     a = mass_solver.solve(rhs)
     cache = scheme.init(system, h, factory, lambda: mass_solver, times[0], q0, v0, a, state)
+    fused = getattr(cache, "fused", None)
+    if callable(getattr(fused, "march", None)) and fused.enabled():
+        # the whole trajectory in one compiled call (the same steps as the loop below)
+        tic = time.perf_counter()
+        try:
+            Q, V, Acc, state, iterations = fused.march(q0, v0, a, state, F_input[:, :n_steps] if present else None,
+                                                       n_steps)
+        except ConvergenceError as err:
+            raise ConvergenceError(f"step {err.step} (t = {times[err.step]:.6g}): {err}") from None
+        except NonFiniteState as err:
+            raise FemromRuntimeError(f"the state became non-finite at t = {times[err.step]:.6g}") from None
+        return {"q": Q, "v": V, "a": Acc, "state": state, "newton_iterations": iterations,
+                "stepping_seconds": time.perf_counter() - tic, "path": "compiled steps"}
     Q, V, Acc = (np.empty((n, times.size)) for _ in range(3))
     Q[:, 0], V[:, 0], Acc[:, 0] = q0, v0, a
     q, v, iterations = q0, v0, 0

@@ -78,6 +78,7 @@ from femrom.fem._interface_law import (
     split_gap,
 )
 from femrom.fem._law_kernels import compiled_kernels
+from femrom.fem._law_kinds import CLAMPED_IWAN
 from femrom.fem.interface_laws.iwan import IwanLaw
 
 
@@ -158,6 +159,14 @@ class ClampedIwanLaw(InterfaceLaw):
                        np.where(reclosed, self.closing * self.closing_friction * self.normal_stiffness * -g_n, 0.0))
         t, ratio, direction, slipping = radial_return(trial, tau[:, None] * self.unit_strength[None, :])
         return g_t, g_n, closed, reclosed, k, trial, t, ratio, direction, slipping
+
+    def kernel_arguments(self):
+        """``(kind, stiffness (N,), unit strength (N,), normal_stiffness)``: the law as the compiled joint kernels
+        take it (:class:`femrom.fem.CompiledJoint`), or ``None`` with ``closing > 0`` (the kernels do not know
+        reclosing points: the numpy step runs)."""
+        if self.closing:
+            return None
+        return CLAMPED_IWAN, self.slider_stiffness, self.unit_strength, float(self.normal_stiffness)
 
     def _normal_stiffness(self, closed, reclosed) -> np.ndarray:
         """(s,) the points' normal stiffness: ``k_n`` closed at the preload, ``kappa k_n`` reclosed, else 0."""

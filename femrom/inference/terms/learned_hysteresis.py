@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from femrom._errors import FemromValueError
-from femrom.fem import slider_return
+from femrom.fem import CompiledSliders, compiled_laws, slider_return
 from femrom.inference._terms import ReducedTerm, register_term
 
 
@@ -153,6 +153,15 @@ class LearnedHysteresis(ReducedTerm):
         x = float(self.direction @ q)
         stuck = slider_return(state.stretch + (x - state.coordinate), self.thresholds)[1]
         return float(self.weights[stuck].sum()) * np.outer(self.direction, self.direction), None
+
+    def compiled_sliders(self) -> CompiledSliders | None:
+        """The sliders as compiled step kernels take them (:class:`femrom.fem.CompiledSliders`), or ``None`` when
+        the compiled laws are off (:func:`femrom.fem.use_compiled_laws`): a reduced Newmark step then runs
+        in one compiled call."""
+        if not compiled_laws():
+            return None
+        return CompiledSliders(np.ascontiguousarray(self.direction), np.ascontiguousarray(self.thresholds),
+                               np.ascontiguousarray(self.weights), SliderState)
 
     def forces(self, Q: np.ndarray, Vel=None, starts=(0,)) -> np.ndarray:
         """(r, K) force along a history ``Q`` (each trajectory of ``starts`` loaded from rest to its first column)."""

@@ -126,6 +126,12 @@ class ProjectedNonlinearForce(ReducedTerm):
             return None
         return lambda q0, q1, state=None: self.transformed.dense_step_force(W, q0, q1, state)
 
+    def compiled_joint(self):
+        """The projected joint as compiled step kernels take it (:meth:`femrom.fem.TransformedForce.compiled_joint`),
+        or ``None`` (no joint, no compiled law, or the compiled laws switched off)."""
+        offer = getattr(self.transformed, "compiled_joint", None)
+        return offer() if callable(offer) else None
+
     def potential(self, q) -> float:
         if not self.conservative:
             return 0.0

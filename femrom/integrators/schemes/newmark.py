@@ -26,7 +26,10 @@ where ``x_{n+1-alpha} = (1 - alpha) x_{n+1} + alpha x_n``; Newmark is the case
 factorised once per ``dt`` (sparse for the full model, dense for a reduced one); a
 nonlinear model solves ``S a + f(q^* + c_q a, v^* + c_v a) = rhs`` by Newton
 (:class:`~femrom.integrators.ImplicitSolve`: on all dofs, condensed onto the force's
-own coordinates, or dense for a small model).
+own coordinates, or dense for a small model). A small model whose force is a projected
+joint with a compiled law, or learned Jenkins sliders, takes the whole step, Newton and
+commit included, in one compiled call (:mod:`femrom.integrators._fused`), the same step to
+round-off.
 """
 
 from __future__ import annotations
@@ -38,6 +41,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from femrom._errors import FemromValueError
+from femrom.integrators._fused import fused_step
 from femrom.integrators._implicit import ImplicitSolve
 from femrom.integrators._newton import Newton
 from femrom.integrators._scheme import Scheme, register_scheme, solve_matrix
@@ -75,13 +79,15 @@ def _finish(S):
 @dataclass
 class NewmarkCache:
     """What a Newmark-family step reuses: ``dt``, the effective matrix and its solver
-    (linear models) or the nonlinear step's :class:`ImplicitSolve`."""
+    (linear models) or the nonlinear step's :class:`ImplicitSolve`, and the whole step as one
+    compiled call when the force offers it (:func:`~femrom.integrators._fused.fused_step`)."""
 
     dt: float
     effective_matrix: Any
     solver: Any = None
     nonlinear: ImplicitSolve | None = None
     details: dict = field(default_factory=dict)
+    fused: Any = None
 
 
 class NewmarkFamily(Scheme):
@@ -102,10 +108,15 @@ class NewmarkFamily(Scheme):
             cache.nonlinear = ImplicitSolve(system, S, (1.0 - af) * self.beta * dt * dt,
                                             (1.0 - af) * self.gamma * dt, 1.0, make_solver, self.newton)
             cache.details = cache.nonlinear.details   # the same dict: running totals show in the summary
+            cache.fused = fused_step(self, system, dt, S, cache.nonlinear)
+            if cache.fused is not None:
+                cache.details["compiled_step"] = True
         return cache
 
     def step(self, system, cache: NewmarkCache, t, q, v, a, state, force, force_end=None):
         """One step from ``(t, q, v, a)``: returns ``(q1, v1, a1, state1, newton_iterations)``."""
+        if cache.fused is not None and cache.fused.enabled():
+            return cache.fused(q, v, a, state, force)
         h, beta, gamma, af = cache.dt, self.beta, self.gamma, self.alpha_f
         q_pred = q + h * v + ((0.5 - beta) * h * h) * a
         v_pred = v + ((1.0 - gamma) * h) * a

@@ -1,0 +1,209 @@
+r"""A whole Newmark-family step of a small model with a joint or learned sliders in one compiled call.
+
+The dense Newton of a reduced model with a joint (:class:`~femrom.integrators.ImplicitSolve`,
+``method = "dense"``) spends most of a step in Python around its few hundred floating-point
+operations: the law's and the force's wrappers, the ``(L V)^T D (L V)`` products, norms and
+``r x r`` solves on tiny arrays, the scheme's bookkeeping. When the model's force offers a
+:class:`~femrom.fem.CompiledJoint` (:meth:`femrom.fem.TransformedForce.compiled_joint`: a joint
+whose law has compiled kernels), :class:`FusedJointStep` runs the predictor, the Newton
+iterations (gaps, law, projection, solve, convergence tests) and the commit of the slider
+states as one numba call (``newmark_joint_step`` of :func:`femrom.fem.compiled_kernels`, kept
+in the file of the law kernels it calls so that numba's on-disk cache cannot go stale), with
+the tolerances, tests and iteration counts of the reference path. Sums run in loops where
+numpy calls BLAS, so the two paths agree to round-off, not bit for bit.
+
+Learned Jenkins sliders along a reduced direction (:class:`~femrom.inference.LearnedHysteresis`,
+which offers a :class:`~femrom.fem.CompiledSliders`) step the same way
+(:class:`FusedSlidersStep`), and a whole trajectory of them in one call (:meth:`FusedSlidersStep.march`,
+taken by :func:`femrom.integrators.march`).
+
+The numpy path stays the reference: the scheme takes it whenever the force offers no compiled
+joint, and at every step where the compiled laws are switched off
+(``FEMROM_COMPILED_LAWS=0``, :func:`femrom.fem.use_compiled_laws`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+
+from femrom._errors import FemromRuntimeError, FemromValueError
+from femrom.fem import compiled_kernels, compiled_laws
+from femrom.integrators._newton import ConvergenceError
+
+
+def _dense(A) -> np.ndarray:
+    return np.ascontiguousarray(A.toarray() if sp.issparse(A) else A, dtype=float)
+
+
+def _frozen(x) -> np.ndarray:
+    """``x`` as a read-only float C array (the driver's own vectors are; one compiled signature for all)."""
+    if x.flags.writeable or x.dtype != np.float64 or not x.flags.c_contiguous:
+        x = np.array(x, dtype=float)
+        x.setflags(write=False)
+    return x
+
+
+class NonFiniteState(FemromRuntimeError):
+    """A marched step's new state is not finite (the march turns it into its own error)."""
+
+    def __init__(self, step: int):
+        super().__init__(f"the state became non-finite at step {step}")
+        self.step = step
+
+
+class _FusedStep:
+    """What the fused steps share: the model's dense matrices and the scheme's coefficients, as the reference
+    forms them (``NewmarkFamily.init``, ``ImplicitSolve``)."""
+
+    def __init__(self, scheme, system, dt: float, effective_matrix, initial_state):
+        kernels = compiled_kernels()
+        self._kernels = kernels
+        self._status = {kernels.NOT_CONVERGED: "not converged", kernels.NOT_FINITE: "not finite",
+                        kernels.SINGULAR: "singular"}
+        h = float(dt)
+        beta, gamma = float(scheme.beta), float(scheme.gamma)
+        am, af = float(scheme.alpha_m), float(scheme.alpha_f)
+        newton = scheme.newton
+        r = system.n_dofs
+        self._initial_state, self._newton = initial_state, newton
+        damping = system.damping
+        self._matrices = (_dense(system.mass), _dense(damping) if damping is not None else np.zeros((r, r)),
+                          damping is not None, _dense(system.stiffness), _dense(effective_matrix))
+        c_q = float((1.0 - af) * beta * h * h)
+        self._scalars = (h, beta, gamma, am, af, c_q, 1.0, float(newton.rtol), float(newton.atol),
+                         int(newton.max_iterations))
+        self._no_force = np.zeros(r)
+
+    @staticmethod
+    def enabled() -> bool:
+        """Whether the compiled laws are on now (the fused step follows the same switch)."""
+        return compiled_laws()
+
+    def _raise(self, status, iteration, norm, tolerance):
+        options = self._newton
+        what = self._status[status]
+        if what == "not finite":
+            raise ConvergenceError(f"Newton residual is not finite at iteration {iteration}")
+        if what == "singular":
+            raise ConvergenceError(f"Newton's matrix is singular at iteration {iteration}")
+        raise ConvergenceError(
+            f"Newton did not converge in {options.max_iterations} iterations: residual "
+            f"{norm:.3g} > tolerance {tolerance:.3g} (atol={options.atol:g}, rtol={options.rtol:g})")
+
+
+class FusedJointStep(_FusedStep):
+    """One Newmark-family step (``scheme``'s coefficients, ``dt``) of ``system`` in one compiled call.
+
+    Parameters
+    ----------
+    scheme : NewmarkFamily
+    system : SecondOrderSystem
+        Small (dense matrices), whose force gave ``joint``.
+    dt : float
+    effective_matrix : (n, n) array
+        ``S`` of the scheme.
+    joint : CompiledJoint
+    initial_state : callable
+        The force's ``initial_state`` (for a ``None`` state).
+    """
+
+    def __init__(self, scheme, system, dt: float, effective_matrix, joint, initial_state):
+        super().__init__(scheme, system, dt, effective_matrix, initial_state)
+        self._kernel = self._kernels.newmark_joint_step
+        self.joint = joint
+        self._law = (joint.kind, joint.dense_map, joint.local_offset, joint.gap_offset, joint.areas,
+                     joint.stiffness, joint.strength, joint.normal_stiffness)
+
+    def __call__(self, q, v, a, state, force):
+        """``(q1, v1, a1, state1, newton_iterations)`` of the step from ``(q, v, a)``, ``state`` and ``force``."""
+        if state is None:
+            state = self._initial_state()
+        if not (state.flags.writeable and state.flags.c_contiguous and state.dtype == np.float64):
+            state = np.array(state, dtype=float)
+        if force is None:
+            force, has_force = self._no_force, False
+        else:
+            has_force = True
+            if not (force.flags.writeable and force.flags.c_contiguous and force.dtype == np.float64):
+                force = np.array(force, dtype=float)
+        M, C, has_C, K, S = self._matrices
+        q1, v1, a1, state1, iterations, status, norm, tolerance = self._kernel(
+            _frozen(q), _frozen(v), _frozen(a), force, has_force, M, C, has_C, K, S, *self._scalars, *self._law,
+            state)
+        if status:
+            self._raise(status, iterations, norm, tolerance)
+        return q1, v1, a1, state1, iterations
+
+
+class FusedSlidersStep(_FusedStep):
+    """:class:`FusedJointStep` for learned Jenkins sliders along a reduced direction (a
+    :class:`~femrom.fem.CompiledSliders`); :meth:`march` takes a whole trajectory in one call."""
+
+    def __init__(self, scheme, system, dt: float, effective_matrix, sliders, initial_state):
+        super().__init__(scheme, system, dt, effective_matrix, initial_state)
+        self.sliders = sliders
+        self._law = (sliders.direction, sliders.thresholds, sliders.weights)
+
+    def _parts(self, state):
+        state = self._initial_state() if state is None else state
+        stretch = state.stretch
+        if not (stretch.flags.c_contiguous and stretch.dtype == np.float64):
+            stretch = np.array(stretch, dtype=float)
+        return stretch, float(state.coordinate)
+
+    def __call__(self, q, v, a, state, force):
+        """``(q1, v1, a1, state1, newton_iterations)`` of the step from ``(q, v, a)``, ``state`` and ``force``."""
+        stretch, coordinate = self._parts(state)
+        has_force = force is not None
+        M, C, has_C, K, S = self._matrices
+        q1, v1, a1, stretch1, coordinate1, iterations, status, norm, tolerance = \
+            self._kernels.newmark_sliders_step(q, v, a, force if has_force else self._no_force, has_force,
+                                               M, C, has_C, K, S, *self._scalars, *self._law, stretch, coordinate)
+        if status:
+            self._raise(status, iterations, norm, tolerance)
+        return q1, v1, a1, self.sliders.state(stretch1, coordinate1), iterations
+
+    def march(self, q0, v0, a0, state, forces, n_steps: int):
+        """``(Q, V, A (r, n + 1), final state, newton_iterations)`` of ``n = n_steps`` steps, the forcing of
+        step ``k`` in ``forces[:, k]`` ((r, n) or ``None``). A failing step raises :class:`ConvergenceError`
+        (Newton) or :class:`NonFiniteState` (a non-finite ``q``) with its number in ``step``."""
+        stretch, coordinate = self._parts(state)
+        r, n = q0.size, int(n_steps)
+        has_force = forces is not None
+        forces = np.ascontiguousarray(forces, dtype=float) if has_force else np.zeros((r, n))
+        if forces.shape != (r, n):
+            raise FemromValueError(f"forces must be ({r}, {n}), got shape {forces.shape}")
+        Q, V, A = (np.empty((r, n + 1)) for _ in range(3))
+        Q[:, 0], V[:, 0], A[:, 0] = q0, v0, a0
+        M, C, has_C, K, S = self._matrices
+        stretch1, coordinate1, done, iterations, status, norm, tolerance = self._kernels.newmark_sliders_march(
+            np.array(q0, dtype=float), np.array(v0, dtype=float), np.array(a0, dtype=float), forces, has_force,
+            M, C, has_C, K, S, *self._scalars, *self._law, stretch, coordinate, Q, V, A)
+        if status == self._kernels.STATE_NOT_FINITE:
+            raise NonFiniteState(done + 1)
+        if status:
+            try:
+                self._raise(status, iterations, norm, tolerance)
+            except ConvergenceError as err:
+                err.step = done + 1
+                raise
+        return Q, V, A, self.sliders.state(stretch1, coordinate1), iterations
+
+
+def fused_step(scheme, system, dt: float, effective_matrix, implicit):
+    """A :class:`FusedJointStep` or :class:`FusedSlidersStep` when ``implicit`` (the step's
+    :class:`ImplicitSolve`) runs dense Newton and ``system``'s force offers a compiled joint or compiled
+    sliders (compiled laws on), else ``None``."""
+    if implicit.method != "dense":
+        return None
+    force = system.nonlinear
+    offer = getattr(force, "compiled_joint", None)
+    joint = offer() if callable(offer) else None
+    if joint is not None:
+        return FusedJointStep(scheme, system, dt, effective_matrix, joint, force.initial_state)
+    offer = getattr(force, "compiled_sliders", None)
+    sliders = offer() if callable(offer) else None
+    if sliders is not None:
+        return FusedSlidersStep(scheme, system, dt, effective_matrix, sliders, force.initial_state)
+    return None
