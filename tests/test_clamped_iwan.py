@@ -163,3 +163,10 @@ def test_reclosed_friction_tangent_and_step_derivative_are_the_derivatives():
         fd_z = (law.commit(moved + e, state) - law.commit(moved - e, state)) / (2 * h)
         assert np.allclose(dt[:, :, m], fd_t, rtol=1e-5, atol=1e-7 * K_T * kappa)
         assert np.allclose(dz[..., m], fd_z, rtol=1e-5, atol=1e-6)
+
+
+def test_a_closing_law_offers_no_compiled_step_kernel():
+    # the fused compiled step knows the preload's contact status only: with reclosing points the numpy
+    # step must run (a kernel here would drop the reclosed points' tractions)
+    assert ClampedIwanLaw(K_N, K_T, CHI, BETA).kernel_arguments() is not None
+    assert ClampedIwanLaw(K_N, K_T, CHI, BETA, closing=1e-3).kernel_arguments() is None
