@@ -132,7 +132,7 @@ def test_the_jointed_beam_rom_case_quick_mode_writes_its_metrics(tmp_path):
     assert metrics["f1_hz"] == pytest.approx(80.5, rel=1e-6)                             # the calibrated mode 1
     assert (out / "backbone_300N.png").stat().st_size > 0
     rows = {row["model"]: row for row in metrics["rows"]}
-    assert set(rows) == {"galerkin", "lopinf", "spml", "iwan", "iwan_band"}
+    assert set(rows) == {"galerkin", "lopinf", "spml", "spml_hyst", "iwan", "iwan_band"}
     for name, row in rows.items():
         assert set(row) >= set(RING_DOWN_COLUMNS) and row["r"] == 2 and row["test"] == "300 N", name
         assert row["stable"], name                                # every model decays over the test

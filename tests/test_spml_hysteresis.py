@@ -88,6 +88,10 @@ def test_hysteretic_spml_recovers_the_slider_and_the_spring(fits):
     train = concatenate(fits["data"][0])
     assert _force_error(learner, train) < 1e-7                            # observed 8e-11
     assert learner.loss_ < 1e-16                                          # observed 1e-22
+    # the sliders are the learned dissipation: no convex dissipation beside them by default (plain SpML
+    # with a damping term learns one)
+    assert learner.config_.learn_dissipation is False and learner.dissipation_ is None
+    assert fits["plain"].config_.learn_dissipation is True
     # the stages: the sliders' start (IwanLOpInf), step 1, least squares, L-BFGS
     assert learner.stages_[0]["stage"] == "sliders (IwanLOpInf)"
     assert {s["stage"] for s in learner.stages_} >= {"least squares", "L-BFGS"}

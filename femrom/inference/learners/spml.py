@@ -71,7 +71,9 @@ class SpMLConfig:
     learn_dissipation : bool or None
         Whether to learn a nonlinear dissipation function ``F^`` (the linear ``C^`` is step 1's);
         ``None``: when step 1 learns a damping term (an undamped structure gets none, which a
-        spurious dissipation would only make lose energy).
+        spurious dissipation would only make lose energy) and there is no ``"hysteresis"`` term (the
+        sliders are then the learned dissipation: on the jointed beam a convex dissipation beside
+        them fitted what r > 1 coordinates cannot close and spoiled the backbone, docs/spml.md).
     dissipation_directions : int or None
         Directions ``a_k``, ``b_k`` of the convex powers ``|a_k . v|^3 / 3``, ``(b_k . v)^4 / 4``
         (``None``: r; 0: none).
@@ -402,8 +404,8 @@ class SpML(Learner):
         train_arrays = self._arrays(data)
         validation_arrays = None if validation is None else self._arrays(validation)
         scales = _scales(data, train_arrays[5])
-        if cfg.learn_dissipation is None:
-            cfg = replace(cfg, learn_dissipation=self.linear.damping)
+        if cfg.learn_dissipation is None:     # with sliders, they are the learned dissipation (docs/spml.md)
+            cfg = replace(cfg, learn_dissipation=self.linear.damping and not self.hysteresis)
         self.config_ = cfg
         specs = self._linear_specs(data, train_arrays)
         sliders, start_stage = None, None
