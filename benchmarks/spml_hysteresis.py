@@ -108,21 +108,21 @@ def oscillator(blocks: int, iterations: int) -> dict:
             "ratio_sliders_to_plain": {"median": float(np.median(ratios)), "range": [min(ratios), max(ratios)]}}
 
 
-def jointed_beam(ranks: tuple, horizon: float, iterations: int) -> dict:
+def jointed_beam(ranks: tuple, horizon: float, iterations: int, names=("iwan", "spml", "spml_hyst", "spml_hyst_convex")) -> dict:
     from femrom.cases import jointed_beam_rom as case
     from femrom.post import period_corrected
     from femrom.study import ModelSpec, RingDownComparison, compare_ring_downs
 
     config = dataclasses.replace(case.JointedBeamRomCase(), horizon_factor=horizon, full_model_steps=0,
                                  spml_iterations=iterations, ranks=tuple(ranks),
-                                 models=("iwan", "spml", "spml_hyst"))
+                                 models=tuple(n for n in names if n != "spml_hyst_convex"))
     tic = time.perf_counter()
     models = case.reference_models(config, progress=lambda line: print(line, file=sys.stderr, flush=True))
     training, validation, tests = case.reference_runs(models, config, progress=lambda line: None)
     reference_seconds = time.perf_counter() - tic
     convex = ModelSpec("spml", "spml_hyst_convex", {"terms": ("damping", "input", "hysteresis"), "config": SpMLConfig(
         max_iterations=iterations, seed=0, learn_dissipation=True)})
-    settings = RingDownComparison(ranks=config.ranks, models=case.model_specs(config) + (convex,), band=case.BAND,
+    settings = RingDownComparison(ranks=config.ranks, models=case.model_specs(config) + ((convex,) if "spml_hyst_convex" in names else ()), band=case.BAND,
                                   window=case.WINDOW, range_window=0.05, range_trim=0.05)
     dt = models["dt"]
     out = compare_ring_downs(models["hyper"], models["z_hyper"], training, validation, tests, settings,
@@ -181,6 +181,8 @@ def main(argv=None) -> int:
     parser.add_argument("--ranks", type=int, nargs="+", default=[1, 2, 3])
     parser.add_argument("--horizon", type=float, default=10.0, help="test length / training window (the case's 10)")
     parser.add_argument("--iterations", type=int, default=2000, help="SpML's L-BFGS budget on the jointed beam")
+    parser.add_argument("--models", nargs="+", default=["iwan", "spml", "spml_hyst", "spml_hyst_convex"],
+                        choices=["iwan", "spml", "spml_hyst", "spml_hyst_convex"], help="jointed-beam rows")
     parser.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "spml_hysteresis.json"))
     args = parser.parse_args(argv)
     results = {"date": datetime.now(timezone.utc).isoformat(timespec="seconds"),
@@ -189,7 +191,8 @@ def main(argv=None) -> int:
     if "oscillator" in args.parts:
         results["oscillator"] = oscillator(args.blocks, args.oscillator_iterations)
     if "jointed_beam" in args.parts:
-        results["jointed_beam"] = jointed_beam(tuple(args.ranks), args.horizon, args.iterations)
+        results["jointed_beam"] = jointed_beam(tuple(args.ranks), args.horizon, args.iterations,
+                                               tuple(args.models))
     results["machine"]["load_average_end"] = list(os.getloadavg())
     text = tables(results)
     print(text)

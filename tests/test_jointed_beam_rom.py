@@ -65,7 +65,9 @@ def comparison():
     linear = {"terms": ("damping", "input")}
     models = (ModelSpec("lopinf", options=linear),
               ModelSpec("spml", options={**linear, "config": SpMLConfig(max_iterations=1000)}),
-              ModelSpec("iwan_lopinf", "iwan", linear))
+              ModelSpec("iwan_lopinf", "iwan", linear),
+              ModelSpec("spml", "spml_hyst", {"terms": ("damping", "input", "hysteresis"),
+                                              "config": SpMLConfig(max_iterations=1000, potential_widths=())}))
     settings = RingDownComparison(ranks=(2,), models=models, band=(0.5 * f1, 1.6 * f1), window=0.1)
     out = compare_ring_downs(reference, z0, training, validation, [(test, runs[300.0])], settings,
                              progress=lambda line: None)
@@ -106,6 +108,21 @@ def test_learned_sliders_follow_the_joint_where_a_history_free_dissipation_canno
     # in time too (observed 0.063 against SpML's 0.46), and it decays
     assert iwan["time_domain_error"] < 0.5 * spml["time_domain_error"]
     assert iwan["stable"]
+
+
+def test_spml_with_sliders_does_better_than_plain_spml_on_the_joint(comparison):
+    rows, _ = comparison
+    hyst, iwan, spml = rows["spml_hyst"], rows["iwan"], rows["spml"]
+    # SpML with its hysteresis term (sliders, monomials, no convex dissipation: the study's spml_hyst) on the
+    # same data: the shift within 15 % (observed 9.7 %) and the damping error under a third of plain SpML's
+    # (observed 27 % against 131 %). It does not reach IwanLOpInf here (1.0 % and 4.6 %): from the Iwan start,
+    # L-BFGS lowers the validation residual 2.5-fold (mass, K^, C^, monomials refined) while the mode-1
+    # backbone moves away (docs/spml.md, "SpML with learned sliders")
+    assert hyst["frequency_shift_hz"] > 0
+    assert hyst["frequency_shift_error"] < 0.15
+    assert spml["damping_max_error"] > 3 * hyst["damping_max_error"]
+    assert hyst["damping_max_error"] > iwan["damping_max_error"]
+    assert hyst["stable"]
 
 
 @pytest.mark.slow
