@@ -86,7 +86,7 @@ def test_hysteretic_spml_recovers_the_slider_and_the_spring(fits):
         np.testing.assert_allclose(learner.linear_matrices_[name], [[value]], rtol=1e-7)
     np.testing.assert_allclose(learner.mass_, [[1.0]], rtol=1e-8)       # the gauge tr M^ = tr M_0 = 1
     train = concatenate(fits["data"][0])
-    assert _force_error(learner, train) < 1e-7                            # observed 8e-11
+    assert _force_error(learner, train) < 1e-7                            # observed 1e-11
     assert learner.loss_ < 1e-16                                          # observed 1e-22
     # the sliders are the learned dissipation: no convex dissipation beside them by default (plain SpML
     # with a damping term learns one)
@@ -99,13 +99,13 @@ def test_hysteretic_spml_recovers_the_slider_and_the_spring(fits):
 
 def test_plain_spml_cannot_follow_the_slider(fits):
     """Plain SpML on the same data: its smooth potential and history-free dissipation leave most of the
-    slider's force unexplained (force error with K^'s change, observed 0.21; the sliders' 8e-11), and the unseen 10 N blow
-    predicted by both with the same Newmark step drifts away (observed 0.60 against 3e-11)."""
+    slider's force unexplained (force error with K^'s change, observed 0.21; the sliders' 1e-11), and the unseen 10 N blow
+    predicted by both with the same Newmark step drifts away (observed 0.23 against 2e-11)."""
     train, _, test = fits["data"]
     plain, sliders = fits["plain"], fits["sliders"]
     assert plain.hysteresis_ is None and not plain.operators_.stateful
     assert _force_error(plain, concatenate(train)) > 0.1
-    assert plain.loss_ > 1e6 * sliders.loss_                              # observed 7e-4 against 1e-22
+    assert plain.loss_ > 1e6 * sliders.loss_                              # observed 5e-3 against 1e-22
     t = np.arange(STEPS) * DT
     errors = {}
     for name in ("plain", "sliders"):
