@@ -65,7 +65,9 @@ def comparison():
     linear = {"terms": ("damping", "input")}
     models = (ModelSpec("lopinf", options=linear),
               ModelSpec("spml", options={**linear, "config": SpMLConfig(max_iterations=1000)}),
-              ModelSpec("iwan_lopinf", "iwan", linear))
+              ModelSpec("iwan_lopinf", "iwan", linear),
+              ModelSpec("spml", "spml_hyst", {"terms": ("damping", "input", "hysteresis"),
+                                              "config": SpMLConfig(max_iterations=1000, potential_widths=())}))
     settings = RingDownComparison(ranks=(2,), models=models, band=(0.5 * f1, 1.6 * f1), window=0.1)
     out = compare_ring_downs(reference, z0, training, validation, [(test, runs[300.0])], settings,
                              progress=lambda line: None)
@@ -108,6 +110,21 @@ def test_learned_sliders_follow_the_joint_where_a_history_free_dissipation_canno
     assert iwan["stable"]
 
 
+def test_spml_with_sliders_does_better_than_plain_spml_on_the_joint(comparison):
+    rows, _ = comparison
+    hyst, iwan, spml = rows["spml_hyst"], rows["iwan"], rows["spml"]
+    # SpML with its hysteresis term (sliders, monomials, no convex dissipation: the study's spml_hyst) on the
+    # same data: the shift within 15 % (observed 9.7 %) and the damping error under half of plain SpML's
+    # (observed 27 % against 63 %). It does not reach IwanLOpInf here (1.0 % and 4.6 %): from the Iwan start,
+    # L-BFGS lowers the validation residual 2.5-fold (mass, K^, C^, monomials refined) while the mode-1
+    # backbone moves away (docs/spml.md, "SpML with learned sliders")
+    assert hyst["frequency_shift_hz"] > 0
+    assert hyst["frequency_shift_error"] < 0.15
+    assert spml["damping_max_error"] > 2 * hyst["damping_max_error"]
+    assert hyst["damping_max_error"] > iwan["damping_max_error"]
+    assert hyst["stable"]
+
+
 @pytest.mark.slow
 def test_the_jointed_beam_rom_case_quick_mode_writes_its_metrics(tmp_path):
     """``python -m femrom run jointed_beam_rom --quick -o DIR`` (r = 2, 200 SpML iterations, a 0.9 s
@@ -132,7 +149,7 @@ def test_the_jointed_beam_rom_case_quick_mode_writes_its_metrics(tmp_path):
     assert metrics["f1_hz"] == pytest.approx(80.5, rel=1e-6)                             # the calibrated mode 1
     assert (out / "backbone_300N.png").stat().st_size > 0
     rows = {row["model"]: row for row in metrics["rows"]}
-    assert set(rows) == {"galerkin", "lopinf", "spml", "iwan", "iwan_band"}
+    assert set(rows) == {"galerkin", "lopinf", "spml", "spml_hyst", "iwan", "iwan_band"}
     for name, row in rows.items():
         assert set(row) >= set(RING_DOWN_COLUMNS) and row["r"] == 2 and row["test"] == "300 N", name
         assert row["stable"], name                                # every model decays over the test

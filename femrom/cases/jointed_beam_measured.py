@@ -11,7 +11,8 @@ read from ``femrom.post.brb_data_dir()`` or ``--data``) is the only input (``doc
    the other way round.
 3. **Models** from the learner registry (:class:`femrom.study.ModelSpec`) on ``SecondOrderData`` without
    input: L-OpInf (linear, a flat backbone by construction), SpML (learned mass, potential, convex
-   dissipation) and Iwan-L-OpInf (learned sliders); the last ``validation`` seconds of the training part
+   dissipation), SpML with its ``hysteresis`` term (``SpML-sliders``: the same settings, learned sliders in
+   place of the convex dissipation) and Iwan-L-OpInf (learned sliders); the last ``validation`` seconds of the training part
    are what SpML and the Iwan fit judge themselves on.
 4. **Prediction** from the test part's first state ``(q, q')`` at ``predict_every`` samples (Newmark
    for the sliders, the discrete-gradient scheme otherwise); acc1's predicted signal through the same
@@ -123,11 +124,13 @@ def linear_fits_by_rank(acc, rate: float, t0: float, train_span, config: "Measur
 
 
 def fit_models(train: SecondOrderData, validation: SecondOrderData, config: MeasuredRomCase) -> dict:
-    """L-OpInf, SpML and Iwan-L-OpInf (:class:`femrom.study.ModelSpec`) on the training part, on the modal
+    """L-OpInf, SpML, SpML with sliders and Iwan-L-OpInf (:class:`femrom.study.ModelSpec`) on the training part, on the modal
     coordinates themselves (identity basis); SpML and the Iwan fit judge themselves on ``validation``."""
     training = TrainingSet(None, np.eye(config.rank), {"train": train}, validation={"validation": validation})
     specs = (ModelSpec("lopinf", "L-OpInf", {"terms": ("damping",)}),
              ModelSpec("spml", "SpML", {"terms": ("damping",), "config": config.spml, "progress": False}),
+             ModelSpec("spml", "SpML-sliders", {"terms": ("damping", "hysteresis"), "config": config.spml,
+                                                "progress": False}),
              ModelSpec("iwan_lopinf", "Iwan-L-OpInf", {"terms": ("damping",), **dict(config.iwan)}))
     return {spec.label: spec.fit(training, config.rank) for spec in specs}
 

@@ -49,13 +49,18 @@ class SpMLModule(torch.nn.Module):
     generator : torch.Generator
     initial : dict, optional
         ``{"alpha": {degree: (n,) ndarray}}``: the monomials' starting coefficients (scaled units).
+    hysteresis : dict, optional
+        The learned sliders (:class:`~femrom.inference.LearnedHysteresis`): ``direction`` (r,),
+        ``thresholds`` (p,), starting ``weights`` (p,) and ``top`` (the top slider of the monotone
+        shape, or ``None``): :meth:`_hysteresis_terms`.
     """
 
     def __init__(self, r: int, config, scales: dict, mass0: np.ndarray, linear: list, generator: torch.Generator,
-                 initial: dict | None = None):
+                 initial: dict | None = None, hysteresis: dict | None = None):
         super().__init__()
         self.r, self.config = r, config
         self._linear_terms(linear)
+        self._hysteresis_terms(hysteresis, scales)
         self.register_buffer("sq", _tensor(scales["q"]))
         self.register_buffer("sv", _tensor(scales["v"]))
         self.cU, self.cF = float(scales["potential"]), float(scales["dissipation"])
@@ -120,6 +125,45 @@ class SpMLModule(torch.nn.Module):
                 self.register_parameter(f"linear_{i}", P)
                 entry["parameter"] = P
             self.linear.append(entry)
+
+    def _hysteresis_terms(self, spec: dict | None, scales: dict) -> None:
+        r"""The sliders' weights ``k = c_h T (d * d)``, non-negative for any ``d`` (trained).
+
+        ``T`` (p, p) (:func:`slider_maps`) maps non-negative increments to the weights: with a ``top``
+        slider ``j``, the shape of Segalman's densities that :class:`~femrom.inference.IwanLOpInf` fits
+        (``k_1 <= ... <= k_{j-1}``, ``k_j`` free, nothing above); without one (``monotone`` false)
+        ``T = I``. ``c_h``: the force scale over the coordinate scale squared (``d`` of order one).
+        The stretches along ``x = a . q^`` are data (the play operator on the data's history), so the
+        residual is linear in ``k``: each least-squares stage solves the weights exactly, choosing
+        the top slider too (:func:`solve_linear_part`); L-BFGS keeps the top.
+        """
+        self.hysteresis = None
+        if spec is None:
+            return
+        a = np.asarray(spec["direction"], dtype=float)
+        phi = np.asarray(spec["thresholds"], dtype=float)
+        scale = float(scales["potential"]) / (float(np.mean(scales["q"])) ** 2 * float(a @ a))
+        self.hysteresis = {"direction": _tensor(a), "thresholds": phi, "scale": scale,
+                           "monotone": bool(spec.get("monotone", spec.get("top") is not None))}
+        self.hysteresis_increments = torch.nn.Parameter(torch.zeros(phi.size, dtype=DTYPE))
+        self.set_sliders(spec.get("top"), spec["weights"])
+
+    def set_sliders(self, top: int | None, weights) -> None:
+        """Set the weights (p,) in the shape of the ``top`` slider (:func:`slider_maps`)."""
+        p = self.hysteresis["thresholds"].size
+        self.hysteresis["top"], self.hysteresis["map"] = top, _tensor(slider_maps(p, top))
+        y = slider_increments(weights, top)
+        with torch.no_grad():
+            self.hysteresis_increments.copy_(_tensor(np.sqrt(y / self.hysteresis["scale"])))
+
+    def hysteresis_weights(self) -> torch.Tensor:
+        """(p,) the sliders' weights ``k``."""
+        d = self.hysteresis_increments
+        return self.hysteresis["scale"] * (self.hysteresis["map"] @ (d * d))
+
+    def hysteresis_force(self, stretches: torch.Tensor) -> torch.Tensor:
+        """(K, r) ``a sum_i k_i e_i`` at the rows of the stretches (K, p)."""
+        return (stretches @ self.hysteresis_weights())[:, None] * self.hysteresis["direction"][None, :]
 
     def linear_matrices(self) -> list:
         """The linear terms' matrices ``X_j`` (r, p_j), in step 1's order."""
@@ -266,12 +310,13 @@ class SpMLModule(torch.nn.Module):
     def has_dissipation(self) -> bool:
         return self.dissipative and (self.d_cubic is not None or self.f_output_raw is not None)
 
-    def residual(self, q, v, a, target, blocks, features) -> torch.Tensor:
-        r"""(K, r) ``M^^-1 (Y + (M^ - M_0) a + sum_j D_j^T X_j^T + dF^/dv + dU^/dq)`` (rows).
+    def residual(self, q, v, a, target, blocks, features, stretches=None) -> torch.Tensor:
+        r"""(K, r) ``M^^-1 (Y + (M^ - M_0) a + sum_j D_j^T X_j^T + dF^/dv + dU^/dq + a_h k^T e)`` (rows).
 
         ``Y`` (K, r): step 1's target (``M_0 a`` and the known terms); ``blocks``: the
         learned linear terms' data blocks ``D_j^T`` (K, p_j) (``q``, ``v``, ``-u``, ...);
-        ``features``: :meth:`features` of ``q``. Solved with ``M^``, the residual is an
+        ``features``: :meth:`features` of ``q``; ``stretches`` (K, p): the sliders' (with
+        :attr:`hysteresis`). Solved with ``M^``, the residual is an
         acceleration: scaling every term by one factor leaves it unchanged, so a learned
         mass cannot shrink the loss by shrinking the model.
         """
@@ -282,13 +327,16 @@ class SpMLModule(torch.nn.Module):
             R = R + self.potential_force(q, features)
         if self.has_dissipation:
             R = R + self.dissipation_force(v)
+        if self.hysteresis is not None:
+            R = R + self.hysteresis_force(stretches)
         L = self.mass_factor()
         return torch.linalg.solve_triangular(L.T, torch.linalg.solve_triangular(L, R.T, upper=False),
                                              upper=True).T
 
     # -- export -------------------------------------------------------------------------
     def export(self):
-        """``(mass (r, r), linear {name: X_j}, polynomial, u_network, powers, f_network)``: numpy, unscaled."""
+        """``(mass (r, r), linear {name: X_j}, polynomial, u_network, powers, f_network)``: numpy, unscaled
+        (the sliders' weights: :meth:`hysteresis_weights`)."""
         sq, sv = self.sq.numpy(), self.sv.numpy()
         with torch.no_grad():
             mass = self.mass().numpy().copy()
@@ -325,8 +373,9 @@ class SpMLModule(torch.nn.Module):
 def train(module: SpMLModule, train_arrays, validation_arrays, config, progress, rollouts=None) -> dict:
     r"""Fit the module's weights in stages (:func:`_stages`) and return what each did.
 
-    ``train_arrays``/``validation_arrays``: ``(q, v, a, Y, blocks, ||Y||_F^2)`` with (K, r) arrays
-    and a list of (K, p_j) blocks (:meth:`SpMLModule.residual`); ``rollouts``: ``(training,
+    ``train_arrays``/``validation_arrays``: ``(q, v, a, Y, blocks, ||Y||_F^2, stretches)`` with (K, r)
+    arrays, a list of (K, p_j) blocks and the sliders' (K, p) stretches or ``None``
+    (:meth:`SpMLModule.residual`); ``rollouts``: ``(training,
     validation or None)`` trajectory lists for the rollout refinement (:class:`Rollout`). Runs on ``config.threads``
     torch threads (restored after): at these sizes intra-op threads cost more than they give
     (measured on 2 shared cores: a (9000, 3) x (3, 16) product took 26 ms on 2 threads, 0.36 ms on 1).
@@ -340,9 +389,9 @@ def train(module: SpMLModule, train_arrays, validation_arrays, config, progress,
 
 
 def _loss_on(module, arrays) -> float:
-    q, v, a, Y, blocks, features, norm = arrays
+    q, v, a, Y, blocks, features, norm, stretches = arrays
     with torch.no_grad():
-        R = module.residual(q, v, a, Y, blocks, features)
+        R = module.residual(q, v, a, Y, blocks, features, stretches)
         return float((R * R).sum() / norm)
 
 
@@ -351,18 +400,23 @@ def _tensors(module, arrays):
         return None
     q = _tensor(arrays[0])
     return (q, *(_tensor(x) for x in arrays[1:4]), [_tensor(D) for D in arrays[4]], module.features(q),
-            float(arrays[5]))
+            float(arrays[5]), None if arrays[6] is None else _tensor(arrays[6]))
 
 
 def _snapshot(module) -> dict:
     return {"state": {k: v.detach().clone() for k, v in module.state_dict().items()},
-            "bases": [e["base"].clone() for e in module.linear]}
+            "bases": [e["base"].clone() for e in module.linear],
+            "top": None if module.hysteresis is None else module.hysteresis["top"]}
 
 
 def _restore(module, snapshot: dict) -> None:
     module.load_state_dict(snapshot["state"])
     for e, base in zip(module.linear, snapshot["bases"]):
         e["base"] = base.clone()
+    if module.hysteresis is not None:         # the weights' shape (the parameters are the increments)
+        top = snapshot["top"]
+        module.hysteresis["top"] = top
+        module.hysteresis["map"] = _tensor(slider_maps(module.hysteresis["thresholds"].size, top))
 
 
 def _stages(module, train_arrays, validation_arrays, config, progress, rollouts=None) -> dict:
@@ -471,8 +525,8 @@ def _train(module, train_t, valid_t, config, progress, offset: int = 0, objectiv
     def loss_of(arrays):
         if objective is not None:
             return objective(arrays)
-        q, v, a, Y, blocks, features, norm = arrays
-        R = module.residual(q, v, a, Y, blocks, features)
+        q, v, a, Y, blocks, features, norm, stretches = arrays
+        R = module.residual(q, v, a, Y, blocks, features, stretches)
         return (R * R).sum() / norm
 
     def closure():
@@ -603,8 +657,15 @@ def solve_linear_part(module: SpMLModule, arrays, features: dict, ridge: float, 
     again with the matrices fixed. The module's parameters are set in place (the linear terms are
     re-based: their starting matrix becomes the solution and the correction ``P`` restarts at 0).
     """
-    q, v, a, Y, blocks, _ = arrays
+    q, v, a, Y, blocks, _, stretches = arrays
     K, r = q.shape
+    sliders = module.hysteresis
+    if sliders is not None:             # the weights' increments y >= 0: a (K, n_d) data block E T
+        direction, slider_data = sliders["direction"].numpy(), stretches
+    n_sliders = 0 if sliders is None else slider_data.shape[1]
+    if n_sliders:                       # the shapes tried: every top slider, or non-negative weights
+        tops = list(range(n_sliders)) if sliders["monotone"] else [None]
+        shapes, chosen = [slider_maps(n_sliders, top) for top in tops], []
     with torch.no_grad():
         M_cur = module.mass().numpy()
         M0 = (module.L0 @ module.L0.T).numpy()
@@ -644,6 +705,8 @@ def solve_linear_part(module: SpMLModule, arrays, features: dict, ridge: float, 
                     parts.append(_matrix_block(a[rows], "symmetric", r))
                 if refine:
                     parts += [_matrix_block(D[rows], e["structure"], r) for e, D in zip(module.linear, blocks)]
+            if n_sliders:
+                parts.append(direction[None, :, None] * slider_data[rows][:, None, :])
             widths = [p.shape[2] for p in parts]
             if not widths:
                 return G, h, widths
@@ -663,6 +726,10 @@ def solve_linear_part(module: SpMLModule, arrays, features: dict, ridge: float, 
             reg[block] = ridge * max(float(np.mean(d[block])), np.finfo(float).tiny)
             start += width
         A = G + np.diag(reg)
+        if n_sliders:                   # the last n_sliders unknowns: the weights, in one of their shapes
+            theta, index = _bounded_solve(A, h, shapes, constraint)
+            chosen.append(tops[index])
+            return theta
         if constraint is None:
             return -np.linalg.lstsq(A, h, rcond=None)[0]
         c, value = constraint
@@ -705,17 +772,96 @@ def solve_linear_part(module: SpMLModule, arrays, features: dict, ridge: float, 
     constant = base + a @ M.T
     if refine and module.linear:
         constant = constant + sum(D @ matrices[e["name"]].T for e, D in zip(module.linear, blocks))
-    alpha = np.zeros(0)
-    if degrees:
+    alpha, increments = np.zeros(0), None
+    if degrees or n_sliders:
         G, h, widths = accumulate(False, constant)
-        alpha = solve(G, h, widths)
+        theta = solve(G, h, widths)
+        alpha = theta[:sum(sizes)]
+        if n_sliders:
+            increments = (chosen[-1], theta[sum(sizes):])
     elif not matrices:
         return
-    _set(module, alpha, degrees, sizes, matrices)
+    _set(module, alpha, degrees, sizes, matrices, increments)
 
 
-def _set(module: SpMLModule, alpha, degrees, sizes, matrices: dict) -> None:
+def slider_maps(p: int, top: int | None) -> np.ndarray:
+    """(p, p) ``T`` with the sliders' weights ``k = T y``, ``y >= 0``: with a ``top`` slider ``j``,
+    ``k_i = sum_{l <= i} y_l`` for ``i < j`` (nondecreasing), ``k_j = y_j``, nothing above; ``None``: ``I``."""
+    if top is None:
+        return np.eye(p)
+    T = np.zeros((p, p))
+    for i in range(top):
+        T[i, :i + 1] = 1.0
+    T[top, top] = 1.0
+    return T
+
+
+def slider_increments(k: np.ndarray, top: int | None) -> np.ndarray:
+    """(p,) ``y >= 0`` with ``k = slider_maps(p, top) y`` for weights ``k`` of that shape (round-off clipped)."""
+    k = np.clip(np.asarray(k, dtype=float), 0.0, None)
+    if top is None:
+        return k
+    y = np.zeros_like(k)
+    y[:top] = np.clip(np.diff(k[:top], prepend=0.0), 0.0, None)
+    y[top] = k[top]
+    return y
+
+
+def _bounded_solve(A: np.ndarray, h: np.ndarray, maps: list, constraint=None) -> tuple[np.ndarray, int]:
+    r"""``argmin theta^T A theta / 2 + h^T theta`` over every shape of the last ``p`` unknowns (the
+    sliders' weights ``k = T y``, ``y >= 0``, one ``T`` (p, p) of ``maps`` at a time), with
+    ``c . theta = value`` given ``constraint = (c, value)`` (``c`` zero on the weights); returns the
+    best ``theta`` (the weights in it) and the index of its map.
+
+    The constraint is eliminated through the unknown where ``c`` is largest; the unbounded unknowns
+    ``u`` are then eliminated too (``u = -A_uu^-1 (g_u + A_uk k)``), leaving for each map a problem
+    in the ``p`` increments, ``min y^T T^T S T y / 2 + (T^T g)^T y``, ``y >= 0`` with the Schur
+    complement ``S``: a non-negative least-squares problem of ``p`` unknowns (scipy's NNLS).
+    """
+    from scipy.optimize import nnls
+
+    n, p = A.shape[0], maps[0].shape[0]
+    if constraint is None:
+        Z, theta0 = np.eye(n), np.zeros(n)
+    else:
+        c, value = constraint
+        m = int(np.argmax(np.abs(c)))
+        keep = [i for i in range(n) if i != m]
+        Z = np.zeros((n, n - 1))
+        Z[keep, np.arange(n - 1)] = 1.0
+        Z[m] = -c[keep] / c[m]
+        theta0 = np.zeros(n)
+        theta0[m] = value / c[m]
+    Az = Z.T @ A @ Z
+    g = Z.T @ (A @ theta0 + h)
+    nu = Az.shape[0] - p
+    Auu, Auk, Akk = Az[:nu, :nu], Az[:nu, nu:], Az[nu:, nu:]
+    if nu:
+        solved = np.linalg.lstsq(Auu, np.column_stack([Auk, g[:nu]]), rcond=None)[0]
+        S, gk = Akk - Auk.T @ solved[:, :p], g[nu:] - Auk.T @ solved[:, p]
+    else:
+        S, gk = Akk, g
+    S = 0.5 * (S + S.T)
+    best = None
+    for index, T in enumerate(maps):
+        St, gt = T.T @ S @ T, T.T @ gk
+        w, U = np.linalg.eigh(St)
+        keep = w > 1e-13 * max(float(w.max()), np.finfo(float).tiny)
+        # ||D U^T y + D^-1 U^T g||^2 / 2 = y^T St y / 2 + g^T y + const on the kept eigenvectors
+        D = np.sqrt(w[keep])
+        y = nnls((D[:, None] * U[:, keep].T), -(U[:, keep].T @ gt) / D, maxiter=50 * p)[0]
+        value_ = 0.5 * y @ St @ y + gt @ y
+        if best is None or value_ < best[0]:
+            best = (value_, index, T @ y)
+    _, index, k = best
+    u = -solved[:, p] - solved[:, :p] @ k if nu else np.zeros(0)
+    return theta0 + Z @ np.concatenate([u, k]), index
+
+
+def _set(module: SpMLModule, alpha, degrees, sizes, matrices: dict, increments=None) -> None:
     with torch.no_grad():
+        if increments is not None:
+            module.set_sliders(*increments)
         start = 0
         for d, n in zip(degrees, sizes):
             module.alpha[str(d)].copy_(_tensor(alpha[start:start + n]))
@@ -769,6 +915,8 @@ class Rollout:
 
     def __init__(self, module: SpMLModule, trajectories: list, steps: int, substeps: int, stride: int,
                  newton: int = 4):
+        if module.hysteresis is not None:
+            raise FemromValueError("SpMLConfig.rollout_steps: the rollout refinement does not step learned sliders")
         self.module, self.steps, self.substeps, self.newton = module, int(steps), int(substeps), int(newton)
         starts, q, v, u, dts = [], [], [], [], []
         for tr in trajectories:

@@ -16,10 +16,16 @@ from femrom.inference._learner import Learner, register_learner
 from femrom.inference._operators import ReducedOperators
 from femrom.inference._second_order import system_terms, terms_for_training
 from femrom.inference._structured_lstsq import FastSolver
-from femrom.inference._terms import term_class
+from femrom.inference._terms import ReducedTerm, term_class
+from femrom.inference.learners.iwan_lopinf import LINEAR_TERMS as SLIDER_LINEAR_TERMS
+from femrom.inference.learners.iwan_lopinf import IwanLOpInf
 from femrom.inference.learners.lopinf import LagrangianOpInf
 from femrom.inference.terms.learned_dissipation import LearnedDissipation
+from femrom.inference.terms.learned_hysteresis import LearnedHysteresis, slider_stretches
 from femrom.inference.terms.learned_potential import LearnedPotential
+
+#: The names that ask SpML for learned sliders (:class:`LearnedHysteresis`) among its terms.
+HYSTERESIS_TERMS = ("hysteresis", LearnedHysteresis.name)
 
 #: The one line a user without torch reads when asking for SpML.
 TORCH_MISSING = "SpML needs torch, which is not installed: pip install 'femrom[ml]' (torch==2.13.0, CPU is enough)"
@@ -65,7 +71,9 @@ class SpMLConfig:
     learn_dissipation : bool or None
         Whether to learn a nonlinear dissipation function ``F^`` (the linear ``C^`` is step 1's);
         ``None``: when step 1 learns a damping term (an undamped structure gets none, which a
-        spurious dissipation would only make lose energy).
+        spurious dissipation would only make lose energy) and there is no ``"hysteresis"`` term (the
+        sliders are then the learned dissipation: on the jointed beam a convex dissipation beside
+        them fitted what r > 1 coordinates cannot close and spoiled the backbone, docs/spml.md).
     dissipation_directions : int or None
         Directions ``a_k``, ``b_k`` of the convex powers ``|a_k . v|^3 / 3``, ``(b_k . v)^4 / 4``
         (``None``: r; 0: none).
@@ -117,6 +125,16 @@ class SpMLConfig:
         Seed of the initial weights (a ``torch.Generator``; same seed, same weights).
     threads : int
         torch threads during the fit (restored after; 1 is fastest at these sizes).
+    hysteresis_thresholds : int or tuple of float
+        With the ``"hysteresis"`` term: the number of sliders, their thresholds log-spaced over
+        ``hysteresis_span`` times the training data's ``max |a . q^|``; or the thresholds themselves
+        (:class:`IwanLOpInf`'s ``thresholds``).
+    hysteresis_span : (2,) floats
+    hysteresis_direction : (r,) floats or None
+        The sliders' direction ``a`` (fixed; ``None``: ``e_1``, the leading coordinate).
+    hysteresis_monotone : bool
+        The shape of Segalman's densities for the weights (:class:`IwanLOpInf`'s ``monotone``): the top
+        slider is chosen by the start's cone programs and kept through the fit.
     """
 
     potential_degrees: tuple = (3, 4)
@@ -142,8 +160,29 @@ class SpMLConfig:
     weight_decay: float = 0.0
     seed: int = 0
     threads: int = 1
+    hysteresis_thresholds: int | tuple = 32
+    hysteresis_span: tuple = (1e-3, 1.0)
+    hysteresis_direction: tuple | None = None
+    hysteresis_monotone: bool = True
 
     def __post_init__(self):
+        object.__setattr__(self, "hysteresis_span", tuple(float(x) for x in self.hysteresis_span))
+        if self.hysteresis_direction is not None:
+            object.__setattr__(self, "hysteresis_direction", tuple(float(x) for x in self.hysteresis_direction))
+        if np.ndim(self.hysteresis_thresholds) == 0:
+            if not (isinstance(self.hysteresis_thresholds, (int, np.integer)) and self.hysteresis_thresholds >= 2):
+                raise FemromValueError("SpMLConfig.hysteresis_thresholds must be an integer >= 2 or thresholds > 0, "
+                                       f"got {self.hysteresis_thresholds!r}")
+        else:
+            values = tuple(float(x) for x in np.ravel(self.hysteresis_thresholds))
+            if not values or not all(np.isfinite(x) and x > 0 for x in values):
+                raise FemromValueError("SpMLConfig.hysteresis_thresholds must be an integer >= 2 or thresholds > 0, "
+                                       f"got {self.hysteresis_thresholds!r}")
+            object.__setattr__(self, "hysteresis_thresholds", values)
+        lo, hi = (self.hysteresis_span + (0.0, 0.0))[:2]
+        if len(self.hysteresis_span) != 2 or not 0 < lo <= hi:
+            raise FemromValueError(f"SpMLConfig.hysteresis_span must be (low, high) with 0 < low <= high, got "
+                                   f"{self.hysteresis_span}")
         object.__setattr__(self, "potential_degrees", tuple(int(d) for d in self.potential_degrees))
         object.__setattr__(self, "potential_widths", tuple(int(w) for w in self.potential_widths))
         object.__setattr__(self, "dissipation_widths", tuple(int(w) for w in self.dissipation_widths))
@@ -212,7 +251,12 @@ class SpML(Learner):
     Parameters
     ----------
     terms, regularization, solver, mass, mass_orthonormal, stiffness_margin
-        Step 1's (:class:`~femrom.inference.SecondOrderLearner`): e.g. ``terms=["damping"]``.
+        Step 1's (:class:`~femrom.inference.SecondOrderLearner`): e.g. ``terms=["damping"]``; with
+        ``"hysteresis"`` (or ``"learned_hysteresis"``, or the class :class:`LearnedHysteresis`) among
+        them, learned Jenkins sliders along one reduced direction join the model (docs/spml.md,
+        "SpML with learned sliders"): their weights start at :class:`IwanLOpInf`'s fit, are solved in
+        every least-squares stage (non-negative, in the monotone shape) and refined by L-BFGS with
+        every other weight. The model then steps with Newmark (a return mapping; the sliders' state).
     config : SpMLConfig
     progress : bool or None
         The progress line with the loss (``None``: on a terminal, in a log every 30 s).
@@ -229,6 +273,8 @@ class SpML(Learner):
     mass_ : (r, r) ndarray
     potential_ : LearnedPotential or None
     dissipation_ : LearnedDissipation or None
+    hysteresis_ : LearnedHysteresis or None
+        The learned sliders (with the ``"hysteresis"`` term).
     history_ : list of dict
         ``iteration``, ``loss`` (training), ``validation_loss`` at every check of L-BFGS, ``kept``
         where the weights were the best so far.
@@ -251,6 +297,12 @@ class SpML(Learner):
         if not isinstance(config, SpMLConfig):
             raise FemromTypeError(f"config must be an SpMLConfig, got {type(config).__name__}")
         self.config, self.progress = config, progress
+        terms = (terms,) if isinstance(terms, (str, type, ReducedTerm)) else tuple(terms)
+        sliders = [t for t in terms if t is LearnedHysteresis or (isinstance(t, str) and t in HYSTERESIS_TERMS)]
+        if len(sliders) > 1:
+            raise FemromValueError(f"each term may be named once, got the hysteresis as {sliders}")
+        self.hysteresis = bool(sliders)
+        terms = [t for t in terms if not (t is LearnedHysteresis or (isinstance(t, str) and t in HYSTERESIS_TERMS))]
         self.linear = LagrangianOpInf(terms, regularization=regularization, solver=solver, mass=mass,
                                       mass_orthonormal=mass_orthonormal, stiffness_margin=stiffness_margin)
         self.linear_options = {"regularization": regularization, "solver": solver, "mass": mass,
@@ -258,7 +310,7 @@ class SpML(Learner):
 
     @property
     def learned_terms(self):
-        return self.linear.learned_terms
+        return [*self.linear.learned_terms, *([LearnedHysteresis] if self.hysteresis else [])]
 
     @property
     def known_terms(self):
@@ -281,15 +333,18 @@ class SpML(Learner):
         return terms_for_training(cls, training, r, terms, extra_terms, options, {"known_forces": known_forces})
 
     # -- the regression's pieces on any data ------------------------------------------------
-    def _arrays(self, data: SecondOrderData):
-        """``(Q^T, Q'^T, Q''^T, Y^T, [D_j^T], ||Q''||_F^2)``: step 1's target (``M_0 Q''`` and
-        the known terms) and the data blocks of its learned linear terms, as (K, .) arrays."""
+    def _arrays(self, data: SecondOrderData, sliders: LearnedHysteresis | None = None):
+        """``(Q^T, Q'^T, Q''^T, Y^T, [D_j^T], ||Q''||_F^2, E^T)``: step 1's target (``M_0 Q''`` and
+        the known terms), the data blocks of its learned linear terms, as (K, .) arrays, and the
+        stretches (K, p) of ``sliders`` along the data's history (``None`` without)."""
         linear = self.linear
         Y = linear._target(data)
         blocks = [cls.datablock(data).T for cls in linear._learned(data)]
         norm = float(np.sum(data.accelerations ** 2))
+        stretches = None if sliders is None else \
+            slider_stretches(sliders.direction @ data.states, sliders.thresholds, data.starts).T
         return (data.states.T, data.velocities.T, data.accelerations.T, Y.T, blocks,
-                max(norm, np.finfo(float).tiny))
+                max(norm, np.finfo(float).tiny), stretches)
 
     def _linear_specs(self, data: SecondOrderData, arrays) -> list:
         """Step 1's learned linear terms: name, structure, matrix, ``eps`` shift and a scale floor."""
@@ -349,12 +404,23 @@ class SpML(Learner):
         train_arrays = self._arrays(data)
         validation_arrays = None if validation is None else self._arrays(validation)
         scales = _scales(data, train_arrays[5])
-        if cfg.learn_dissipation is None:
-            cfg = replace(cfg, learn_dissipation=self.linear.damping)
+        if cfg.learn_dissipation is None:     # with sliders, they are the learned dissipation (docs/spml.md)
+            cfg = replace(cfg, learn_dissipation=self.linear.damping and not self.hysteresis)
         self.config_ = cfg
         specs = self._linear_specs(data, train_arrays)
+        sliders, start_stage = None, None
+        if self.hysteresis:
+            tic_sliders = time.perf_counter()
+            sliders, matrices = self._slider_start(data, cfg)
+            for spec in specs:               # step 1's linear terms: the sliders' fit's
+                spec["matrix"] = matrices.get(spec["name"], spec["matrix"])
+            train_arrays = self._arrays(data, sliders.hysteresis_)
+            validation_arrays = None if validation is None else self._arrays(validation, sliders.hysteresis_)
+            start_stage = {"stage": "sliders (IwanLOpInf)", "seconds": time.perf_counter() - tic_sliders,
+                           "residual": sliders.residual_, "linear_residual": sliders.linear_residual_}
         generator = torch.Generator().manual_seed(int(cfg.seed))
-        module = backend.SpMLModule(r, cfg, scales, self._mass0(r), specs, generator)
+        module = backend.SpMLModule(r, cfg, scales, self._mass0(r), specs, generator, hysteresis=None
+                                    if sliders is None else self._slider_spec(sliders, cfg.hysteresis_monotone))
         rollouts = None
         if cfg.rollout_steps and not self.linear.known_terms:
             rollouts = (_trajectories(pieces), None if held is None else _trajectories(held))
@@ -364,7 +430,7 @@ class SpML(Learner):
         mass, linear, polynomial, u_network, powers, f_network = module.export()
         self.linear_matrices_ = linear
         self.history_ = result["history"]
-        self.stages_ = result["stages"]
+        self.stages_ = ([start_stage] if start_stage else []) + result["stages"]
         self.best_iteration_, self.iterations_ = result["best_iteration"], result["iterations"]
         self.training_seconds_ = time.perf_counter() - tic
         self.mass_ = mass
@@ -372,10 +438,55 @@ class SpML(Learner):
             LearnedPotential(r, polynomial, u_network)
         self.dissipation_ = None if powers is None and f_network is None else \
             LearnedDissipation(r, powers, f_network)
+        self.hysteresis_ = None
+        if module.hysteresis is not None:
+            with torch.no_grad():
+                weights = module.hysteresis_weights().numpy().copy()
+            self.hysteresis_ = LearnedHysteresis(sliders.hysteresis_.direction, sliders.hysteresis_.thresholds,
+                                                 np.clip(weights, 0.0, None))
         self.linear_loss_ = self._loss(data, {n: self.linear.coefficients_[n] for n in linear}, step1=True)
         self.loss_ = self._loss(data, linear)
         self.operators_ = self._operators(linear_ops, data)
         return self
+
+    def _slider_start(self, data: SecondOrderData, cfg: SpMLConfig):
+        """The sliders' start: :class:`IwanLOpInf` on the data (thresholds, top slider, weights, and its
+        ``K^, C^, B^`` as step 1's linear terms), the accelerations taken as ``M_0 Q''``; and those matrices."""
+        if self.linear.known_terms:
+            raise FemromValueError("SpML: the hysteresis term does not combine with known force terms")
+        if cfg.rollout_steps:
+            raise FemromValueError("SpML: the hysteresis term does not combine with SpMLConfig.rollout_steps "
+                                   "(the rollout does not step sliders)")
+        names = [cls.name for cls in self.linear._learned(data) if cls.name != "stiffness"]
+        unknown = [n for n in names if n not in SLIDER_LINEAR_TERMS]
+        if unknown:
+            raise FemromValueError(f"SpML: the hysteresis term combines with the linear terms "
+                                   f"{', '.join(SLIDER_LINEAR_TERMS)}, not {unknown}")
+        mass0 = self._mass0(data.r)
+        shifted = data if self.linear.mass is None else replace(data, accelerations=mass0 @ data.accelerations)
+        iwan = IwanLOpInf(names, thresholds=cfg.hysteresis_thresholds if np.ndim(cfg.hysteresis_thresholds) == 0
+                          else np.asarray(cfg.hysteresis_thresholds), threshold_span=cfg.hysteresis_span,
+                          direction=None if cfg.hysteresis_direction is None else np.asarray(cfg.hysteresis_direction),
+                          monotone=cfg.hysteresis_monotone,
+                          stiffness_margin=self.linear_options["stiffness_margin"]).fit(shifted)
+        matrices = {t.name: t.matrix for t in iwan.operators_.terms if t.name in ("stiffness", *SLIDER_LINEAR_TERMS)}
+        return iwan, matrices
+
+    @staticmethod
+    def _slider_spec(iwan: IwanLOpInf, monotone: bool) -> dict:
+        """The start of the sliders in the torch module: direction, thresholds, weights and their shape
+        (the top slider; with explicit thresholds, the largest weight's)."""
+        h = iwan.hysteresis_
+        top = None
+        if monotone:
+            top = int(np.argmin(np.abs(h.thresholds - iwan.top_threshold_))) if iwan.top_threshold_ is not None \
+                else int(np.argmax(h.weights))
+        weights = h.weights.copy()
+        if top is not None:            # in the shape: nondecreasing below the top, nothing above
+            weights[:top] = np.minimum.accumulate(weights[:top][::-1])[::-1]
+            weights[top + 1:] = 0.0
+        return {"direction": h.direction, "thresholds": h.thresholds, "weights": weights, "top": top,
+                "monotone": monotone}
 
     def _operators(self, linear_ops: ReducedOperators, data) -> ReducedOperators:
         refined = {cls.name: cls.from_coefficients(self.linear_matrices_[cls.name])
@@ -383,26 +494,30 @@ class SpML(Learner):
         terms = [refined.get(t.name, t) for t in linear_ops.terms if t.name != "mass"]
         if self.config.learn_mass or self.linear.mass is not None:
             terms.append(term_class("mass")(self.mass_))
-        terms += [t for t in (self.potential_, self.dissipation_) if t is not None]
+        terms += [t for t in (self.potential_, self.dissipation_, self.hysteresis_) if t is not None]
         return ReducedOperators(tuple(terms), self.describe())
 
-    def nonlinear_forces(self, Q: np.ndarray, Vel: np.ndarray | None = None) -> np.ndarray:
-        """(r, K) ``grad U^(Q) + grad F^(Vel)``: the learned nonlinear forces at columns."""
+    def nonlinear_forces(self, Q: np.ndarray, Vel: np.ndarray | None = None, starts=(0,)) -> np.ndarray:
+        """(r, K) ``grad U^(Q) + grad F^(Vel)`` and the sliders' force along the history ``Q`` (each
+        trajectory of ``starts`` loaded from rest to its first column): the learned nonlinear forces."""
         out = np.zeros(np.shape(Q))
         if self.potential_ is not None:
             out += self.potential_.forces(Q)
         if self.dissipation_ is not None and Vel is not None:
             out += self.dissipation_.forces(Q, Vel)
+        if getattr(self, "hysteresis_", None) is not None:
+            out += self.hysteresis_.forces(Q, starts=starts)
         return out
 
     def _loss(self, data: SecondOrderData, linear: dict, step1: bool = False) -> float:
         """The relative residual ``||M^^-1 R||_F^2 / ||Q''||_F^2`` of the exported (numpy) model
         (``step1``: of step 1's model alone)."""
-        q, v, a, Y, blocks, norm = self._arrays(data)
+        q, v, a, Y, blocks, norm, _ = self._arrays(data)
         R = Y.T + sum(linear[cls.name] @ D.T for cls, D in zip(self.linear._learned(data), blocks))
         mass = self._mass0(data.r)
         if not step1:
-            R = R + (self.mass_ - mass) @ data.accelerations + self.nonlinear_forces(data.states, data.velocities)
+            R = R + (self.mass_ - mass) @ data.accelerations \
+                + self.nonlinear_forces(data.states, data.velocities, data.starts)
             mass = self.mass_
         R = np.linalg.solve(mass, R)
         return float(np.sum(R * R) / norm)
@@ -413,6 +528,8 @@ class SpML(Learner):
         if getattr(self, "history_", None) is not None:
             out.update(loss=self.loss_, linear_loss=self.linear_loss_, iterations=self.iterations_,
                        best_iteration=self.best_iteration_, training_seconds=self.training_seconds_)
+        if getattr(self, "hysteresis_", None) is not None:
+            out["hysteresis"] = self.hysteresis_.describe()
         return out
 
 
