@@ -351,3 +351,78 @@ def test_bad_input_is_refused():
     duffing = sdof(0.0, LocalPotential.cubic(np.ones(1), 1e4))
     with pytest.raises(HarmonicBalanceError, match="Newton"):
         HarmonicBalance(duffing, 0, harmonics=3).solve(2 * np.pi * 3.0, 1e3, newton=Newton(max_iterations=2))
+
+
+# -- sweeps: chord steps, the stepped sine's rows, periodic states ---------------------------
+def test_chord_steps_reach_the_same_solution_for_fewer_jacobians():
+    # a Jenkins oscillator swept through its softened resonance (slipping over most of the period):
+    # with the Jacobian of the previous point reused, every point meets the same Newton tolerance,
+    # so the two sweeps agree to a few times that tolerance (1e-10 of the balanced forces)
+    system = jenkins_system(0.03)
+    frequencies = 2 * np.pi * np.linspace(0.75, 1.05, 13)
+    hb = HarmonicBalance(system, 0, harmonics=3, samples=64)
+    counted = {"jacobian": 0}
+    residual = hb.residual
+
+    def counting(z, omega, force=0.0, *, xi=0.0, jacobian=True):
+        counted["jacobian"] += bool(jacobian)
+        return residual(z, omega, force, xi=xi, jacobian=jacobian)
+
+    hb.residual = counting
+    runs = {}
+    for chord in (None, {}):
+        counted["jacobian"], z, amplitudes = 0, None, []
+        for omega in frequencies:
+            solution = hb.solve(omega, 8.0, initial=z, chord=chord)
+            z = solution.coefficients.reshape(-1)
+            amplitudes.append(abs(hb.phasor(solution.coefficients)[0]))
+        runs["chord" if chord is not None else "newton"] = (np.array(amplitudes), counted["jacobian"])
+    (newton, j_newton), (chord, j_chord) = runs["newton"], runs["chord"]
+    assert np.max(np.abs(chord / newton - 1)) < 1e-8, np.max(np.abs(chord / newton - 1))
+    assert j_chord < 0.7 * j_newton, (j_chord, j_newton)      # measured 13 against 33 exact Jacobians
+
+
+def test_sweep_rows_are_the_stepped_sines_and_a_linear_models_frf():
+    # a linear 2-dof: every point is the exact FRF (one iteration), its acceleration's amplitude and
+    # phase as the time-marched stepped sine reports them (the same model marched to steady state)
+    from femrom.study import harmonic_balance_sweep
+    system = two_dof()
+    frequencies = np.array([0.35, 0.62, 1.1])
+    swept = harmonic_balance_sweep(system, None, 0, frequencies, (0.5,), harmonics=1)
+    (level,) = swept["rows"]
+    assert level["force_n"] == 0.5 and level["quantity"] == "acceleration"
+    M, K, C = (m.toarray() for m in (system.mass, system.stiffness, system.damping))
+    for j, f in enumerate(frequencies):
+        w = 2 * np.pi * f
+        x = np.linalg.solve(K - w**2 * M + 1j * w * C, 0.5 * np.array([0.0, 1.0]))
+        for i, name in enumerate(("y0", "y1")):
+            point = level["outputs"][name][j]
+            # y = Im(X e^{i w t}) = |X| sin(w t + arg X); the acceleration -w^2 y: the phase turned by pi
+            # each point from the previous one, to Newton's 1e-10 of the balanced forces (times the
+            # resonance's amplification): measured 1.2e-10
+            assert point["amplitude_m_s2"] == pytest.approx(w**2 * abs(x[i]), rel=1e-8)
+            assert np.angle(np.exp(1j * (point["phase_rad"] - np.angle(-x[i])))) == pytest.approx(0, abs=1e-8)
+            assert point["linear_amplitude_m_s2"] == pytest.approx(point["amplitude_m_s2"], rel=1e-9)
+    marched = SteppedSine(frequencies[:2], steps_per_period=256,
+                          steady_state=SteadyStateCriterion(1e-7, max_periods=4000)).run(
+        Shaker(SecondOrderROM.galerkin(system, np.eye(2)), 0), [0.5]).rows()[0]
+    for j in range(2):
+        for name in ("y0", "y1"):
+            a, b = marched["outputs"][name][j], level["outputs"][name][j]
+            # the march's phase error at 256 steps a period: (w dt)^2 / 12 ~ 5e-5 rad
+            assert np.angle(np.exp(1j * (a["phase_rad"] - b["phase_rad"]))) == pytest.approx(0, abs=1e-3)
+            assert a["amplitude_m_s2"] == pytest.approx(b["amplitude_m_s2"], rel=1e-3)
+
+
+def test_periodic_states_are_the_afts_march():
+    # the states periodic_states returns are the ones the AFT's force was evaluated with: re-evaluating
+    # the force at each (q_j, state_j) and transforming gives the AFT's coefficients to round-off
+    system = jenkins_system(0.03)
+    hb = HarmonicBalance(system, 0, harmonics=3, samples=32)
+    solution = hb.solve(2 * np.pi * 1.0, 8.0)
+    q, v, states = hb.periodic_states(solution.coefficients, 2 * np.pi * 1.0)
+    assert q.shape == (32, 1) and len(states) == 32
+    forces = np.array([system.nonlinear.force(q[j], v[j], states[j]) for j in range(32)]).reshape(32, 1)
+    aft = hb.aft(solution.coefficients.reshape(-1), 2 * np.pi * 1.0, jacobian=False)
+    assert np.allclose(hb.basis.analysis @ forces, aft.coefficients, rtol=0, atol=1e-12 * np.abs(forces).max())
+    assert np.ptp([s for s in np.ravel(states)]) > 0          # the slider moves over the period

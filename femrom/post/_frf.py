@@ -33,8 +33,8 @@ def linear_accelerance(system, state, force, frequencies_hz, *, displacement=Non
     """
     n = system.n_dofs
     q = np.zeros(n) if displacement is None else np.asarray(displacement, dtype=float)
-    D0 = system.nonlinear.tangent(q, None, state)[0]
-    K = _dense(system.stiffness + D0)
+    D0 = None if system.nonlinear is None else system.nonlinear.tangent(q, None, state)[0]
+    K = _dense(system.stiffness if D0 is None else system.stiffness + D0)
     M, C = _dense(system.mass), _dense(system.damping)
     E = _dense(system.output_matrix)
     columns = []
