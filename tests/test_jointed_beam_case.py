@@ -17,7 +17,8 @@ def metrics(tmp_path_factory, brb_data):
     # test_the_documented_headline_numbers below runs it); the measured backbone from the data
     config = case.JointedBeamCase(ring_down=1.0, qsma_amplitudes=(1.0, 1.76, 3.1, 5.46, 9.61, 16.9, 30.0), fit_iwan=False,
                                   training_impacts=(300.0,), training_window=0.1,
-                                  forced_levels=(2e-4, 0.05), forced_frequencies=(80.3,))
+                                  forced_levels=(2e-4, 1.5), forced_frequencies=(80.3, 80.35, 80.4),
+                                  time_domain=True, time_domain_levels=(2e-4, 0.05), time_domain_frequencies=(80.3,))
     return case.run(config, tmp_path_factory.mktemp("jointed_beam"), progress=lambda line: None, data_dir=brb_data)
 
 
@@ -98,7 +99,7 @@ def test_the_measured_backbone_is_read_and_compared(metrics):
 
 
 def test_the_stepped_sine_tends_to_the_stuck_joints_response_at_small_force(metrics):
-    tiny, small = metrics["forced_response"]
+    tiny, small = metrics["stepped_sine_time_domain"]
     assert tiny["force_n"] == 2e-4 and small["force_n"] == 0.05
     assert tiny["all_converged"] and small["all_converged"]
     deviation = {}
@@ -148,3 +149,42 @@ def test_the_documented_headline_numbers(tmp_path, brb_data):
         assert 1.05 < ratio(name) < 1.23 and against[name]["damping_max_relative_error"] < 0.15, name
     # "transient: 0.125 Hz against 0.104, 12 %" over its own 2.1-15.6 m/s^2
     assert 1.1 < ratio("transient") < 1.3 and 0.05 < against["transient"]["damping_max_relative_error"] < 0.2
+
+
+def test_the_marched_stepped_sine_agrees_with_harmonic_balance(metrics):
+    # the same hyper-reduced model and points, marched to steady state and by harmonic balance (H = 3):
+    # the march stops when its amplitude changes by less than 1e-2 a period (forced_tolerance) and
+    # steps 32 times a period (Newmark's period error, prewarped at the drive frequency)
+    for level in metrics["stepped_sine_time_domain"]:
+        for point in level["outputs"]["acc3"]:
+            assert abs(point["hb_relative_difference"]) < 0.05, point
+
+
+def test_the_measured_range_joint_by_harmonic_balance(metrics):
+    result = metrics["measured_range"]
+    validation = result["hyper_reduction"]["validation"]
+    # ECSW trained on periodic solutions against every pair at 1.5 N, 80.4 Hz: measured 8e-4
+    assert abs(validation["relative_difference"]) < 0.02
+    assert result["hyper_reduction"]["sampled_pairs"] < 0.2 * result["hyper_reduction"]["of_pairs"]
+    tiny, large = metrics["forced_response"]
+    assert tiny["force_n"] == 2e-4 and large["force_n"] == 1.5
+    for level in (tiny, large):
+        for name in ("acc1", "acc2", "acc3"):
+            assert [p["frequency_hz"] for p in level["outputs"][name]] == [80.3, 80.35, 80.4]
+            for point in level["outputs"][name]:
+                assert set(point) >= {"frequency_hz", "amplitude_m_s2", "phase_rad", "linear_amplitude_m_s2"}
+    # at 2e-4 N the joint barely slips: the response is the stuck joint's to a few per cent (the Iwan
+    # density's weakest sliders soften it as amplitude^(1 + chi)); at 1.5 N it is far from it
+    for point in tiny["outputs"]["acc3"]:
+        assert abs(point["amplitude_m_s2"] / point["linear_amplitude_m_s2"] - 1) < 0.06
+    assert all(abs(p["amplitude_m_s2"] / p["linear_amplitude_m_s2"] - 1) > 0.2 for p in large["outputs"]["acc3"])
+    # the EPMC backbone reaches the measured range and is compared level by level
+    backbone = result["backbone_epmc_acc3"]
+    assert backbone[0]["amplitude_m_s2"] < 5 and backbone[-1]["amplitude_m_s2"] > 80
+    rows = result["against_response_controlled"]
+    assert len(rows) == 8
+    # regression pins of the fitted joint (docs/cases/jointed_beam.md): every level within 0.2 Hz
+    # (measured at most 0.14 Hz), the damping within 50 % (measured -44 % at 80 m/s^2: the miss the
+    # docs report); a model without the reclosing contact keeps softening (0.35 Hz low at 80 m/s^2)
+    assert max(abs(r["frequency_difference_hz"]) for r in rows) < 0.2
+    assert max(abs(r["damping_relative_error"]) for r in rows) < 0.5

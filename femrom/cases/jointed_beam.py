@@ -295,6 +295,17 @@ def run(config: JointedBeamCase, out: Path, progress=print, data_dir=None) -> di
                                                tolerance=config.forced_tolerance, linear_key="linear_amplitude_m_s2",
                                                progress=lambda line: progress(f"  {line}"))
         seconds["stepped_sine_time_domain"] = time.perf_counter() - tic_forced
+        # the same model and points by harmonic balance (H = 3, 64 samples): the march's steady state
+        # against the periodic solution (their difference: the march's tolerance and its period error)
+        clock = time.perf_counter()
+        check = harmonic_balance_sweep(hyper, z_hyper, 1, config.time_domain_frequencies, config.time_domain_levels,
+                                       harmonics=3, samples=64)
+        seconds["stepped_sine_hb_same_points"] = time.perf_counter() - clock
+        for marched, balanced in zip(time_domain, check["rows"]):
+            for name, points in marched["outputs"].items():
+                for point, other in zip(points, balanced["outputs"][name]):
+                    point["hb_amplitude_m_s2"] = other["amplitude_m_s2"]
+                    point["hb_relative_difference"] = point["amplitude_m_s2"] / other["amplitude_m_s2"] - 1.0
     measured_range = measured_range_section(config, setup, damping, data_dir, progress, seconds, notes) \
         if config.forced else None
 
