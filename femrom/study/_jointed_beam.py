@@ -380,10 +380,10 @@ class MeasuredRangeJoint:
     resonance (``m_eff = F / (2 zeta A) = 1.95`` kg) is 5.2 g.
     """
 
-    friction_coefficient: float = 0.3
-    chi: float = 0.15
+    friction_coefficient: float = 0.3206
+    chi: float = -0.03822
     beta: float = 0.3
-    closing: float = 3.0e-4
+    closing: float = 2.986e-4
     shaker_mass: float = 5.2e-3
 
     def parameters(self) -> dict:
