@@ -197,6 +197,11 @@ def measured_range_section(config: JointedBeamCase, setup, damping: float, data_
     if levels is not None:
         measured = phase_resonance_backbone(levels)
         backbones["measured, response-controlled (phase resonance)"] = measured
+        try:
+            backbones["measured, hammer (no shaker)"] = measured_backbone(
+                read_hammer_impact(None if data_dir is None else Path(data_dir)), channel="acc3")
+        except FileNotFoundError:
+            pass
         la = np.log(backbone.amplitude)
         f_model = np.interp(np.log(measured.amplitude), la, backbone.frequency_hz)
         z_model = np.interp(np.log(measured.amplitude), la, backbone.damping_ratio)

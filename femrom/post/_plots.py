@@ -191,7 +191,8 @@ def plot_forced_response(path, levels: list, *, output: str, measured=None, titl
         ``amplitude_m_s2``, ``phase_rad``), as :func:`femrom.study.harmonic_balance_sweep` gives.
     output : str
     measured : list of SteppedSineLevel, optional
-        Drawn as points coloured by their force (:func:`read_response_controlled`); their phase is
+        Drawn as points coloured by their force on the models' log colour scale
+        (:func:`read_response_controlled`); their phase is
         the response's relative to the force as the file gives it, and the models' acceleration phase
         is drawn turned by ``-pi`` to the same convention.
     """
@@ -204,18 +205,22 @@ def plot_forced_response(path, levels: list, *, output: str, measured=None, titl
         top = max(max(forces), max(float(np.max(m.force_n)) for m in measured))
     else:
         top = max(forces)
+    from matplotlib.colors import LogNorm
+
+    bottom = min(min(forces), min(float(np.min(m.force_n)) for m in measured) if measured else min(forces))
+    norm = LogNorm(vmin=max(bottom, 1e-12), vmax=top)
     colour = plt.get_cmap("viridis")
     for level in levels:
         points = level["outputs"][output]
         f = [p["frequency_hz"] for p in points]
-        c = colour(float(level["force_n"]) / top)
+        c = colour(norm(float(level["force_n"])))
         ax_a.plot(f, [p["amplitude_m_s2"] for p in points], "-", color=c, lw=1.4, label=f"model {level['force_n']:g} N")
         ax_p.plot(f, np.mod(np.array([p["phase_rad"] for p in points]), 2 * np.pi) - np.pi, "-", color=c, lw=1.4)
     if measured:
         for m in measured:
-            ax_a.scatter(m.frequency_hz, m.amplitude_m_s2, c=m.force_n, cmap=colour, vmin=0, vmax=top, s=9,
+            ax_a.scatter(m.frequency_hz, m.amplitude_m_s2, c=m.force_n, cmap=colour, norm=norm, s=9,
                          marker="o", edgecolors="none")
-            ax_p.scatter(m.frequency_hz, m.phase_rad, c=m.force_n, cmap=colour, vmin=0, vmax=top, s=9, marker="o",
+            ax_p.scatter(m.frequency_hz, m.phase_rad, c=m.force_n, cmap=colour, norm=norm, s=9, marker="o",
                          edgecolors="none")
         ax_a.plot([], [], "o", color="grey", ms=3, label="measured, constant amplitude (colour: force)")
     ax_a.set_ylabel(f"{output} amplitude [m/s^2]")
