@@ -188,3 +188,12 @@ def test_the_measured_range_joint_by_harmonic_balance(metrics):
     # docs report); a model without the reclosing contact keeps softening (0.35 Hz low at 80 m/s^2)
     assert max(abs(r["frequency_difference_hz"]) for r in rows) < 0.2
     assert max(abs(r["damping_relative_error"]) for r in rows) < 0.5
+    # the force-controlled peaks the response-controlled levels imply: 1.5 N lies between the 60.2 m/s^2
+    # level (smallest force 1.103 N at 80.35 Hz) and the 70.3 m/s^2 one (1.549 N at 80.45 Hz); by hand,
+    # log-log: x = ln(1.5 / 1.103) / ln(1.549 / 1.103) = 0.9055, 60.2 (70.3 / 60.2)^x = 69.3 m/s^2 at 80.44 Hz;
+    # 2e-4 N is below the lowest level's smallest force (0.0295 N): no estimate
+    tiny_peak, large_peak = result["peaks"]
+    assert tiny_peak["response_controlled_estimate"]["amplitude_m_s2"] is None
+    estimate = large_peak["response_controlled_estimate"]
+    assert estimate["amplitude_m_s2"] == pytest.approx(69.3, abs=0.1)
+    assert estimate["frequency_hz"] == pytest.approx(80.44, abs=0.01)
