@@ -52,7 +52,7 @@ import numpy as np
 
 from femrom.cases import case_parser
 from femrom.integrators import HarmonicBalance
-from femrom.post import Backbone, hilbert_backbone, measured_backbone, period_corrected, phase_resonance_backbone, \
+from femrom.post import Backbone, DatasetNotFoundError, hilbert_backbone, measured_backbone, period_corrected, phase_resonance_backbone, \
     plot_backbones, plot_forced_response, read_hammer_impact, read_response_controlled, resonance_force, \
     staged_output, static_qsma, with_linear_damping, write_metrics
 from femrom.rom import ecsw_joint, hyper_reduced_system
@@ -139,7 +139,7 @@ def measured_range_section(config: JointedBeamCase, setup, damping: float, data_
     fit = None
     if config.fit_range:
         if levels is None:
-            raise FileNotFoundError("--fit-range needs the response-controlled data (femrom data fetch brb)")
+            raise DatasetNotFoundError("--fit-range needs the response-controlled data (femrom data fetch brb)")
         progress("jointed beam: fitting the measured-range joint (mu, beta, kappa) on the response-controlled "
                  "and hammer backbones at acc3 (EPMC per evaluation) ...")
         hammer = measured_backbone(read_hammer_impact(None if data_dir is None else Path(data_dir)), channel="acc3")
