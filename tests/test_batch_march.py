@@ -121,3 +121,21 @@ def test_one_start_and_state_serve_every_run():
     np.testing.assert_array_equal(shared["q"], each["q"])
     with pytest.raises(FemromValueError, match="q0 must be"):
         march_batch(system, Newmark(), times[:21], np.zeros((3, system.n_dofs)), inputs=inputs[:, :, :21])
+
+
+def test_a_batch_continues_another():
+    system, z0, times, inputs, q0, states = _batch("clamped_iwan")
+    scheme = Newmark(newton=Newton(rtol=1e-12))
+    whole = march_batch(system, scheme, times, q0, inputs=inputs, state0=states)
+    half = STEPS // 2
+    first = march_batch(system, scheme, times[:half + 1], q0, inputs=inputs[:, :, :half + 1], state0=states)
+    second = march_batch(system, scheme, times[half:], first["q"][:, :, -1], first["v"][:, :, -1],
+                         inputs=inputs[:, :, half:], state0=first["state"], a0=first["a"][:, :, -1])
+    for key in ("q", "v", "a"):
+        joined = np.concatenate([first[key], second[key][:, :, 1:]], axis=2)
+        for b in range(4):
+            _close(joined[b], whole[key][b])
+    for b in range(4):
+        _close(second["state"][b], whole["state"][b])
+    np.testing.assert_array_equal(np.hstack([first["newton_iterations"], second["newton_iterations"]]),
+                                  whole["newton_iterations"])

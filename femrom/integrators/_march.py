@@ -267,7 +267,8 @@ def _per_run(value, B: int, n: int, name: str) -> np.ndarray:
     return x.copy()
 
 
-def march_batch(system, scheme, times, q0=None, v0=None, *, inputs=None, state0=None, solver=None) -> dict:
+def march_batch(system, scheme, times, q0=None, v0=None, *, inputs=None, state0=None, a0=None,
+                solver=None) -> dict:
     r"""``B`` runs of one model over the uniform grid ``times``, stepped together: :func:`march` for each.
 
     The runs share the model (matrices, joint) and the grid, and differ in their inputs (force
@@ -291,6 +292,10 @@ def march_batch(system, scheme, times, q0=None, v0=None, *, inputs=None, state0=
     state0 : optional
         The force's committed state at ``t_0``: one for every run (default its initial state) or a
         sequence of ``B`` (an array with one more leading axis than the force's state).
+    a0 : (n,) or (B, n) ndarray, optional
+        The accelerations at ``t_0`` (default from the equation of motion), e.g. the last column of
+        a previous batch's ``a``, so that a batch continues the runs of another exactly (a linear
+        model with dense operators takes its own, from the equation of motion).
     solver : callable, optional
         As for :func:`march`.
 
@@ -340,6 +345,8 @@ def march_batch(system, scheme, times, q0=None, v0=None, *, inputs=None, state0=
         F_grid, F_input, present = sampled_forcing(system, runs[b], times, theta)
         grids.append(F_grid)
         forcing.append(F_input[:, :n_steps])
+        if a0 is not None:
+            continue
         rhs = F_grid[:, 0]
         if system.damping is not None:
             rhs = rhs - system.damping @ V0[b]
@@ -347,6 +354,8 @@ def march_batch(system, scheme, times, q0=None, v0=None, *, inputs=None, state0=
         if nonlinear is not None:
             rhs = rhs - nonlinear.force(Q0[b], V0[b], states[b])
         A0[b] = mass_solver.solve(rhs)
+    if a0 is not None:
+        A0 = _per_run(a0, B, n, "a0")
     if nonlinear is None and dense_model(system):
         cache = None
     else:
