@@ -22,7 +22,13 @@ ratio single / batch (also per repeat) are printed and written to
 single run (largest difference of ``q``, relative to the run's largest ``|q|``; same Newton
 iterations).
 
-Run ``python -m benchmarks.batch_march`` (about a minute).
+The stepped sine (``SteppedSine.run`` against ``run_batched``, one ``march_batch`` call per period
+for all levels still running) on the 10-pair model with 5 % modal damping (so that the levels
+settle), its first two reduced coordinates as outputs: ``B`` levels from 300 N to 8 kN, three
+frequencies about the first mode, ``--steps-per-period`` steps a period, tolerance 1e-3; the
+medians of ``--repeats`` alternating blocks, wall time per level, and the largest phasor difference.
+
+Run ``python -m benchmarks.batch_march`` (a few minutes).
 """
 
 from __future__ import annotations
@@ -44,7 +50,8 @@ import scipy.sparse as sp
 
 from femrom.fem import ClampedIwanLaw, JointForce, compiled_laws
 from femrom.inference import galerkin
-from femrom.integrators import Newmark, Newton, march, march_batch
+from femrom.integrators import (Newmark, Newton, Shaker, SteadyStateCriterion, SteppedSine, StepResult, march,
+                                march_batch)
 from femrom.scene import SecondOrderSystem
 
 RESULTS = Path(__file__).resolve().parent / "results" / "batch_march.json"
@@ -109,11 +116,45 @@ def check(system, scheme, times, z0) -> dict:
             "newton_iterations_per_step": [float(batch["newton_iterations"][b].mean()) for b in range(len(runs))]}
 
 
+def stepped_sines(repeats: int, steps_per_period: int) -> dict:
+    """Seconds per level of ``run`` and ``run_batched`` at each ``B``, and their largest phasor difference."""
+    system, z0 = lap_joint(10)
+    r = system.n_dofs
+    f1 = np.sqrt(sla.eigh(np.asarray(system.stiffness), np.asarray(system.mass), eigvals_only=True)[0]) / (2 * np.pi)
+    system = dataclasses.replace(system, output_matrix=np.eye(r)[:2], output_names=("y0", "y1"),
+                                 damping=10.0 * np.asarray(system.damping))
+    plant = Shaker(system, 0, rest=StepResult.at_rest(r, state=z0))
+    sweep = SteppedSine(f1 * np.array([0.9, 1.0, 1.1]), steps_per_period=steps_per_period,
+                        steady_state=SteadyStateCriterion(tolerance=1e-3, max_periods=200))
+    out = {}
+    for B in BATCHES:
+        levels = list(np.geomspace(300.0, 8000.0, B)) if B > 1 else [2000.0]
+        seconds = {"run": [], "run_batched": []}
+        for _ in range(repeats):
+            for name in seconds:
+                plant.reset()
+                tic = time.perf_counter()
+                result = getattr(sweep, name)(plant, levels)
+                seconds[name].append((time.perf_counter() - tic) / B)
+                if name == "run":
+                    reference = result
+        difference = max(float(np.abs(a.phasors - b.phasors).max() / np.abs(b.phasors).max())
+                         for a, b in zip(result.levels, reference.levels))
+        periods = [int(level.periods.sum()) for level in reference.levels]
+        out[str(B)] = {"ms_per_level": {k: 1e3 * statistics.median(v) for k, v in seconds.items()},
+                       "spread_ms": {k: [1e3 * min(v), 1e3 * max(v)] for k, v in seconds.items()},
+                       "ratio": statistics.median(seconds["run"]) / statistics.median(seconds["run_batched"]),
+                       "ratio_per_repeat": [x / y for x, y in zip(seconds["run"], seconds["run_batched"])],
+                       "periods_per_level": periods, "phasor_max_relative_difference": difference}
+    return out
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--steps", type=int, default=1000)
     parser.add_argument("--repeats", type=int, default=7)
     parser.add_argument("--pairs", type=int, nargs="+", default=[10, 40])
+    parser.add_argument("--steps-per-period", type=int, default=64)
     args = parser.parse_args()
     assert compiled_laws(), "the batch path needs numba"
     scheme = Newmark(newton=Newton(rtol=1e-12))
@@ -148,6 +189,8 @@ def main():
                 "ratio_per_repeat": [x / y for x, y in zip(s, b)],
                 "all_single": [1e6 * x for x in s], "all_batch": [1e6 * x for x in b]}
         result["models"][str(pairs)] = entry
+    result["stepped_sine"] = stepped_sines(args.repeats, args.steps_per_period)
+    result["steps_per_period"] = args.steps_per_period
     result["load_average_end"] = os.getloadavg()
     print(f"{result['date']}, commit {result['commit']}, load {load[0]:.1f} -> {result['load_average_end'][0]:.1f}")
     print("| pairs | B | single [us / run-step] | batch [us / run-step] | single / batch | same repeat (min-max) |\n"
@@ -159,6 +202,14 @@ def main():
                   f"| {min(x['ratio_per_repeat']):.2f}-{max(x['ratio_per_repeat']):.2f} |")
     for pairs, entry in result["models"].items():
         print(f"{pairs} pairs, check: {entry['check']}")
+    print("\n| stepped sine, B levels | run [ms / level] | run_batched [ms / level] | run / run_batched "
+          "| same repeat (min-max) | periods per level | phasor difference |\n|---|---|---|---|---|---|---|")
+    for B, x in result["stepped_sine"].items():
+        a, b = x["spread_ms"]["run"], x["spread_ms"]["run_batched"]
+        print(f"| {B} | {x['ms_per_level']['run']:.0f} ({a[0]:.0f}-{a[1]:.0f}) "
+              f"| {x['ms_per_level']['run_batched']:.0f} ({b[0]:.0f}-{b[1]:.0f}) | {x['ratio']:.2f} "
+              f"| {min(x['ratio_per_repeat']):.2f}-{max(x['ratio_per_repeat']):.2f} "
+              f"| {min(x['periods_per_level'])}-{max(x['periods_per_level'])} | {x['phasor_max_relative_difference']:.1e} |")
     RESULTS.parent.mkdir(parents=True, exist_ok=True)
     RESULTS.write_text(json.dumps(result, indent=1))
     print(f"written: {RESULTS}")
