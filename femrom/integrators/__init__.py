@@ -23,6 +23,7 @@ Three separate pieces:
   frequency by frequency without restarting, whole periods at
   a time to a tested steady state (:class:`SteadyStateCriterion`), and reports the
   first-harmonic amplitude and phase of each output (:class:`SteppedSineResult`);
+  ``run_batched`` steps its force levels together;
 - *harmonic balance* (:class:`HarmonicBalance`) writes any model's periodic steady state under
   ``F b sin(Omega t)`` as Fourier coefficients, with the nonlinear force (memory included)
   evaluated by alternating frequency-time marches over the period; :func:`frequency_response`
