@@ -147,6 +147,16 @@ def test_a_stuck_joints_stepped_sine_is_its_linear_response():
     assert len(result.levels) == 2
 
 
+def test_the_stepped_sine_response_with_its_levels_batched_is_the_same():
+    # this joint has no compiled step: the batch steps each level by the scheme's step, the same numbers
+    system = two_dofs(damping=0.1)
+    z0 = system.nonlinear.initial_state()
+    args = (system, z0, 1, (0.15, 0.25), (1e-3, 3.0))
+    _, rows = stepped_sine_response(*args, steps_per_period=32, tolerance=1e-3)
+    _, batched = stepped_sine_response(*args, steps_per_period=32, tolerance=1e-3, batched=True)
+    assert batched == rows
+
+
 def test_the_step_cost_leaves_the_first_step_out():
     system = with_impulse(two_dofs(damping=0.02), 20.0, 0.05)
     cost = step_cost(system, np.zeros(2), system.nonlinear.initial_state(), 0.01, 50)

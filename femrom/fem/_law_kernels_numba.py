@@ -19,6 +19,8 @@ The joint kernels (``joint_*``) evaluate a projected joint
 :func:`newmark_joint_step` is a whole Newmark-family step of a small model with one, Newton
 and commit included (its Python side is ``FusedJointStep`` in :mod:`femrom.integrators._fused`; the
 learned sliders' ``newmark_sliders_step`` and ``newmark_sliders_march`` are ``FusedSlidersStep``'s).
+:func:`newmark_joint_batch_march` steps ``B`` runs of one such model together, each step of each
+run a :func:`newmark_joint_step` (``FusedJointStep.march_batch``).
 """
 
 from __future__ import annotations
@@ -440,6 +442,49 @@ def newmark_joint_step(q, v, a, force, has_force, mass, damping, has_damping, st
         joint_gaps(W, local_offset, gap_offset, q1, gap)
         state1 = joint_commit(kind, gap, state, slider_stiffness, strength)
     return q1, v1, x, state1, iterations, CONVERGED, norm, tolerance
+
+
+@njit(cache=True)
+def newmark_joint_batch_march(Q, V, A, forces, has_force, mass, damping, has_damping, stiffness, S,
+                              h, beta, gamma, alpha_m, alpha_f, c_q, w, rtol, atol, max_iterations,
+                              kind, W, local_offset, gap_offset, areas, slider_stiffness, strength, normal_stiffness,
+                              states, iterations, status, failed, norms, tolerances):
+    """``n`` steps of ``B`` independent runs of one model with a projected joint, all runs at every step.
+
+    ``Q, V, A`` (n + 1, B, r): row 0 holds each run's start, rows ``1..n`` are filled; ``forces``
+    (n, B, r) the forcing of step ``k`` of run ``b`` at ``forces[k, b]`` (ignored without ``has_force``);
+    ``states`` (B, s, N, 2) (or N + 1 for the clamped law) each run's committed state, updated in place.
+    Every step of every run is :func:`newmark_joint_step`'s, with that run's own Newton (its own
+    iterations and tests). ``iterations`` (n, B) gets each step's Newton iterations; a run that fails
+    stops there (``status[b]`` why, ``failed[b]`` the 0-based step, ``norms``/``tolerances`` its last
+    test; a non-finite new ``q`` is :data:`STATE_NOT_FINITE`) while the others go on. ``status`` must
+    come in as :data:`CONVERGED` for the runs to step (a run already failed is skipped)."""
+    n, B, r = forces.shape[0], Q.shape[1], Q.shape[2]
+    no_force = np.zeros(r)
+    for k in range(n):
+        for b in range(B):
+            if status[b] != CONVERGED:
+                continue
+            force = forces[k, b] if has_force else no_force
+            q1, v1, a1, state1, its, code, norm, tolerance = newmark_joint_step(
+                Q[k, b], V[k, b], A[k, b], force, has_force, mass, damping, has_damping, stiffness, S,
+                h, beta, gamma, alpha_m, alpha_f, c_q, w, rtol, atol, max_iterations,
+                kind, W, local_offset, gap_offset, areas, slider_stiffness, strength, normal_stiffness, states[b])
+            iterations[k, b] = its
+            if code != CONVERGED:
+                status[b], failed[b], norms[b], tolerances[b] = code, k, norm, tolerance
+                continue
+            finite = True
+            for i in range(r):
+                if not math.isfinite(q1[i]):
+                    finite = False
+            if not finite:
+                status[b], failed[b] = STATE_NOT_FINITE, k
+                continue
+            Q[k + 1, b] = q1
+            V[k + 1, b] = v1
+            A[k + 1, b] = a1
+            states[b] = state1
 
 
 # -- the same step with learned Jenkins sliders along one reduced direction ---------------------------------

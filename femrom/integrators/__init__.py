@@ -16,12 +16,14 @@ Three separate pieces:
 - the *driver* :func:`iterate` loops and yields :class:`StepResult`;
   :func:`integrate` feeds them to *consumers* (:class:`Trajectory`,
   :class:`OutputRecorder`, :class:`EnergyRecorder`, or any callable);
-  :func:`march` steps a model over a grid with sampled inputs into arrays, and a
+  :func:`march` steps a model over a grid with sampled inputs into arrays (:func:`march_batch`
+  many runs of one model at once, in one compiled call on a reduced joint model), and a
   :class:`Stepper` one input at a time;
 - a *stepped sine* (:class:`SteppedSine`) drives any model on a :class:`Shaker`
   frequency by frequency without restarting, whole periods at
   a time to a tested steady state (:class:`SteadyStateCriterion`), and reports the
   first-harmonic amplitude and phase of each output (:class:`SteppedSineResult`);
+  ``run_batched`` steps its force levels together;
 - *harmonic balance* (:class:`HarmonicBalance`) writes any model's periodic steady state under
   ``F b sin(Omega t)`` as Fourier coefficients, with the nonlinear force (memory included)
   evaluated by alternating frequency-time marches over the period; :func:`frequency_response`
@@ -66,7 +68,15 @@ from femrom.integrators._harmonic_balance import (
 )
 from femrom.integrators._hb_continuation import HarmonicBalanceCurve, force_response, frequency_response
 from femrom.integrators._implicit import ImplicitSolve
-from femrom.integrators._march import Stepper, input_sample, input_samples, march, run_linear, uniform_step
+from femrom.integrators._march import (
+    Stepper,
+    input_sample,
+    input_samples,
+    march,
+    march_batch,
+    run_linear,
+    uniform_step,
+)
 from femrom.integrators._newton import ConvergenceError, Newton, newton_loop
 from femrom.integrators._scheme import (
     LinearParts,
@@ -104,7 +114,7 @@ __all__ = [
     "ImplicitSolve", "Integration", "IntegrationError", "IntegrationSummary", "Newmark",
     "Newton", "OutputRecorder", "SimulationResult", "StepClock", "StepResult",
     "Trajectory", "bound_max_frequency", "estimate_max_frequency", "integrate", "integrate_canonical",
-    "iterate", "newmark_frequencies", "register_scheme", "scheme_for", "simulate",     "LinearParts", "Scheme", "Stepper", "march", "newton_loop", "registered_schemes", "run_linear",
+    "iterate", "newmark_frequencies", "register_scheme", "scheme_for", "simulate",     "LinearParts", "Scheme", "Stepper", "march", "march_batch", "newton_loop", "registered_schemes", "run_linear",
     "Shaker", "input_sample", "input_samples", "time_scheme", "uniform_step",     "FrequencyResponse", "Peak", "SteadyStateCriterion", "SteadyStateWarning",
     "SteppedSine", "SteppedSineResult", "first_harmonic", "parabolic_peak",
     "prewarped_frequency",

@@ -12,6 +12,9 @@ in the file of the law kernels it calls so that numba's on-disk cache cannot go 
 the tolerances, tests and iteration counts of the reference path. Sums run in loops where
 numpy calls BLAS, so the two paths agree to round-off, not bit for bit.
 
+:meth:`FusedJointStep.march_batch` steps ``B`` runs of one such model (different forcing, starts or
+states) together, one compiled call for all their steps (:func:`femrom.integrators.march_batch`).
+
 Learned Jenkins sliders along a reduced direction (:class:`~femrom.inference.LearnedHysteresis`,
 which offers a :class:`~femrom.fem.CompiledSliders`) step the same way
 (:class:`FusedSlidersStep`), and a whole trajectory of them in one call (:meth:`FusedSlidersStep.march`,
@@ -134,6 +137,53 @@ class FusedJointStep(_FusedStep):
         if status:
             self._raise(status, iterations, norm, tolerance)
         return q1, v1, a1, state1, iterations
+
+    def march_batch(self, q0, v0, a0, states, forces, n_steps: int):
+        """``B`` runs of ``n = n_steps`` steps together, every step of every run this step's.
+
+        ``q0, v0, a0`` (B, r), ``states`` (B, ...) (each run's committed state), ``forces`` (B, r, n) (the
+        forcing of step ``k`` of run ``b`` at ``forces[b, :, k]``) or ``None``. Returns ``(Q, V, A (B, r, n +
+        1), states (B, ...), iterations (B, n))``. A failing run raises :class:`ConvergenceError` (Newton) or
+        :class:`NonFiniteState` with ``run`` and ``step`` (1-based) after all runs have stepped (the first
+        failing run's)."""
+        q0, v0, a0 = (np.array(x, dtype=float, ndmin=2) for x in (q0, v0, a0))
+        B, r = q0.shape
+        n = int(n_steps)
+        states = np.array(states, dtype=float)
+        if states.shape[0] != B:
+            raise FemromValueError(f"states must have one row a run ({B}), got shape {states.shape}")
+        has_force = forces is not None
+        if has_force:
+            forces = np.asarray(forces, dtype=float)
+            if forces.shape != (B, r, n):
+                raise FemromValueError(f"forces must be ({B}, {r}, {n}), got shape {forces.shape}")
+            forces = np.ascontiguousarray(forces.transpose(2, 0, 1))
+        else:
+            forces = np.zeros((n, B, r))
+        Q, V, A = (np.full((n + 1, B, r), np.nan) for _ in range(3))
+        Q[0], V[0], A[0] = q0, v0, a0
+        iterations = np.zeros((n, B), dtype=np.int64)
+        status = np.zeros(B, dtype=np.int64)
+        failed = np.full(B, -1, dtype=np.int64)
+        norms, tolerances = np.full(B, np.nan), np.full(B, np.nan)
+        M, C, has_C, K, S = self._matrices
+        self._kernels.newmark_joint_batch_march(Q, V, A, forces, has_force, M, C, has_C, K, S, *self._scalars,
+                                                *self._law, states, iterations, status, failed, norms, tolerances)
+        bad = np.flatnonzero(status)
+        if bad.size:
+            b = int(bad[0])
+            if status[b] == self._kernels.STATE_NOT_FINITE:
+                err = NonFiniteState(int(failed[b]) + 1)
+            else:
+                try:
+                    self._raise(status[b], iterations[failed[b], b], norms[b], tolerances[b])
+                except ConvergenceError as raised:
+                    err = raised
+                err.step = int(failed[b]) + 1
+            err.run = b
+            raise err
+        return (Q.transpose(1, 2, 0).copy(), V.transpose(1, 2, 0).copy(), A.transpose(1, 2, 0).copy(), states,
+                iterations.T.copy())
 
 
 class FusedSlidersStep(_FusedStep):

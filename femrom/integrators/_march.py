@@ -12,6 +12,8 @@ prediction's inputs, a controller's moves), and the states are kept in arrays:
   product a step (:func:`run_linear`); a model whose fused step can march (learned
   sliders, :mod:`._fused`) runs in one compiled call; any other model calls the
   scheme's ``step``;
+- :func:`march_batch`: ``B`` runs of one model (different inputs, starts, force states) at
+  once; on a reduced model with a compiled joint all their steps go in one compiled call;
 - :class:`Stepper`: one step at a time, ``y = stepper.step(u)``, for a controller
   in the loop or a stepped sine; the same two paths.
 """
@@ -250,6 +252,158 @@ def march(system, scheme, times, q0, v0, *, inputs=None, state0=None, solver=Non
         Q[:, k + 1], V[:, k + 1], Acc[:, k + 1] = q, v, a
         iterations += its
     return {"q": Q, "v": V, "a": Acc, "state": state, "newton_iterations": iterations,
+            "stepping_seconds": time.perf_counter() - tic, "path": "steps"}
+
+
+def _per_run(value, B: int, n: int, name: str) -> np.ndarray:
+    """(B, n) ndarray of ``value``: zeros for ``None``, one (n,) vector for every run, or (B, n)."""
+    if value is None:
+        return np.zeros((B, n))
+    x = np.asarray(value, dtype=float)
+    if x.shape == (n,):
+        return np.tile(x, (B, 1))
+    if x.shape != (B, n):
+        raise FemromValueError(f"{name} must be ({n},) or ({B}, {n}), got shape {x.shape}")
+    return x.copy()
+
+
+def march_batch(system, scheme, times, q0=None, v0=None, *, inputs=None, state0=None, a0=None,
+                solver=None) -> dict:
+    r"""``B`` runs of one model over the uniform grid ``times``, stepped together: :func:`march` for each.
+
+    The runs share the model (matrices, joint) and the grid, and differ in their inputs (force
+    levels, frequencies), starts and force states. When the scheme's step of this model is one
+    compiled call on a projected joint (the Newmark family on a reduced model whose force offers a
+    :class:`~femrom.fem.CompiledJoint`, compiled laws on), all steps of all runs go in one compiled
+    call, step after step for every run, each run with its own Newton (a run that converged stops
+    iterating while the others go on): ``path = "compiled batch"``. Any other model steps each run by
+    the scheme's ``step`` (``path = "steps"``). Either way run ``b`` is :func:`march` of its own input,
+    start and state, to round-off (``tests/test_batch_march.py``).
+
+    Parameters
+    ----------
+    system : SecondOrderSystem
+    scheme : Scheme or str
+    times : (k,) ndarray
+    q0, v0 : (n,) or (B, n) ndarray, optional
+        Starts (default rest; one vector for every run).
+    inputs : sequence of B (callables or (m, k) ndarrays), or (B, m, k) ndarray, optional
+        Each run's ``u(t)`` or its samples (required when the model has inputs; it then gives ``B``).
+    state0 : optional
+        The force's committed state at ``t_0``: one for every run (default its initial state) or a
+        sequence of ``B`` (an array with one more leading axis than the force's state).
+    a0 : (n,) or (B, n) ndarray, optional
+        The accelerations at ``t_0`` (default from the equation of motion), e.g. the last column of
+        a previous batch's ``a``, so that a batch continues the runs of another exactly (a linear
+        model with dense operators takes its own, from the equation of motion).
+    solver : callable, optional
+        As for :func:`march`.
+
+    Returns
+    -------
+    dict with ``q``, ``v``, ``a`` ((B, n, k) ndarrays), ``state`` (the runs' final states: (B, ...)
+    ndarray when the states are arrays), ``newton_iterations`` ((B, k - 1) int ndarray, by step),
+    ``stepping_seconds`` and ``path``. A run that fails raises :class:`ConvergenceError` (or a
+    :class:`~femrom.FemromRuntimeError` for a non-finite state) naming the run, step and time.
+    """
+    scheme = time_scheme(scheme)
+    scheme.check(system)
+    times, h = uniform_step(times)
+    n = system.n_dofs
+    nonlinear = system.nonlinear
+    if inputs is not None and not callable(inputs):
+        runs = list(inputs)
+        B = len(runs)
+    elif inputs is not None:
+        raise FemromValueError("inputs must be a sequence of one input a run, not one callable")
+    elif q0 is not None and np.ndim(q0) == 2:
+        B, runs = np.shape(q0)[0], None
+    else:
+        raise FemromValueError("give the runs' inputs (one a run) or their starts q0 as a (B, n) array")
+    if B < 1:
+        raise FemromValueError("a batch needs at least one run")
+    runs = runs if runs is not None else [None] * B
+    Q0, V0 = _per_run(q0, B, n, "q0"), _per_run(v0, B, n, "v0")
+    if nonlinear is None:
+        states = [None] * B
+    else:
+        initial = nonlinear.initial_state()
+        if state0 is None:
+            states = [initial.copy() if hasattr(initial, "copy") else initial for _ in range(B)]
+        elif np.ndim(state0) == np.ndim(initial) + 1:
+            states = list(state0)
+            if len(states) != B:
+                raise FemromValueError(f"state0 has {len(states)} states for {B} runs")
+        else:
+            states = [state0] * B
+    theta = float(scheme.input_time)
+    factory = solver or dense_solver
+    mass_solver = factory(system.mass, spd=True)
+    n_steps = times.size - 1
+    grids, forcing, A0, present = [], [], np.empty((B, n)), False
+    for b in range(B):
+        F_grid, F_input, present = sampled_forcing(system, runs[b], times, theta)
+        grids.append(F_grid)
+        forcing.append(F_input[:, :n_steps])
+        if a0 is not None:
+            continue
+        rhs = F_grid[:, 0]
+        if system.damping is not None:
+            rhs = rhs - system.damping @ V0[b]
+        rhs = rhs - system.stiffness @ Q0[b]
+        if nonlinear is not None:
+            rhs = rhs - nonlinear.force(Q0[b], V0[b], states[b])
+        A0[b] = mass_solver.solve(rhs)
+    if a0 is not None:
+        A0 = _per_run(a0, B, n, "a0")
+    if nonlinear is None and dense_model(system):
+        cache = None
+    else:
+        cache = scheme.init(system, h, factory, lambda: mass_solver, times[0], Q0[0], V0[0], A0[0], states[0])
+    fused = getattr(cache, "fused", None)
+    if callable(getattr(fused, "march_batch", None)) and fused.enabled():
+        tic = time.perf_counter()
+        try:
+            Q, V, Acc, state, iterations = fused.march_batch(Q0, V0, A0, np.array(states),
+                                                             np.array(forcing) if present else None, n_steps)
+        except ConvergenceError as err:
+            raise ConvergenceError(f"run {err.run}, step {err.step} (t = {times[err.step]:.6g}): {err}") from None
+        except NonFiniteState as err:
+            raise FemromRuntimeError(f"run {err.run}: the state became non-finite at t = {times[err.step]:.6g}"
+                                     ) from None
+        return {"q": Q, "v": V, "a": Acc, "state": state, "newton_iterations": iterations,
+                "stepping_seconds": time.perf_counter() - tic, "path": "compiled batch"}
+    # the reference: each run by the scheme's step (a linear model by march's step map)
+    Q, V, Acc = (np.empty((B, n, times.size)) for _ in range(3))
+    iterations = np.zeros((B, n_steps), dtype=np.int64)
+    finals = []
+    tic = time.perf_counter()
+    for b in range(B):
+        if cache is None:
+            out = march(system, scheme, times, Q0[b], V0[b], inputs=runs[b], solver=solver)
+            Q[b], V[b], Acc[b] = out["q"], out["v"], out["a"]
+            finals.append(None)
+            continue
+        if b:
+            cache = scheme.init(system, h, factory, lambda: mass_solver, times[0], Q0[b], V0[b], A0[b], states[b])
+        q, v, a, state = Q0[b], V0[b], A0[b], states[b]
+        Q[b, :, 0], V[b, :, 0], Acc[b, :, 0] = q, v, a
+        for k in range(n_steps):
+            try:
+                q, v, a1, state, its = scheme.step(system, cache, times[k], q, v, a, state,
+                                                   forcing[b][:, k] if present else None,
+                                                   (lambda k=k, b=b: grids[b][:, k + 1]) if present else None)
+            except ConvergenceError as err:
+                raise ConvergenceError(f"run {b}, step {k + 1} (t = {times[k + 1]:.6g}): {err}") from None
+            if not np.all(np.isfinite(q)):
+                raise FemromRuntimeError(f"run {b}: the state became non-finite at t = {times[k + 1]:.6g}")
+            a = a1 if a1 is not None else np.full(n, np.nan)
+            Q[b, :, k + 1], V[b, :, k + 1], Acc[b, :, k + 1] = q, v, a
+            iterations[b, k] = its
+        finals.append(state)
+    if all(isinstance(x, np.ndarray) for x in finals):
+        finals = np.stack(finals)
+    return {"q": Q, "v": V, "a": Acc, "state": finals, "newton_iterations": iterations,
             "stepping_seconds": time.perf_counter() - tic, "path": "steps"}
 
 

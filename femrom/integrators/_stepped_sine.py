@@ -44,6 +44,8 @@ from typing import Callable, Sequence
 import numpy as np
 
 from femrom._errors import FemromValueError
+from femrom.integrators._march import march_batch
+from femrom.integrators._newton import ConvergenceError
 from femrom.integrators._steady_state import SteadyStateCriterion, first_harmonic
 
 #: Key of the amplitude in :meth:`FrequencyResponse.rows`, by quantity (SI units assumed).
@@ -340,4 +342,99 @@ class SteppedSine:
                 periods=np.asarray(periods, dtype=int), converged=np.asarray(converged, dtype=bool),
                 remaining=np.asarray(remaining, dtype=float)))
         return SteppedSineResult(levels=tuple(levels), steps_per_period=N, prewarp=bool(self.prewarp),
+                                 criterion=criterion, direction=self.direction)
+
+    def run_batched(self, plant, force_amplitudes, *, progress: Callable[[str], None] | None = None
+                    ) -> SteppedSineResult:
+        """:meth:`run` with all force levels stepped together: the same result, levels as a batch.
+
+        Every level marches on its own branch exactly as in :meth:`run` (from the plant's rest, a
+        period at a time, each frequency until that level is steady or reaches ``max_periods``, the
+        next frequency from where it stopped), but each period of all the levels still running at a
+        frequency is one :func:`~femrom.integrators.march_batch` call: on a reduced model with a
+        compiled joint, one compiled call for all their steps. A level that is steady waits at the
+        end of its period while the others go on. Warnings and progress lines come frequency by
+        frequency (all levels), not level by level; the plant's own state is left as it was.
+
+        Parameters
+        ----------
+        plant : Shaker
+            (its ``system``, ``scheme``, ``quantity``, ``rest`` and ``solver``).
+        force_amplitudes, progress
+            As for :meth:`run`.
+        """
+        amplitudes = _force_amplitudes(force_amplitudes)
+        scheme = plant.scheme
+        if self.prewarp and not hasattr(scheme, "continuous_frequency"):
+            raise FemromValueError("prewarp=True needs a plant whose scheme has a frequency map (plant.scheme); "
+                                   "pass prewarp=False")
+        N, criterion = int(self.steps_per_period), self.steady_state
+        driven = (prewarped_frequency(self.frequencies_hz, N, scheme) if self.prewarp
+                  else np.asarray(self.frequencies_hz))
+        system, rest = plant.system, plant.rest
+        n, L = system.n_dofs, len(amplitudes)
+        E = system.output_matrix
+        field_ = "a" if plant.quantity == "acceleration" else "q"
+        q = np.zeros((L, n)) if rest is None else np.tile(rest.q, (L, 1))
+        v = np.zeros((L, n)) if rest is None else np.tile(rest.v, (L, 1))
+        a = None if rest is None or rest.a is None else np.tile(rest.a, (L, 1))
+        if system.nonlinear is None:
+            states = [None] * L
+        else:
+            start = system.nonlinear.initial_state() if rest is None or rest.state is None else rest.state
+            states = [np.array(start) if isinstance(start, np.ndarray) else start for _ in range(L)]
+        F = np.asarray(amplitudes)
+        results = [{"columns": [], "periods": [], "converged": [], "remaining": []} for _ in range(L)]
+        for f, f_drive in zip(self.frequencies_hz, driven):
+            dt = 1.0 / (float(f_drive) * N)
+            sines = np.sin(2.0 * np.pi * np.arange(1, N + 1) / N)
+            monitors = [criterion.monitor() for _ in range(L)]
+            active = list(range(L))
+            while active:
+                U = np.zeros((len(active), 1, N + 1))
+                for j, i in enumerate(active):
+                    U[j, 0, 1:] = float(F[i]) * sines
+                batch_states = (np.array([states[i] for i in active]) if isinstance(states[0], np.ndarray)
+                                else [states[i] for i in active])
+                try:                  # the grid from 0 so that its step is dt itself, as the shaker's
+                    out = march_batch(system, scheme, dt * np.arange(N + 1), q[active], v[active], inputs=U,
+                                      state0=batch_states, a0=None if a is None else a[active], solver=plant.solver)
+                except ConvergenceError as err:
+                    raise ConvergenceError(f"stepped sine at f = {f:g} Hz, levels {F[active].tolist()} "
+                                           f"(run = index among them; t from the period's start): {err}") from None
+                if a is None:
+                    a = np.empty((L, n))
+                still = []
+                for j, i in enumerate(active):
+                    q[i], v[i], a[i] = out["q"][j, :, -1], out["v"][j, :, -1], out["a"][j, :, -1]
+                    if system.nonlinear is not None:
+                        states[i] = out["state"][j]
+                    samples = np.asarray(E @ out[field_][j, :, 1:])
+                    monitor = monitors[i]
+                    if not monitor.update(first_harmonic(samples)) and monitor.periods < criterion.max_periods:
+                        still.append(i)
+                active = still
+            for i, monitor in enumerate(monitors):
+                record = results[i]
+                record["columns"].append(monitor.phasors)
+                record["periods"].append(monitor.periods)
+                record["converged"].append(monitor.converged)
+                record["remaining"].append(monitor.remaining)
+                if not monitor.converged:
+                    warnings.warn(f"stepped sine F = {F[i]:g}, f = {f:g} Hz: not steady after "
+                                  f"{monitor.periods} periods (estimated transient left "
+                                  f"{monitor.remaining:.2e} > tolerance {criterion.tolerance:g})",
+                                  SteadyStateWarning, stacklevel=2)
+                if progress is not None:
+                    amplitude = float(np.max(np.abs(monitor.phasors)))
+                    status = "steady" if monitor.converged else "NOT STEADY"
+                    progress(f"F = {F[i]:g} N  f = {f:.4f} Hz  periods = {monitor.periods:4d}  {status}  "
+                             f"max |Y| = {amplitude:.4g}")
+        levels = tuple(FrequencyResponse(
+            force_n=float(F[i]), frequencies_hz=np.asarray(self.frequencies_hz),
+            phasors=np.column_stack(record["columns"]), output_names=tuple(plant.output_names),
+            quantity=plant.quantity, periods=np.asarray(record["periods"], dtype=int),
+            converged=np.asarray(record["converged"], dtype=bool), remaining=np.asarray(record["remaining"], dtype=float))
+            for i, record in enumerate(results))
+        return SteppedSineResult(levels=levels, steps_per_period=N, prewarp=bool(self.prewarp),
                                  criterion=criterion, direction=self.direction)

@@ -25,12 +25,16 @@ from femrom.study.experiments.stepped_sine import peak_rows
 
 
 def stepped_sine_response(system, rest_state, input: int, frequencies, levels, *, steps_per_period: int,
-                          tolerance: float, linear_key: str = "linear_amplitude", progress=None):
+                          tolerance: float, linear_key: str = "linear_amplitude", progress=None,
+                          batched: bool = False):
     """``(result, rows)``: the stepped sine of ``system`` driven through input column ``input`` at the force
     ``levels`` [N] over ``frequencies`` [Hz], from rest in the committed force state ``rest_state``
     (:class:`~femrom.integrators.Shaker`, :class:`~femrom.integrators.SteppedSine` with
     ``steps_per_period`` steps per period and :class:`~femrom.integrators.SteadyStateCriterion` at
     ``tolerance``).
+
+    ``batched``: step the levels together (:meth:`~femrom.integrators.SteppedSine.run_batched`, the same
+    result; one compiled call per period for all levels on a reduced model with a compiled joint).
 
     ``rows``: ``result.rows()`` with, in every point of every output, ``linear_key``: ``F |H(f)|`` of the
     model linearised at rest (:func:`femrom.post.linear_accelerance`), in the outputs' acceleration units."""
@@ -38,7 +42,7 @@ def stepped_sine_response(system, rest_state, input: int, frequencies, levels, *
     plant = Shaker(system, force, rest=StepResult.at_rest(system.n_dofs, state=rest_state))
     sweep = SteppedSine(np.asarray(frequencies), steps_per_period=steps_per_period,
                         steady_state=SteadyStateCriterion(tolerance=tolerance))
-    result = sweep.run(plant, list(levels), progress=progress)
+    result = (sweep.run_batched if batched else sweep.run)(plant, list(levels), progress=progress)
     per_newton = linear_accelerance(system, rest_state, force, frequencies)
     rows = result.rows()
     for level in rows:
