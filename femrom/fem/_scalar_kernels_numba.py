@@ -139,12 +139,13 @@ def scalar_vgh(x, parts, hessian, grad, hess):
         ds = np.empty(total)
         dds = np.empty(total)
         J = np.empty((total, r))
+        row = np.empty(r)
         for layer in range(n_layers):
             o, w = b_off[layer], widths[layer]
             for i in range(w):
                 z = bias[o + i]
                 for k in range(r):
-                    J[o + i, k] = 0.0
+                    row[k] = 0.0
                 if has_w[layer]:
                     p, wp = b_off[layer - 1], widths[layer - 1]
                     base = w_off[layer] + i * wp
@@ -153,12 +154,14 @@ def scalar_vgh(x, parts, hessian, grad, hess):
                         z += wij * h[p + j]
                         c = wij * ds[p + j]
                         for k in range(r):
-                            J[o + i, k] += c * J[p + j, k]
+                            row[k] += c * J[p + j, k]
                 if has_u[layer]:
                     base = u_off[layer] + i * r
                     for k in range(r):
                         z += U[base + k] * x[k]
-                        J[o + i, k] += U[base + k]
+                        row[k] += U[base + k]
+                for k in range(r):
+                    J[o + i, k] = row[k]
                 if activation == 0:
                     t = math.tanh(z)
                     d = 1.0 - t * t
