@@ -77,8 +77,7 @@ def per_step(rom, q0, v0, steps: int, compiled: bool | None):
 
 
 FIRST_CALL = """
-import sys, time
-sys.path.insert(0, {root!r})
+import time
 from benchmarks.spml_rom_step import spml_rom
 import numpy as np
 rom, _, q0, v0, _ = spml_rom({r})
@@ -94,7 +93,7 @@ def first_call(r: int) -> dict:
     with tempfile.TemporaryDirectory() as cache:
         env = dict(os.environ, NUMBA_CACHE_DIR=cache, PYTHONPATH=str(ROOT))
         for name in ("cold", "warm"):
-            run = subprocess.run([sys.executable, "-c", FIRST_CALL.format(root=str(ROOT), r=r)], env=env,
+            run = subprocess.run([sys.executable, "-c", FIRST_CALL.format(r=r)], env=env, cwd=ROOT,
                                  capture_output=True, text=True, check=True)
             out[name] = float(run.stdout.strip().splitlines()[-1])
     return out

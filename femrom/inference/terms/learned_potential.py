@@ -73,7 +73,8 @@ class LearnedPotential(ReducedTerm):
     ``q^ = 0`` stays an equilibrium. The force is an exact gradient
     (``conservative``): ``v^T M^ v / 2 + q^T K^ q / 2 + U^(q)`` is the energy a
     discrete-gradient scheme keeps (:mod:`femrom.rom.schemes.discrete_gradient`).
-    Fitted by :class:`~femrom.inference.SpML`; evaluated in numpy (no torch).
+    Fitted by :class:`~femrom.inference.SpML`; evaluated without torch: compiled (numba,
+    :meth:`compiled_scalar`) with the compiled laws on, else in numpy (the reference).
 
     Parameters
     ----------
