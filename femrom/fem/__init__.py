@@ -28,7 +28,8 @@ from femrom.fem._interface_law import (
     slider_return,
     register_interface_law,
 )
-from femrom.fem._law_kernels import CompiledJoint, CompiledSliders, compiled_kernels, compiled_laws, use_compiled_laws
+from femrom.fem._law_kernels import (CompiledJoint, CompiledScalar, CompiledSliders, compiled_kernels, compiled_laws,
+                                    compiled_scalar_kernels, use_compiled_laws)
 from femrom.fem._joint import JointForce, interface_frames, relative_displacement_map
 from femrom.fem._loads import point_load, surface_pressure, surface_traction
 from femrom.fem._outputs import average_rows, nearest_node_rows, probe_rows
@@ -56,7 +57,7 @@ __all__ = [
     "ParallelSliderLaw", "QuarticPotential", "SolidSpace", "SpaceError", "TransformedForce", "dense_projection", "transform_force", "force_from_parameters",
     "interface_frames", "interface_law", "interface_law_from_parameters", "radial_return", "slider_return",
     "register_force", "register_interface_law", "relative_displacement_map", "selection_map", "sum_of_forces",
-    "average_rows", "axial_stiffness", "CompiledJoint", "CompiledSliders", "compiled_kernels", "compiled_laws", "use_compiled_laws", "bending_stiffness", "dirichlet_dofs", "elasticity_stiffness",
+    "average_rows", "axial_stiffness", "CompiledJoint", "CompiledScalar", "CompiledSliders", "compiled_kernels", "compiled_laws", "compiled_scalar_kernels", "use_compiled_laws", "bending_stiffness", "dirichlet_dofs", "elasticity_stiffness",
     "hrz_lumped", "lame_parameters", "line_basis", "line_mass", "nearest_node_rows", "point_load", "probe_rows",
     "rayleigh_damping", "rayleigh_from_damping_ratios", "rigid_body_modes", "surface_pressure",
     "surface_traction", "vector_mass",

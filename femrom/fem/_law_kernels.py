@@ -26,6 +26,7 @@ import numpy as np
 _ENVIRONMENT = "FEMROM_COMPILED_LAWS"
 _enabled = os.environ.get(_ENVIRONMENT, "1").strip().lower() not in ("0", "false", "no", "off", "numpy")
 _kernels = None        # the compiled module after the first successful import, False when numba is missing
+_scalar_kernels = None  # the same for :mod:`femrom.fem._scalar_kernels_numba`
 
 
 def use_compiled_laws(enabled: bool) -> bool:
@@ -56,6 +57,49 @@ def compiled_kernels():
             module = False
         _kernels = module
     return _kernels or None
+
+
+def compiled_scalar_kernels():
+    """The kernels of learned scalar functions and of the fused discrete-gradient step
+    (:mod:`femrom.fem._scalar_kernels_numba`), or ``None`` when the compiled laws are off (the same switch,
+    :func:`use_compiled_laws`, ``FEMROM_COMPILED_LAWS``) or numba is missing."""
+    global _scalar_kernels
+    if not _enabled:
+        return None
+    if _scalar_kernels is None:
+        try:
+            from femrom.fem import _scalar_kernels_numba as module
+        except ImportError:
+            module = False
+        _scalar_kernels = module
+    return _scalar_kernels or None
+
+
+@dataclass(frozen=True, eq=False)
+class CompiledScalar:
+    r"""A learned scalar function ``phi`` of ``q^`` (a potential) or of ``q^'`` (a dissipation function), as
+    compiled kernels take it.
+
+    ``phi(x) = T3[x,x,x] + T4[x,x,x,x] + sum_k |a_k . x|^3 / 3 + sum_k (b_k . x)^4 / 4 + N(x) - N(0)
+    - grad N(0) . x``, each part optional. What :meth:`femrom.inference.LearnedPotential.compiled_scalar`
+    and :meth:`femrom.inference.LearnedDissipation.compiled_scalar` return; ``parts`` is the tuple the
+    kernels ``scalar_vgh`` and ``discrete_gradient_step`` of :func:`compiled_scalar_kernels` read:
+    ``(T3 (r,r,r), T4 (r,r,r,r), A (n3, r), B (n4, r), widths, has_weight, has_input, bias_offsets,
+    weight_offsets, input_offsets, biases, weights, input_weights, output, activation, N(0), grad N(0))``
+    (empty arrays for an absent part; the layers' matrices flattened row by row; activation 0 tanh,
+    1 softplus). The numpy functions (:mod:`femrom.inference._networks`) are the reference.
+
+    Attributes
+    ----------
+    r : int
+    argument : {"q", "v"}
+        ``"q"``: a conservative potential ``U^(q^)``; ``"v"``: a dissipation function ``F^(q^')``.
+    parts : tuple
+    """
+
+    r: int
+    argument: str
+    parts: tuple
 
 
 @dataclass(frozen=True, eq=False)

@@ -333,3 +333,42 @@ class ScalarSum:
             v, g = part.value_gradient(X)
             values, grads = values + v, grads + g
         return values, grads
+
+
+def packed_parts(function: ScalarSum) -> tuple:
+    """``function``'s parts as the arrays :class:`femrom.fem.CompiledScalar` holds (empty for an absent part)."""
+    r = function.r
+    T3, T4 = np.zeros((0, 0, 0)), np.zeros((0, 0, 0, 0))
+    A, B = np.zeros((0, r)), np.zeros((0, r))
+    network = None
+    for part in function.parts:
+        if isinstance(part, SymmetricPolynomial) and T3.size == 0:
+            T3, T4 = part.T3, part.T4
+        elif isinstance(part, ConvexPowers) and A.size == 0:
+            A, B = part.cubic, part.quartic
+        elif isinstance(part, ScalarNetwork) and network is None:
+            network = part
+        else:
+            raise FemromValueError(f"no compiled form for a sum with {type(part).__name__} twice or unknown")
+    ints = np.zeros(0, dtype=np.int64)
+    widths, has_w, has_u, b_off, w_off, u_off = ints, ints, ints, np.zeros(1, dtype=np.int64), ints, ints
+    bias, W, U, output, activation, value0, grad0 = (np.zeros(0),) * 4 + (0, 0.0, np.zeros(r))
+    if network is not None:
+        layers = network.layers
+        widths = np.array([layer.bias.size for layer in layers], dtype=np.int64)
+        has_w = np.array([layer.weight is not None for layer in layers], dtype=np.int64)
+        has_u = np.array([layer.input_weight is not None for layer in layers], dtype=np.int64)
+        b_off = np.concatenate([[0], np.cumsum(widths)]).astype(np.int64)
+        w_sizes = [0 if layer.weight is None else layer.weight.size for layer in layers]
+        u_sizes = [0 if layer.input_weight is None else layer.input_weight.size for layer in layers]
+        w_off = np.concatenate([[0], np.cumsum(w_sizes)[:-1]]).astype(np.int64)
+        u_off = np.concatenate([[0], np.cumsum(u_sizes)[:-1]]).astype(np.int64)
+        flat = lambda name: np.concatenate([np.zeros(0)] + [np.asarray(getattr(layer, name), dtype=float).ravel()
+                                                            for layer in layers if getattr(layer, name) is not None])
+        bias, W, U = flat("bias"), flat("weight"), flat("input_weight")
+        output, activation = network.output, ("tanh", "softplus").index(network.activation)
+        value0, grad0 = float(network.value0), network.gradient0
+    arrays = [np.ascontiguousarray(a, dtype=float) for a in (T3, T4, A, B)]
+    ints = [np.ascontiguousarray(a, dtype=np.int64) for a in (widths, has_w, has_u, b_off, w_off, u_off)]
+    floats = [np.ascontiguousarray(a, dtype=float) for a in (bias, W, U, output)]
+    return (*arrays, *ints, *floats, int(activation), float(value0), np.ascontiguousarray(grad0, dtype=float))

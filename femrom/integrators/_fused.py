@@ -20,6 +20,12 @@ which offers a :class:`~femrom.fem.CompiledSliders`) step the same way
 (:class:`FusedSlidersStep`), and a whole trajectory of them in one call (:meth:`FusedSlidersStep.march`,
 taken by :func:`femrom.integrators.march`).
 
+A model whose nonlinear force is a learned potential of ``q^`` and/or a learned dissipation
+function of ``q^'`` (SpML's :class:`~femrom.inference.LearnedPotential` and
+:class:`~femrom.inference.LearnedDissipation`, which offer a :class:`~femrom.fem.CompiledScalar`)
+steps the discrete-gradient scheme the same way (:class:`FusedDiscreteGradientStep`, the kernel
+``discrete_gradient_step`` of :func:`femrom.fem.compiled_scalar_kernels`).
+
 The numpy path stays the reference: the scheme takes it whenever the force offers no compiled
 joint, and at every step where the compiled laws are switched off
 (``FEMROM_COMPILED_LAWS=0``, :func:`femrom.fem.use_compiled_laws`).
@@ -31,7 +37,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from femrom._errors import FemromRuntimeError, FemromValueError
-from femrom.fem import compiled_kernels, compiled_laws
+from femrom.fem import compiled_kernels, compiled_laws, compiled_scalar_kernels
 from femrom.integrators._newton import ConvergenceError
 
 
@@ -257,3 +263,85 @@ def fused_step(scheme, system, dt: float, effective_matrix, implicit):
     if sliders is not None:
         return FusedSlidersStep(scheme, system, dt, effective_matrix, sliders, force.initial_state)
     return None
+
+
+class FusedDiscreteGradientStep:
+    """One :class:`~femrom.integrators.DiscreteGradient` step of a small model whose nonlinear force is a learned
+    potential (a :class:`~femrom.fem.CompiledScalar` of ``q``) and/or a learned dissipation function (one of
+    ``v``), in one compiled call: the reference's predictor, Newton iterations, update and stagnation tests,
+    iteration count and end-of-step acceleration, equal to round-off.
+
+    Parameters
+    ----------
+    scheme : DiscreteGradient
+    system : SecondOrderSystem
+    dt : float
+    matrix : (r, r) ndarray
+        ``(2/h) M + C + (h/2) K``.
+    potential, dissipation : CompiledScalar or None
+    """
+
+    def __init__(self, scheme, system, dt: float, matrix, potential, dissipation):
+        self._kernels = compiled_scalar_kernels()
+        r = system.n_dofs
+        damping = system.damping
+        self._matrices = (_dense(system.mass), _dense(damping) if damping is not None else np.zeros((r, r)),
+                          damping is not None, _dense(system.stiffness), _dense(matrix))
+        newton = scheme.newton
+        self._newton = newton
+        self._scalars = (float(dt), float(newton.rtol), int(newton.max_iterations), bool(scheme.accelerations))
+        self._empty = np.zeros(r)
+        self.potential, self.dissipation = potential, dissipation
+        self._terms = (potential.parts if potential is not None else dissipation.parts, potential is not None,
+                       dissipation.parts if dissipation is not None else potential.parts, dissipation is not None)
+
+    @staticmethod
+    def enabled() -> bool:
+        """Whether the compiled laws are on now (the fused step follows the same switch)."""
+        return compiled_scalar_kernels() is not None
+
+    def __call__(self, t, q, v, a, state, force, force_end=None):
+        """``(q1, v1, a1, state, newton_iterations)`` of the step from ``(q, v, a)`` at ``t`` (the state of
+        stateless terms passes through)."""
+        h, rtol, max_iterations, accelerations = self._scalars
+        F_end = force_end() if (accelerations and force_end is not None) else None
+        M, C, has_C, K, J = self._matrices
+        empty = self._empty
+        q1, v1, a1, iterations, status = self._kernels.discrete_gradient_step(
+            _frozen(q), _frozen(v), empty if a is None else _frozen(a), a is not None,
+            empty if force is None else _frozen(force), force is not None,
+            empty if F_end is None else _frozen(F_end), F_end is not None,
+            M, C, has_C, K, J, h, rtol, max_iterations, accelerations, *self._terms)
+        if status:
+            where = f" at t = {t + h:.6g}"
+            if status == self._kernels.NOT_FINITE:
+                raise ConvergenceError(f"Newton residual is not finite at iteration {iterations}{where}")
+            if status == self._kernels.SINGULAR:
+                raise ConvergenceError(f"Newton's matrix is singular at iteration {iterations}{where}")
+            raise ConvergenceError(f"Newton did not converge in {self._newton.max_iterations} iterations{where}")
+        return q1, v1, (a1 if accelerations else None), state, iterations
+
+
+def fused_discrete_gradient(scheme, system, dt: float, matrix):
+    """A :class:`FusedDiscreteGradientStep` when ``system`` is small (a dense step matrix) and every summand of
+    its nonlinear force offers a compiled scalar function (``compiled_scalar()``: at most one of ``q``,
+    conservative, and one of ``v``), none stateful, with the compiled laws on; else ``None``."""
+    force = system.nonlinear
+    if force is None or compiled_scalar_kernels() is None or not isinstance(matrix, np.ndarray):
+        return None
+    parts = (force,)
+    for attribute in ("forces", "terms"):               # a sum's summands (as the scheme's ``forces_of``)
+        summands = getattr(force, attribute, None)
+        if isinstance(summands, (tuple, list)):
+            parts = tuple(summands)
+            break
+    found = {}
+    for part in parts:
+        offer = getattr(part, "compiled_scalar", None)
+        compiled = offer() if callable(offer) else None
+        if compiled is None or getattr(part, "stateful", False) or compiled.argument in found:
+            return None
+        if compiled.argument == "q" and not part.conservative:
+            return None
+        found[compiled.argument] = compiled
+    return FusedDiscreteGradientStep(scheme, system, dt, matrix, found.get("q"), found.get("v"))

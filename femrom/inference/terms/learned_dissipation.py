@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from femrom._errors import FemromValueError
+from femrom.fem import CompiledScalar
 from femrom.inference._networks import ConvexPowers, ScalarNetwork, ScalarSum
 from femrom.inference._terms import ReducedTerm, register_term
 from femrom.inference.terms.learned_potential import _PointCache
@@ -56,7 +57,7 @@ class LearnedDissipation(ReducedTerm):
                                  "output weights, or an activation other than softplus)")
         self.powers, self.network = powers, network
         self.function = ScalarSum((powers, network), self._r)
-        self._at = _PointCache(self.function)
+        self._at = _PointCache(self.function, "v")
 
     @property
     def r(self) -> int:
@@ -93,6 +94,11 @@ class LearnedDissipation(ReducedTerm):
 
     def target(self, data) -> np.ndarray:
         return self.forces(data.states, data.velocities)
+
+    def compiled_scalar(self) -> CompiledScalar | None:
+        """``F^`` as compiled kernels take it (:class:`femrom.fem.CompiledScalar`, argument ``"v"``), or ``None``
+        when the compiled laws are off (:meth:`LearnedPotential.compiled_scalar`)."""
+        return self._at.compiled()
 
     # -- storage ------------------------------------------------------------------------
     def save(self, group) -> None:

@@ -5,28 +5,56 @@ from __future__ import annotations
 import numpy as np
 
 from femrom._errors import FemromValueError
-from femrom.inference._networks import ScalarNetwork, ScalarSum, SymmetricPolynomial
+from femrom.fem import CompiledScalar, compiled_scalar_kernels
+from femrom.inference._networks import ScalarNetwork, ScalarSum, SymmetricPolynomial, packed_parts
 from femrom.inference._terms import ReducedTerm, register_term
 
 
 class _PointCache:
     """The last point's ``(value, gradient, hessian)``: a scheme asks for the force and then
-    the tangent at the same point, which is one evaluation."""
+    the tangent at the same point, which is one evaluation. With the compiled laws on
+    (:func:`femrom.fem.use_compiled_laws`) it is the compiled kernel's (``scalar_vgh`` of
+    :func:`femrom.fem.compiled_scalar_kernels`), else the numpy reference's."""
 
-    def __init__(self, function):
-        self.function, self.x, self.result = function, None, None
+    def __init__(self, function, argument: str):
+        self.function, self.argument = function, argument
+        self.x, self.result, self.kernels, self._compiled = None, None, None, None
+
+    def compiled(self) -> CompiledScalar | None:
+        """The function as compiled kernels take it, or ``None`` with the compiled laws off."""
+        if compiled_scalar_kernels() is None:
+            return None
+        if self._compiled is None:
+            self._compiled = CompiledScalar(self.function.r, self.argument, packed_parts(self.function))
+        return self._compiled
+
+    def _hit(self, x, kernels) -> bool:
+        return self.x is not None and kernels is self.kernels and np.array_equal(self.x, x)
 
     def __call__(self, x):
-        if self.x is None or not np.array_equal(self.x, x):
-            self.result = self.function.value_gradient_hessian(x)
-            self.x = np.array(x, dtype=float)
+        kernels = compiled_scalar_kernels()
+        if not self._hit(x, kernels):
+            if kernels is None:
+                self.result = self.function.value_gradient_hessian(x)
+            else:
+                r = self.function.r
+                grad, hess = np.empty(r), np.empty((r, r))
+                value = kernels.scalar_vgh(np.ascontiguousarray(x, dtype=float), self.compiled().parts, True,
+                                           grad, hess)
+                self.result = (value, grad, hess)
+            self.x, self.kernels = np.array(x, dtype=float), kernels
         return self.result
 
     def value(self, x) -> float:
         """``phi(x)`` (from the cache at its point, else the value alone)."""
-        if self.x is not None and np.array_equal(self.x, x):
+        kernels = compiled_scalar_kernels()
+        if self._hit(x, kernels):
             return self.result[0]
-        return self.function.value(x)
+        if kernels is None:
+            return self.function.value(x)
+        grad = np.empty(self.function.r)
+        return kernels.scalar_vgh(np.ascontiguousarray(x, dtype=float), self.compiled().parts, False, grad,
+                                  np.empty((0, 0)))
 
 
 @register_term
@@ -45,7 +73,8 @@ class LearnedPotential(ReducedTerm):
     ``q^ = 0`` stays an equilibrium. The force is an exact gradient
     (``conservative``): ``v^T M^ v / 2 + q^T K^ q / 2 + U^(q)`` is the energy a
     discrete-gradient scheme keeps (:mod:`femrom.rom.schemes.discrete_gradient`).
-    Fitted by :class:`~femrom.inference.SpML`; evaluated in numpy (no torch).
+    Fitted by :class:`~femrom.inference.SpML`; evaluated without torch: compiled (numba,
+    :meth:`compiled_scalar`) with the compiled laws on, else in numpy (the reference).
 
     Parameters
     ----------
@@ -66,7 +95,7 @@ class LearnedPotential(ReducedTerm):
             if part is not None and part.r != self._r:
                 raise FemromValueError(f"learned potential: a part has r = {part.r}, expected {self._r}")
         self.function = ScalarSum((polynomial, network), self._r)
-        self._at = _PointCache(self.function)
+        self._at = _PointCache(self.function, "q")
 
     @property
     def r(self) -> int:
@@ -97,6 +126,12 @@ class LearnedPotential(ReducedTerm):
 
     def target(self, data) -> np.ndarray:
         return self.forces(data.states)
+
+    def compiled_scalar(self) -> CompiledScalar | None:
+        """``U^`` as compiled kernels take it (:class:`femrom.fem.CompiledScalar`, argument ``"q"``), or ``None``
+        when the compiled laws are off: a discrete-gradient step of a model whose nonlinear terms all offer
+        one runs in one compiled call (:mod:`femrom.integrators`)."""
+        return self._at.compiled()
 
     # -- storage ------------------------------------------------------------------------
     def save(self, group) -> None:

@@ -44,6 +44,7 @@ from typing import Any
 import numpy as np
 import scipy.sparse as sp
 
+from femrom.integrators._fused import fused_discrete_gradient
 from femrom.integrators._newton import newton_loop
 from femrom.integrators._scheme import register_scheme
 from femrom.integrators.schemes.implicit_midpoint import ImplicitMidpoint, end_acceleration
@@ -123,6 +124,7 @@ class DiscreteGradientCache:
     mass_solver: Any
     linear: Any = None
     details: dict = field(default_factory=dict)
+    fused: Any = None
 
 
 @register_scheme
@@ -168,9 +170,15 @@ class DiscreteGradient(ImplicitMidpoint):
                                       mass_solver=mass_solver() if self.accelerations else None)
         if system.nonlinear is None:
             cache.linear = make_solver(J, spd=True)
+        else:
+            cache.fused = fused_discrete_gradient(self, system, h, J)
+            if cache.fused is not None:
+                cache.details["compiled_step"] = True
         return cache
 
     def step(self, system, cache: DiscreteGradientCache, t, q, v, a, state, force, force_end=None):
+        if cache.fused is not None and cache.fused.enabled():
+            return cache.fused(t, q, v, a, state, force, force_end)
         M, C, K, h = system.mass, system.damping, system.stiffness, cache.dt
         if system.nonlinear is None:
             # the midpoint rule: ((2/h) M + C + (h/2) K) v_m = (2/h) M v - K q + F
