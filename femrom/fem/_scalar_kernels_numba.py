@@ -75,10 +75,32 @@ def _lu_solve(A, b):
 
 
 @njit(cache=True)
+def _workspace(parts, r):
+    """The arrays :func:`_vgh` works in (allocated once a step, not once an evaluation): a flat array (the
+    network's values, sigma', sigma'', Hessian, back-propagated ``dN/dh`` and ``dN/dz``, one layer's
+    ``W diag(sigma')``), the Jacobian ``J = dz/dx`` (units, r) and ``diag(delta sigma'') J``."""
+    widths, b_off = parts[4], parts[7]
+    n_layers = widths.size
+    total = b_off[n_layers] if n_layers > 0 else 0
+    widest = 0
+    for layer in range(n_layers):
+        widest = max(widest, widths[layer])
+    return np.empty(3 * total + r * r + 2 * widest + widest * widest), np.empty((total, r)), np.empty((total, r))
+
+
+@njit(cache=True)
 def scalar_vgh(x, parts, hessian, grad, hess):
     """``phi(x)``; ``grad`` (r,) and, with ``hessian``, ``hess`` (r, r) overwritten with its derivatives."""
+    return _vgh(x, parts, 2 if hessian else 1, grad, hess, _workspace(parts, x.size))
+
+
+@njit(cache=True)
+def _vgh(x, parts, mode, grad, hess, work):
+    """:func:`scalar_vgh` with a workspace (:func:`_workspace`); ``mode`` 0: the value only (``grad`` is then
+    scratch: the network's part of it is not computed), 1: and the gradient, 2: and the Hessian."""
     T3, T4, A, B, widths, has_w, has_u, b_off, w_off, u_off, bias, W, U, output, activation, value0, grad0 = parts
     r = x.size
+    hessian = mode == 2
     value = 0.0
     for i in range(r):
         grad[i] = 0.0
@@ -131,67 +153,83 @@ def scalar_vgh(x, parts, hessian, grad, hess):
             for i in range(r):
                 for j in range(r):
                     hess[i, j] += B[k, i] * c * B[k, j]
-    # -- the network: forward (values, sigma', sigma'', J = dz/dx), backward (delta = dN/dh)
+    # -- the network: forward (values, sigma', sigma'' and, for the Hessian, the rows of J = dz/dx, layer by
+    # layer J_l = W_l diag(sigma'_{l-1}) J_{l-1} + U_l), backward (delta = dN/dh; the Hessian J^T diag(delta
+    # sigma'') J); all in the workspace
     n_layers = widths.size
     if n_layers > 0:
+        flat, J, Jc = work
         total = b_off[n_layers]
-        h = np.empty(total)
-        ds = np.empty(total)
-        dds = np.empty(total)
-        J = np.empty((total, r))
-        row = np.empty(r)
+        widest = 0
+        for layer in range(n_layers):
+            widest = max(widest, widths[layer])
+        hv = flat[0:total]
+        ds = flat[total:2 * total]
+        dds = flat[2 * total:3 * total]
+        e = 3 * total
+        net_hess = flat[e:e + r * r].reshape((r, r))
+        delta = flat[e + r * r:e + r * r + widest]
+        dz = flat[e + r * r + widest:e + r * r + 2 * widest]
+        e += r * r + 2 * widest
         for layer in range(n_layers):
             o, w = b_off[layer], widths[layer]
+            if hessian:
+                if has_w[layer]:
+                    p, wp = b_off[layer - 1], widths[layer - 1]
+                    scaled = flat[e:e + w * wp].reshape((w, wp))
+                    for i in range(w):
+                        base = w_off[layer] + i * wp
+                        for j in range(wp):
+                            scaled[i, j] = W[base + j] * ds[p + j]
+                    np.dot(scaled, J[p:p + wp], J[o:o + w])
+                else:
+                    for i in range(w):
+                        for k in range(r):
+                            J[o + i, k] = 0.0
+                if has_u[layer]:
+                    for i in range(w):
+                        base = u_off[layer] + i * r
+                        for k in range(r):
+                            J[o + i, k] += U[base + k]
             for i in range(w):
                 z = bias[o + i]
-                for k in range(r):
-                    row[k] = 0.0
                 if has_w[layer]:
                     p, wp = b_off[layer - 1], widths[layer - 1]
                     base = w_off[layer] + i * wp
                     for j in range(wp):
-                        wij = W[base + j]
-                        z += wij * h[p + j]
-                        c = wij * ds[p + j]
-                        for k in range(r):
-                            row[k] += c * J[p + j, k]
+                        z += W[base + j] * hv[p + j]
                 if has_u[layer]:
                     base = u_off[layer] + i * r
                     for k in range(r):
                         z += U[base + k] * x[k]
-                        row[k] += U[base + k]
-                for k in range(r):
-                    J[o + i, k] = row[k]
                 if activation == 0:
                     t = math.tanh(z)
                     d = 1.0 - t * t
-                    h[o + i], ds[o + i], dds[o + i] = t, d, -2.0 * t * d
+                    hv[o + i], ds[o + i], dds[o + i] = t, d, -2.0 * t * d
                 else:
                     s = 0.5 * (1.0 + math.tanh(0.5 * z))
-                    h[o + i] = max(z, 0.0) + math.log1p(math.exp(-abs(z)))
+                    hv[o + i] = max(z, 0.0) + math.log1p(math.exp(-abs(z)))
                     ds[o + i], dds[o + i] = s, s * (1.0 - s)
         last = b_off[n_layers - 1]
         net = 0.0
         for i in range(widths[n_layers - 1]):
-            net += output[i] * h[last + i]
+            net += output[i] * hv[last + i]
         value += net - value0
         for k in range(r):
             value -= grad0[k] * x[k]
             grad[k] -= grad0[k]
-        upper = np.zeros((r, r)) if hessian else np.zeros((0, 0))   # the network's Hessian, upper half
-        delta = output.copy()
+        if mode == 0:
+            return value
+        for i in range(widths[n_layers - 1]):
+            delta[i] = output[i]
         for layer in range(n_layers - 1, -1, -1):
             o, w = b_off[layer], widths[layer]
-            dz = np.empty(w)
             for i in range(w):
                 dz[i] = delta[i] * ds[o + i]
                 if hessian:
                     c = delta[i] * dds[o + i]
-                    if c != 0.0:
-                        for a in range(r):
-                            ca = c * J[o + i, a]
-                            for b in range(a, r):
-                                upper[a, b] += ca * J[o + i, b]
+                    for k in range(r):
+                        Jc[o + i, k] = c * J[o + i, k]
             if has_u[layer]:
                 for i in range(w):
                     base = u_off[layer] + i * r
@@ -199,15 +237,17 @@ def scalar_vgh(x, parts, hessian, grad, hess):
                         grad[k] += U[base + k] * dz[i]
             if has_w[layer]:
                 wp = widths[layer - 1]
-                delta = np.zeros(wp)
+                for j in range(wp):
+                    delta[j] = 0.0
                 for i in range(w):
                     base = w_off[layer] + i * wp
                     for j in range(wp):
                         delta[j] += W[base + j] * dz[i]
         if hessian:
+            np.dot(J.T, Jc, net_hess)
             for a in range(r):
                 for b in range(r):
-                    hess[a, b] += upper[a, b] if a <= b else upper[b, a]
+                    hess[a, b] += net_hess[a, b] if a <= b else net_hess[b, a]
     return value
 
 
@@ -223,7 +263,9 @@ def discrete_gradient_step(q, v, a, has_a, force, has_force, force_end, has_forc
     hess = np.empty((r, r))
     dgrad = np.zeros(r)
     jac = np.zeros((r, r))
-    u0 = scalar_vgh(q, potential, False, grad, hess) if has_potential else 0.0
+    work_u = _workspace(potential, r) if has_potential else (np.empty(0), np.empty((0, r)), np.empty((0, r)))
+    work_f = _workspace(dissipation, r) if has_dissipation else (np.empty(0), np.empty((0, r)), np.empty((0, r)))
+    u0 = _vgh(q, potential, 0, grad, hess, work_u) if has_potential else 0.0
     x = np.empty(r)
     for i in range(r):
         x[i] = v[i] + (0.5 * h * a[i] if has_a else 0.0)
@@ -270,14 +312,14 @@ def discrete_gradient_step(q, v, a, has_a, force, has_force, force_end, has_forc
                 s = _NODE0 if node == 0 else _NODE1
                 for i in range(r):
                     point[i] = q[i] + s * delta[i]
-                scalar_vgh(point, potential, True, grad, hess)
+                _vgh(point, potential, 2, grad, hess, work_u)
                 for i in range(r):
                     dgrad[i] += 0.5 * grad[i]
                     for j in range(r):
                         jac[i, j] += (0.5 * s) * hess[i, j]
             dd = _dot(delta, delta)
             if dd > SMALL_STEP * (_dot(q1, q1) + _dot(q, q) + 1.0):
-                u1 = scalar_vgh(q1, potential, False, grad, hess)
+                u1 = _vgh(q1, potential, 0, grad, hess, work_u)
                 c = (u1 - u0 - _dot(dgrad, delta)) / dd
                 for i in range(r):
                     dgrad[i] += c * delta[i]
@@ -286,7 +328,7 @@ def discrete_gradient_step(q, v, a, has_a, force, has_force, force_end, has_forc
                 for j in range(r):
                     Jt[i, j] += h * jac[i, j]
         if has_dissipation:
-            scalar_vgh(x, dissipation, True, grad, hess)
+            _vgh(x, dissipation, 2, grad, hess, work_f)
             for i in range(r):
                 R[i] += grad[i]
                 for j in range(r):
@@ -327,11 +369,11 @@ def discrete_gradient_step(q, v, a, has_a, force, has_force, force_end, has_forc
                     total += damping[i, j] * v1[j]
                 rhs[i] -= total
         if has_potential:
-            scalar_vgh(q1, potential, False, grad, hess)
+            _vgh(q1, potential, 1, grad, hess, work_u)
             for i in range(r):
                 rhs[i] -= grad[i]
         if has_dissipation:
-            scalar_vgh(v1, dissipation, False, grad, hess)
+            _vgh(v1, dissipation, 1, grad, hess, work_f)
             for i in range(r):
                 rhs[i] -= grad[i]
         if has_force_end:
