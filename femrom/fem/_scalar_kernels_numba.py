@@ -78,14 +78,17 @@ def _lu_solve(A, b):
 def _workspace(parts, r):
     """The arrays :func:`_vgh` works in (allocated once a step, not once an evaluation): a flat array (the
     network's values, sigma', sigma'', Hessian, back-propagated ``dN/dh`` and ``dN/dz``, one layer's
-    ``W diag(sigma')``), the Jacobian ``J = dz/dx`` (units, r) and ``diag(delta sigma'') J``."""
+    ``W h`` and ``U x``, one layer's ``W diag(sigma')``), the Jacobian ``J = dz/dx`` (units, r) and ``diag(delta sigma'') J`` and the monomials' contractions ``T4[., ., ., x]``, ``T4[., ., x, x]``,
+    ``T3[., ., x]``."""
     widths, b_off = parts[4], parts[7]
     n_layers = widths.size
     total = b_off[n_layers] if n_layers > 0 else 0
     widest = 0
     for layer in range(n_layers):
         widest = max(widest, widths[layer])
-    return np.empty(3 * total + r * r + 2 * widest + widest * widest), np.empty((total, r)), np.empty((total, r))
+    m = r if parts[0].shape[0] > 0 else 0
+    return (np.empty(3 * total + r * r + 4 * widest + widest * widest), np.empty((total, r)), np.empty((total, r)),
+            np.empty(m * m * m + 2 * m * m))
 
 
 @njit(cache=True)
@@ -110,22 +113,20 @@ def _vgh(x, parts, mode, grad, hess, work):
                 hess[i, j] = 0.0
     # -- monomials: B3 = T3[x,.,.], B4 = T4[x,x,.,.] (contracted on the last index first, as numpy)
     if T3.shape[0] > 0:
+        mono = work[3]
+        y4 = mono[0:r * r * r]
+        b4 = mono[r * r * r:r * r * r + r * r]
+        b3 = mono[r * r * r + r * r:r * r * r + 2 * r * r]
+        np.dot(T4.reshape((r * r * r, r)), x, y4)
+        np.dot(y4.reshape((r * r, r)), x, b4)
+        np.dot(T3.reshape((r * r, r)), x, b3)
         for a in range(r):
             c3, c4 = 0.0, 0.0
             for b in range(r):
-                b3 = 0.0
-                for c in range(r):
-                    b3 += T3[a, b, c] * x[c]
-                b4 = 0.0
-                for c in range(r):
-                    y = 0.0
-                    for d in range(r):
-                        y += T4[a, b, c, d] * x[d]
-                    b4 += y * x[c]
-                c3 += b3 * x[b]
-                c4 += b4 * x[b]
+                c3 += b3[a * r + b] * x[b]
+                c4 += b4[a * r + b] * x[b]
                 if hessian:
-                    hess[a, b] += 6.0 * b3 + 12.0 * b4
+                    hess[a, b] += 6.0 * b3[a * r + b] + 12.0 * b4[a * r + b]
             value += (c3 + c4) * x[a]
             grad[a] += 3.0 * c3 + 4.0 * c4
     # -- convex powers
@@ -158,7 +159,7 @@ def _vgh(x, parts, mode, grad, hess, work):
     # sigma'') J); all in the workspace
     n_layers = widths.size
     if n_layers > 0:
-        flat, J, Jc = work
+        flat, J, Jc = work[0], work[1], work[2]
         total = b_off[n_layers]
         widest = 0
         for layer in range(n_layers):
@@ -170,7 +171,9 @@ def _vgh(x, parts, mode, grad, hess, work):
         net_hess = flat[e:e + r * r].reshape((r, r))
         delta = flat[e + r * r:e + r * r + widest]
         dz = flat[e + r * r + widest:e + r * r + 2 * widest]
-        e += r * r + 2 * widest
+        zw = flat[e + r * r + 2 * widest:e + r * r + 3 * widest]
+        zu = flat[e + r * r + 3 * widest:e + r * r + 4 * widest]
+        e += r * r + 4 * widest
         for layer in range(n_layers):
             o, w = b_off[layer], widths[layer]
             if hessian:
@@ -191,17 +194,17 @@ def _vgh(x, parts, mode, grad, hess, work):
                         base = u_off[layer] + i * r
                         for k in range(r):
                             J[o + i, k] += U[base + k]
+            if has_w[layer]:
+                p, wp = b_off[layer - 1], widths[layer - 1]
+                np.dot(W[w_off[layer]:w_off[layer] + w * wp].reshape((w, wp)), hv[p:p + wp], zw[:w])
+            if has_u[layer]:
+                np.dot(U[u_off[layer]:u_off[layer] + w * r].reshape((w, r)), x, zu[:w])
             for i in range(w):
                 z = bias[o + i]
                 if has_w[layer]:
-                    p, wp = b_off[layer - 1], widths[layer - 1]
-                    base = w_off[layer] + i * wp
-                    for j in range(wp):
-                        z += W[base + j] * hv[p + j]
+                    z += zw[i]
                 if has_u[layer]:
-                    base = u_off[layer] + i * r
-                    for k in range(r):
-                        z += U[base + k] * x[k]
+                    z += zu[i]
                 if activation == 0:
                     t = math.tanh(z)
                     d = 1.0 - t * t
@@ -263,8 +266,8 @@ def discrete_gradient_step(q, v, a, has_a, force, has_force, force_end, has_forc
     hess = np.empty((r, r))
     dgrad = np.zeros(r)
     jac = np.zeros((r, r))
-    work_u = _workspace(potential, r) if has_potential else (np.empty(0), np.empty((0, r)), np.empty((0, r)))
-    work_f = _workspace(dissipation, r) if has_dissipation else (np.empty(0), np.empty((0, r)), np.empty((0, r)))
+    work_u = _workspace(potential, r) if has_potential else (np.empty(0), np.empty((0, r)), np.empty((0, r)), np.empty(0))
+    work_f = _workspace(dissipation, r) if has_dissipation else (np.empty(0), np.empty((0, r)), np.empty((0, r)), np.empty(0))
     u0 = _vgh(q, potential, 0, grad, hess, work_u) if has_potential else 0.0
     x = np.empty(r)
     for i in range(r):
