@@ -78,7 +78,7 @@ def _lu_solve(A, b):
 def _workspace(parts, r):
     """The arrays :func:`_vgh` works in (allocated once a step, not once an evaluation): a flat array (the
     network's values, sigma', sigma'', Hessian, back-propagated ``dN/dh`` and ``dN/dz``, one layer's
-    ``W h`` and ``U x``, one layer's ``W diag(sigma')``), the Jacobian ``J = dz/dx`` (units, r) and ``diag(delta sigma'') J`` and the monomials' contractions ``T4[., ., ., x]``, ``T4[., ., x, x]``,
+    ``W h`` and ``U x``), the Jacobian ``J = dz/dx`` (units, r) and ``diag(delta sigma'') J`` and the monomials' contractions ``T4[., ., ., x]``, ``T4[., ., x, x]``,
     ``T3[., ., x]``."""
     widths, b_off = parts[4], parts[7]
     n_layers = widths.size
@@ -87,7 +87,7 @@ def _workspace(parts, r):
     for layer in range(n_layers):
         widest = max(widest, widths[layer])
     m = r if parts[0].shape[0] > 0 else 0
-    return (np.empty(3 * total + r * r + 4 * widest + widest * widest), np.empty((total, r)), np.empty((total, r)),
+    return (np.empty(3 * total + r * r + 4 * widest), np.empty((total, r)), np.empty((total, r)),
             np.empty(m * m * m + 2 * m * m))
 
 
@@ -173,18 +173,15 @@ def _vgh(x, parts, mode, grad, hess, work):
         dz = flat[e + r * r + widest:e + r * r + 2 * widest]
         zw = flat[e + r * r + 2 * widest:e + r * r + 3 * widest]
         zu = flat[e + r * r + 3 * widest:e + r * r + 4 * widest]
-        e += r * r + 4 * widest
         for layer in range(n_layers):
             o, w = b_off[layer], widths[layer]
             if hessian:
                 if has_w[layer]:
                     p, wp = b_off[layer - 1], widths[layer - 1]
-                    scaled = flat[e:e + w * wp].reshape((w, wp))
-                    for i in range(w):
-                        base = w_off[layer] + i * wp
-                        for j in range(wp):
-                            scaled[i, j] = W[base + j] * ds[p + j]
-                    np.dot(scaled, J[p:p + wp], J[o:o + w])
+                    for j in range(p, p + wp):                  # diag(sigma') J_{l-1} (Jc is free until the backward pass)
+                        for k in range(r):
+                            Jc[j, k] = ds[j] * J[j, k]
+                    np.dot(W[w_off[layer]:w_off[layer] + w * wp].reshape((w, wp)), Jc[p:p + wp], J[o:o + w])
                 else:
                     for i in range(w):
                         for k in range(r):
