@@ -3,7 +3,11 @@ r"""numba kernels of learned scalar functions and of a whole discrete-gradient s
 A scalar function ``phi(x) = T3[x,x,x] + T4[x,x,x,x] + sum |a_k . x|^3 / 3 + sum (b_k . x)^4 / 4
 + N(x) - N(0) - grad N(0) . x`` (any part may be absent) is a tuple of arrays, :attr:`CompiledScalar.parts`;
 :func:`scalar_vgh` returns its value and writes its gradient and Hessian, the same formulas as the
-numpy reference (:mod:`femrom.inference._networks`) in loops. :func:`discrete_gradient_step` is one
+numpy reference (:mod:`femrom.inference._networks`): the contractions as BLAS products (equal to round-off),
+the network's Hessian forward over reverse, ``J^T diag(delta sigma'') J`` with the layer Jacobians
+``J_l = W_l diag(sigma'_{l-1}) J_{l-1} + U_l``, formed only when the Hessian is asked for. A step allocates
+its workspaces once (:func:`_workspace`) and evaluates values alone (no gradient, no Jacobian) where only
+values are used. :func:`discrete_gradient_step` is one
 step of :class:`femrom.integrators.DiscreteGradient` for a model whose nonlinear force is a learned
 potential of ``q`` and/or a learned dissipation of ``q'``: the predictor, the Newton iterations on the
 midpoint velocity (the two-point Gauss quadrature of the average vector field, Gonzalez's projection,
