@@ -3,7 +3,11 @@ r"""numba kernels of learned scalar functions and of a whole discrete-gradient s
 A scalar function ``phi(x) = T3[x,x,x] + T4[x,x,x,x] + sum |a_k . x|^3 / 3 + sum (b_k . x)^4 / 4
 + N(x) - N(0) - grad N(0) . x`` (any part may be absent) is a tuple of arrays, :attr:`CompiledScalar.parts`;
 :func:`scalar_vgh` returns its value and writes its gradient and Hessian, the same formulas as the
-numpy reference (:mod:`femrom.inference._networks`) in loops. :func:`discrete_gradient_step` is one
+numpy reference (:mod:`femrom.inference._networks`): the contractions as BLAS products (equal to round-off),
+the network's Hessian forward over reverse, ``J^T diag(delta sigma'') J`` with the layer Jacobians
+``J_l = W_l diag(sigma'_{l-1}) J_{l-1} + U_l``, formed only when the Hessian is asked for. A step allocates
+its workspaces once (:func:`_workspace`) and evaluates values alone (no gradient, no Jacobian) where only
+values are used. :func:`discrete_gradient_step` is one
 step of :class:`femrom.integrators.DiscreteGradient` for a model whose nonlinear force is a learned
 potential of ``q`` and/or a learned dissipation of ``q'``: the predictor, the Newton iterations on the
 midpoint velocity (the two-point Gauss quadrature of the average vector field, Gonzalez's projection,
@@ -75,10 +79,35 @@ def _lu_solve(A, b):
 
 
 @njit(cache=True)
+def _workspace(parts, r):
+    """The arrays :func:`_vgh` works in (allocated once a step, not once an evaluation): a flat array (the
+    network's values, sigma', sigma'', Hessian, back-propagated ``dN/dh`` and ``dN/dz``, one layer's
+    ``W h`` and ``U x``), the Jacobian ``J = dz/dx`` (units, r) and ``diag(delta sigma'') J`` and the monomials' contractions ``T4[., ., ., x]``, ``T4[., ., x, x]``,
+    ``T3[., ., x]``."""
+    widths, b_off = parts[4], parts[7]
+    n_layers = widths.size
+    total = b_off[n_layers] if n_layers > 0 else 0
+    widest = 0
+    for layer in range(n_layers):
+        widest = max(widest, widths[layer])
+    m = r if parts[0].shape[0] > 0 else 0
+    return (np.empty(3 * total + r * r + 4 * widest), np.empty((total, r)), np.empty((total, r)),
+            np.empty(m * m * m + 2 * m * m))
+
+
+@njit(cache=True)
 def scalar_vgh(x, parts, hessian, grad, hess):
     """``phi(x)``; ``grad`` (r,) and, with ``hessian``, ``hess`` (r, r) overwritten with its derivatives."""
+    return _vgh(x, parts, 2 if hessian else 1, grad, hess, _workspace(parts, x.size))
+
+
+@njit(cache=True)
+def _vgh(x, parts, mode, grad, hess, work):
+    """:func:`scalar_vgh` with a workspace (:func:`_workspace`); ``mode`` 0: the value only (``grad`` is then
+    scratch: the network's part of it is not computed), 1: and the gradient, 2: and the Hessian."""
     T3, T4, A, B, widths, has_w, has_u, b_off, w_off, u_off, bias, W, U, output, activation, value0, grad0 = parts
     r = x.size
+    hessian = mode == 2
     value = 0.0
     for i in range(r):
         grad[i] = 0.0
@@ -88,22 +117,20 @@ def scalar_vgh(x, parts, hessian, grad, hess):
                 hess[i, j] = 0.0
     # -- monomials: B3 = T3[x,.,.], B4 = T4[x,x,.,.] (contracted on the last index first, as numpy)
     if T3.shape[0] > 0:
+        mono = work[3]
+        y4 = mono[0:r * r * r]
+        b4 = mono[r * r * r:r * r * r + r * r]
+        b3 = mono[r * r * r + r * r:r * r * r + 2 * r * r]
+        np.dot(T4.reshape((r * r * r, r)), x, y4)
+        np.dot(y4.reshape((r * r, r)), x, b4)
+        np.dot(T3.reshape((r * r, r)), x, b3)
         for a in range(r):
             c3, c4 = 0.0, 0.0
             for b in range(r):
-                b3 = 0.0
-                for c in range(r):
-                    b3 += T3[a, b, c] * x[c]
-                b4 = 0.0
-                for c in range(r):
-                    y = 0.0
-                    for d in range(r):
-                        y += T4[a, b, c, d] * x[d]
-                    b4 += y * x[c]
-                c3 += b3 * x[b]
-                c4 += b4 * x[b]
+                c3 += b3[a * r + b] * x[b]
+                c4 += b4[a * r + b] * x[b]
                 if hessian:
-                    hess[a, b] += 6.0 * b3 + 12.0 * b4
+                    hess[a, b] += 6.0 * b3[a * r + b] + 12.0 * b4[a * r + b]
             value += (c3 + c4) * x[a]
             grad[a] += 3.0 * c3 + 4.0 * c4
     # -- convex powers
@@ -131,67 +158,82 @@ def scalar_vgh(x, parts, hessian, grad, hess):
             for i in range(r):
                 for j in range(r):
                     hess[i, j] += B[k, i] * c * B[k, j]
-    # -- the network: forward (values, sigma', sigma'', J = dz/dx), backward (delta = dN/dh)
+    # -- the network: forward (values, sigma', sigma'' and, for the Hessian, the rows of J = dz/dx, layer by
+    # layer J_l = W_l diag(sigma'_{l-1}) J_{l-1} + U_l), backward (delta = dN/dh; the Hessian J^T diag(delta
+    # sigma'') J); all in the workspace
     n_layers = widths.size
     if n_layers > 0:
+        flat, J, Jc = work[0], work[1], work[2]
         total = b_off[n_layers]
-        h = np.empty(total)
-        ds = np.empty(total)
-        dds = np.empty(total)
-        J = np.empty((total, r))
-        row = np.empty(r)
+        widest = 0
+        for layer in range(n_layers):
+            widest = max(widest, widths[layer])
+        hv = flat[0:total]
+        ds = flat[total:2 * total]
+        dds = flat[2 * total:3 * total]
+        e = 3 * total
+        net_hess = flat[e:e + r * r].reshape((r, r))
+        delta = flat[e + r * r:e + r * r + widest]
+        dz = flat[e + r * r + widest:e + r * r + 2 * widest]
+        zw = flat[e + r * r + 2 * widest:e + r * r + 3 * widest]
+        zu = flat[e + r * r + 3 * widest:e + r * r + 4 * widest]
         for layer in range(n_layers):
             o, w = b_off[layer], widths[layer]
-            for i in range(w):
-                z = bias[o + i]
-                for k in range(r):
-                    row[k] = 0.0
+            if hessian:
                 if has_w[layer]:
                     p, wp = b_off[layer - 1], widths[layer - 1]
-                    base = w_off[layer] + i * wp
-                    for j in range(wp):
-                        wij = W[base + j]
-                        z += wij * h[p + j]
-                        c = wij * ds[p + j]
+                    for j in range(p, p + wp):                  # diag(sigma') J_{l-1} (Jc is free until the backward pass)
                         for k in range(r):
-                            row[k] += c * J[p + j, k]
+                            Jc[j, k] = ds[j] * J[j, k]
+                    np.dot(W[w_off[layer]:w_off[layer] + w * wp].reshape((w, wp)), Jc[p:p + wp], J[o:o + w])
+                else:
+                    for i in range(w):
+                        for k in range(r):
+                            J[o + i, k] = 0.0
                 if has_u[layer]:
-                    base = u_off[layer] + i * r
-                    for k in range(r):
-                        z += U[base + k] * x[k]
-                        row[k] += U[base + k]
-                for k in range(r):
-                    J[o + i, k] = row[k]
+                    for i in range(w):
+                        base = u_off[layer] + i * r
+                        for k in range(r):
+                            J[o + i, k] += U[base + k]
+            if has_w[layer]:
+                p, wp = b_off[layer - 1], widths[layer - 1]
+                np.dot(W[w_off[layer]:w_off[layer] + w * wp].reshape((w, wp)), hv[p:p + wp], zw[:w])
+            if has_u[layer]:
+                np.dot(U[u_off[layer]:u_off[layer] + w * r].reshape((w, r)), x, zu[:w])
+            for i in range(w):
+                z = bias[o + i]
+                if has_w[layer]:
+                    z += zw[i]
+                if has_u[layer]:
+                    z += zu[i]
                 if activation == 0:
                     t = math.tanh(z)
                     d = 1.0 - t * t
-                    h[o + i], ds[o + i], dds[o + i] = t, d, -2.0 * t * d
+                    hv[o + i], ds[o + i], dds[o + i] = t, d, -2.0 * t * d
                 else:
                     s = 0.5 * (1.0 + math.tanh(0.5 * z))
-                    h[o + i] = max(z, 0.0) + math.log1p(math.exp(-abs(z)))
+                    hv[o + i] = max(z, 0.0) + math.log1p(math.exp(-abs(z)))
                     ds[o + i], dds[o + i] = s, s * (1.0 - s)
         last = b_off[n_layers - 1]
         net = 0.0
         for i in range(widths[n_layers - 1]):
-            net += output[i] * h[last + i]
+            net += output[i] * hv[last + i]
         value += net - value0
         for k in range(r):
             value -= grad0[k] * x[k]
             grad[k] -= grad0[k]
-        upper = np.zeros((r, r)) if hessian else np.zeros((0, 0))   # the network's Hessian, upper half
-        delta = output.copy()
+        if mode == 0:
+            return value
+        for i in range(widths[n_layers - 1]):
+            delta[i] = output[i]
         for layer in range(n_layers - 1, -1, -1):
             o, w = b_off[layer], widths[layer]
-            dz = np.empty(w)
             for i in range(w):
                 dz[i] = delta[i] * ds[o + i]
                 if hessian:
                     c = delta[i] * dds[o + i]
-                    if c != 0.0:
-                        for a in range(r):
-                            ca = c * J[o + i, a]
-                            for b in range(a, r):
-                                upper[a, b] += ca * J[o + i, b]
+                    for k in range(r):
+                        Jc[o + i, k] = c * J[o + i, k]
             if has_u[layer]:
                 for i in range(w):
                     base = u_off[layer] + i * r
@@ -199,15 +241,17 @@ def scalar_vgh(x, parts, hessian, grad, hess):
                         grad[k] += U[base + k] * dz[i]
             if has_w[layer]:
                 wp = widths[layer - 1]
-                delta = np.zeros(wp)
+                for j in range(wp):
+                    delta[j] = 0.0
                 for i in range(w):
                     base = w_off[layer] + i * wp
                     for j in range(wp):
                         delta[j] += W[base + j] * dz[i]
         if hessian:
+            np.dot(J.T, Jc, net_hess)
             for a in range(r):
                 for b in range(r):
-                    hess[a, b] += upper[a, b] if a <= b else upper[b, a]
+                    hess[a, b] += net_hess[a, b] if a <= b else net_hess[b, a]
     return value
 
 
@@ -223,7 +267,9 @@ def discrete_gradient_step(q, v, a, has_a, force, has_force, force_end, has_forc
     hess = np.empty((r, r))
     dgrad = np.zeros(r)
     jac = np.zeros((r, r))
-    u0 = scalar_vgh(q, potential, False, grad, hess) if has_potential else 0.0
+    work_u = _workspace(potential, r) if has_potential else (np.empty(0), np.empty((0, r)), np.empty((0, r)), np.empty(0))
+    work_f = _workspace(dissipation, r) if has_dissipation else (np.empty(0), np.empty((0, r)), np.empty((0, r)), np.empty(0))
+    u0 = _vgh(q, potential, 0, grad, hess, work_u) if has_potential else 0.0
     x = np.empty(r)
     for i in range(r):
         x[i] = v[i] + (0.5 * h * a[i] if has_a else 0.0)
@@ -270,14 +316,14 @@ def discrete_gradient_step(q, v, a, has_a, force, has_force, force_end, has_forc
                 s = _NODE0 if node == 0 else _NODE1
                 for i in range(r):
                     point[i] = q[i] + s * delta[i]
-                scalar_vgh(point, potential, True, grad, hess)
+                _vgh(point, potential, 2, grad, hess, work_u)
                 for i in range(r):
                     dgrad[i] += 0.5 * grad[i]
                     for j in range(r):
                         jac[i, j] += (0.5 * s) * hess[i, j]
             dd = _dot(delta, delta)
             if dd > SMALL_STEP * (_dot(q1, q1) + _dot(q, q) + 1.0):
-                u1 = scalar_vgh(q1, potential, False, grad, hess)
+                u1 = _vgh(q1, potential, 0, grad, hess, work_u)
                 c = (u1 - u0 - _dot(dgrad, delta)) / dd
                 for i in range(r):
                     dgrad[i] += c * delta[i]
@@ -286,7 +332,7 @@ def discrete_gradient_step(q, v, a, has_a, force, has_force, force_end, has_forc
                 for j in range(r):
                     Jt[i, j] += h * jac[i, j]
         if has_dissipation:
-            scalar_vgh(x, dissipation, True, grad, hess)
+            _vgh(x, dissipation, 2, grad, hess, work_f)
             for i in range(r):
                 R[i] += grad[i]
                 for j in range(r):
@@ -327,11 +373,11 @@ def discrete_gradient_step(q, v, a, has_a, force, has_force, force_end, has_forc
                     total += damping[i, j] * v1[j]
                 rhs[i] -= total
         if has_potential:
-            scalar_vgh(q1, potential, False, grad, hess)
+            _vgh(q1, potential, 1, grad, hess, work_u)
             for i in range(r):
                 rhs[i] -= grad[i]
         if has_dissipation:
-            scalar_vgh(v1, dissipation, False, grad, hess)
+            _vgh(v1, dissipation, 1, grad, hess, work_f)
             for i in range(r):
                 rhs[i] -= grad[i]
         if has_force_end:
