@@ -140,7 +140,7 @@ def measured_range_section(config: JointedBeamCase, setup, damping: float, data_
     if config.fit_range:
         if levels is None:
             raise DatasetNotFoundError("--fit-range needs the response-controlled data (femrom data fetch brb)")
-        progress("jointed beam: fitting the measured-range joint (mu, beta, kappa) on the response-controlled "
+        progress("jointed beam: fitting the measured-range joint (mu, chi, kappa) on the response-controlled "
                  "and hammer backbones at acc3 (EPMC per evaluation) ...")
         hammer = measured_backbone(read_hammer_impact(None if data_dir is None else Path(data_dir)), channel="acc3")
         fit = config.fit_measured_range(setup, phase_resonance_backbone(levels), hammer, damping, start=joint,
