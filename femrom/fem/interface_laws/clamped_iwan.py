@@ -210,12 +210,13 @@ class ClampedIwanLaw(InterfaceLaw):
         traction, D = kernels.clamped_iwan(gap, state, self.slider_stiffness, self.unit_strength,
                                            float(self.normal_stiffness), bool(tangent))
         D = D if tangent else None
-        hit = self._reclosed(gap, state)
-        if hit.any():                    # the few reclosed points: the reference
-            t_hit, D_hit = self._evaluate(gap[hit], state[hit], tangent)
-            traction[hit] = t_hit
-            if tangent:
-                D[hit] = D_hit
+        if self.closing:
+            hit = self._reclosed(gap, state)
+            if hit.any():                # the few reclosed points: the reference
+                t_hit, D_hit = self._evaluate(gap[hit], state[hit], tangent)
+                traction[hit] = t_hit
+                if tangent:
+                    D[hit] = D_hit
         return traction, D
 
     def commit(self, gap, state):
@@ -223,9 +224,10 @@ class ClampedIwanLaw(InterfaceLaw):
         if compiled is not None:
             kernels, gap, state = compiled
             new = kernels.clamped_iwan_commit(gap, state, self.slider_stiffness, self.unit_strength)
-            hit = self._reclosed(gap, state)
-            if hit.any():
-                new[hit] = self._commit(gap[hit], state[hit])
+            if self.closing:
+                hit = self._reclosed(gap, state)
+                if hit.any():
+                    new[hit] = self._commit(gap[hit], state[hit])
             return new
         return self._commit(gap, state)
 
