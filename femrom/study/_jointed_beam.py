@@ -233,17 +233,18 @@ class JointedBeamModel:
             out[f"{peak:g}_n_acc1_max_error"] = float(np.max(np.abs(acc_hyper - acc)) / np.max(np.abs(acc)))
         return out
 
-    def measured_range(self, calibrated: CalibratedBeam, joint: "MeasuredRangeJoint", damping_ratio: float):
+    def measured_range(self, calibrated: CalibratedBeam, joint: "MeasuredRangeJoint", damping_ratio: float, *,
+                       attached: bool = True):
         """``(reduced, z0)``: the full model with the ``clamped_iwan`` joint of ``joint`` (reclosing points
         included) at its static equilibrium about the preload, Galerkin on the modes (:meth:`reduced`, every
-        pair), and the shaker's attached mass on input 1 (:func:`with_attached_mass`)."""
+        pair), and with ``attached`` the shaker's mass on input 1 (:func:`with_attached_mass`)."""
         beam = calibrated.beam
         model, q0, z0 = clamped_iwan_joint(calibrated.system, beam.preload.displacement, beam.preload.state,
                                            calibrated.left_face, friction_coefficient=joint.friction_coefficient,
                                            chi=joint.chi, beta=joint.beta, closing=joint.closing,
                                            closing_friction=joint.friction_coefficient)
         reduced = self.reduced(calibrated, model, q0, z0, damping_ratio)
-        return with_attached_mass(reduced, 1, joint.shaker_mass), z0
+        return (with_attached_mass(reduced, 1, joint.shaker_mass) if attached else reduced), z0
 
     def measured_range_backbone(self, reduced, z0, *, harmonics: int = 1, samples: int | None = None,
                                 top: float = 90.0):
@@ -284,8 +285,8 @@ class JointedBeamModel:
         def misfit(x):
             joint = dataclasses.replace(start, friction_coefficient=float(np.exp(x[0])),
                                         chi=float(-1.0 + 2.0 / (1.0 + np.exp(-x[1]))), closing=float(np.exp(x[2])))
-            shaker, z0 = self.measured_range(calibrated, joint, damping_ratio)
-            free = with_attached_mass(shaker, 1, -joint.shaker_mass)
+            free, z0 = self.measured_range(calibrated, joint, damping_ratio, attached=False)
+            shaker = with_attached_mass(free, 1, joint.shaker_mass)
             try:
                 f, z = at(self.measured_range_backbone(shaker, z0)[1], a_rc)
                 f0, z0h = at(self.measured_range_backbone(free, z0)[1], a_h)
