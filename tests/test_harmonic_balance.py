@@ -426,3 +426,15 @@ def test_periodic_states_are_the_afts_march():
     aft = hb.aft(solution.coefficients.reshape(-1), 2 * np.pi * 1.0, jacobian=False)
     assert np.allclose(hb.basis.analysis @ forces, aft.coefficients, rtol=0, atol=1e-12 * np.abs(forces).max())
     assert np.ptp([s for s in np.ravel(states)]) > 0          # the slider moves over the period
+
+
+def test_sweeps_refuse_a_bad_grid():
+    from femrom.study import harmonic_balance_sweep, periodic_training
+    system = two_dof()
+    for frequencies, levels, culprit in (([np.nan], [1.0], "frequencies"), ([-1.0], [1.0], "frequencies"),
+                                         ([], [1.0], "frequencies"), ([0.3], [np.inf], "levels"),
+                                         ([0.3], [], "levels"), ([0.3], [-1.0], "levels")):
+        with pytest.raises(ValueError, match=culprit):
+            harmonic_balance_sweep(system, None, 0, frequencies, levels)
+    with pytest.raises(ValueError, match="frequencies"):
+        periodic_training(system, None, 0, 0.0, [1.0])

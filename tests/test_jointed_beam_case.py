@@ -219,3 +219,11 @@ def test_the_measured_range_fit_reproduces_its_documented_misfit(brb_data):
     assert first["friction_coefficient"] == pytest.approx(MeasuredRangeJoint().friction_coefficient)
     assert 24.0 < first["misfit"] < 26.0, first["misfit"]
     assert fit["misfit"] <= first["misfit"]
+
+
+def test_the_measured_range_joint_refuses_bad_parameters():
+    from femrom.study import MeasuredRangeJoint
+    for name, value in (("shaker_mass", -1e-3), ("chi", -1.0), ("closing", float("nan")),
+                        ("friction_coefficient", 0.0), ("beta", "0.3")):
+        with pytest.raises(ValueError, match=f"MeasuredRangeJoint: {name}"):
+            MeasuredRangeJoint(**{name: value})

@@ -113,7 +113,8 @@ def response_controlled_peaks(levels, forces) -> list[dict]:
     """What the response-controlled levels say a force-controlled test would peak at: per force ``F``, the
     level amplitude whose smallest force is ``F`` (log-log interpolation between the levels) and the
     frequency of that smallest force (:func:`femrom.post.resonance_force`); ``None`` outside the levels."""
-    table = sorted((resonance_force(level)[1], level.level_m_s2, resonance_force(level)[0]) for level in levels)
+    table = sorted((force, level.level_m_s2, frequency)
+                   for level, (frequency, force) in ((level, resonance_force(level)) for level in levels))
     force, amplitude, frequency = (np.array(column) for column in zip(*table))
     rows = []
     for F in forces:

@@ -19,6 +19,7 @@ import time
 
 import numpy as np
 
+from femrom._errors import FemromValueError
 from femrom.integrators import HarmonicBalance, HarmonicBalanceError, Shaker, SteadyStateCriterion, SteppedSine, StepResult
 from femrom.post import linear_accelerance
 from femrom.study.experiments.stepped_sine import peak_rows
@@ -99,8 +100,8 @@ def harmonic_balance_sweep(system, rest_state, input: int, frequencies, levels, 
     fundamental's); ``iterations`` per level the Newton iterations per point.
     """
     tic = time.perf_counter()
+    frequencies, levels = _sweep_grid(frequencies, levels)
     hb = HarmonicBalance(system, input, harmonics=harmonics, samples=samples, state=rest_state)
-    frequencies = np.asarray(frequencies, dtype=float).reshape(-1)
     names = list(system.output_names or [f"y{i}" for i in range(hb.output_matrix.shape[0])])
     per_newton = linear_accelerance(system, rest_state, hb.force_vector, frequencies)
     H = hb.basis.harmonics
@@ -137,6 +138,18 @@ def harmonic_balance_sweep(system, rest_state, input: int, frequencies, levels, 
     return {"rows": rows, "iterations": iterations, "seconds": time.perf_counter() - tic}
 
 
+def _sweep_grid(frequencies, levels) -> tuple[np.ndarray, list]:
+    """Checked ``(frequencies (k,), levels)``: positive finite frequencies [Hz], finite forces >= 0 [N], neither
+    empty (one FemromValueError naming the culprit)."""
+    f = np.asarray(frequencies, dtype=float).reshape(-1)
+    if f.size == 0 or not np.all(np.isfinite(f)) or not np.all(f > 0):
+        raise FemromValueError(f"frequencies must be positive and finite (Hz), at least one, got {f.tolist()}")
+    F = np.asarray(levels, dtype=float).reshape(-1)
+    if F.size == 0 or not np.all(np.isfinite(F)) or not np.all(F >= 0):
+        raise FemromValueError(f"levels must be finite forces >= 0 (N), at least one, got {F.tolist()}")
+    return f, [float(x) for x in F]
+
+
 def _sweep_point(hb, omega, force, z, previous_omega, chord, depth: int = 0):
     """One point of :func:`harmonic_balance_sweep`: from ``z`` (the previous point) reusing its Jacobian
     (``chord``), splitting the step on failure."""
@@ -160,8 +173,9 @@ def periodic_training(system, rest_state, input: int, frequency: float, forces, 
     ``forces`` (harmonic balance, each from the previous), and at every AFT sample the coordinates
     with the force's state there (:meth:`~femrom.integrators.HarmonicBalance.periodic_states`): the
     motions a frequency-domain study computes, for :func:`femrom.rom.ecsw_joint`."""
+    (frequency,), forces = _sweep_grid([frequency], forces)
     hb = HarmonicBalance(system, input, harmonics=harmonics, samples=samples, state=rest_state)
-    omega, z, snapshots = 2 * np.pi * float(frequency), None, []
+    omega, z, snapshots = 2 * np.pi * frequency, None, []
     for force in forces:
         solution = hb.solve(omega, float(force), initial=z)
         z = solution.coefficients.reshape(-1)

@@ -36,7 +36,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import minimize
 
-from femrom._errors import FemromError
+from femrom._errors import FemromError, FemromValueError
 from femrom.inference import galerkin
 from femrom.integrators import HarmonicBalance, epmc, linear_mode
 from femrom.post import epmc_backbone, static_qsma, with_linear_damping
@@ -386,6 +386,14 @@ class MeasuredRangeJoint:
     beta: float = 0.3
     closing: float = 2.986e-4
     shaker_mass: float = 5.2e-3
+
+    def __post_init__(self):
+        for name, ok, valid in (("friction_coefficient", lambda v: v > 0, "> 0"), ("chi", lambda v: v > -1, "> -1"),
+                                ("beta", lambda v: v >= 0, ">= 0"), ("closing", lambda v: v >= 0, ">= 0"),
+                                ("shaker_mass", lambda v: v >= 0, ">= 0 [kg]")):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and np.isfinite(value) and ok(value)):
+                raise FemromValueError(f"MeasuredRangeJoint: {name} must be {valid}, got {value!r}")
 
     def parameters(self) -> dict:
         return dataclasses.asdict(self)
