@@ -10,7 +10,8 @@ over ten times the training window. Per r: POD of the 10 modal coordinates, SpML
 on the projected ``q^, q^', q^''`` and the hammer input, Galerkin the reference projected on the same
 directions with its sampled joint (``femrom.study.compare_ring_downs``). Once, the per-step cost of the
 24,522-dof model with the joint (condensed Newton) is measured, so that step costs compare with the
-true FOM too.
+true FOM too. ``accuracy_cost_<frequency|damping>_<test>.png`` draw each model's backbone errors against
+its step's cost, beside the reference's and the full model's steps.
 
 Run ``python -m femrom run jointed_beam_rom [-o results/jointed_beam_rom] [--quick] [--extrapolation]``.
 """
@@ -28,7 +29,7 @@ import numpy as np
 from femrom.cases import case_parser
 from femrom.inference import SpMLConfig
 from femrom.integrators import Newmark, Newton, SteadyStateCriterion, SteppedSine
-from femrom.post import period_corrected, plot_backbones, staged_output, write_metrics
+from femrom.post import period_corrected, plot_accuracy_cost_groups, plot_backbones, staged_output, write_metrics
 from femrom.scene import Signal, SignalVector
 from femrom.study import (
     RING_DOWN_COLUMNS,
@@ -197,6 +198,15 @@ def run(config: JointedBeamRomCase, out: Path, progress=print) -> dict:
                   for (m, r, label), b in comparison["backbones"].items() if label == run_.label}
         plot_backbones(out / f"backbone_{run_.label.replace(' ', '')}.png", curves,
                        title=f"jointed beam ROMs, {run_.label} blow, acc1", amplitude_label="acc1 amplitude [m/s^2]")
+    for error, what in (("frequency_shift_error", "frequency shift"), ("damping_max_error", "damping")):
+        for run_, _ in tests:
+            shown = [row for row in rows if row["test"] == run_.label and row[error] is not None]
+            plot_accuracy_cost_groups(
+                out / f"accuracy_cost_{error.split('_')[0]}_{run_.label.replace(' ', '')}.png", shown,
+                "seconds_per_step", error, "r", "model",
+                title=f"jointed beam ROMs, {run_.label} blow: {what} error against the step's cost",
+                marks={"reference (10 modes, ECSW)": reference_step,
+                       "full model": None if full_cost is None else full_cost["seconds_per_step"]})
     backbones = {f"{m}/{r}/{label}": [{"amplitude_m_s2": x["amplitude"], "frequency_hz": x["frequency_hz"],
                                        "damping_ratio": x["damping_ratio"]} for x in b.rows()]
                  for (m, r, label), b in comparison["backbones"].items()}

@@ -156,12 +156,16 @@ def plot_accuracy_cost(path, rows: list[dict], cost: str, error: str, label: str
 
 
 def plot_accuracy_cost_groups(path, rows: list[dict], cost: str, error: str, label: str,
-                              group: str, title: str = "") -> Path:
+                              group: str, title: str = "", *, marks: dict | None = None) -> Path:
     """Log-log error against cost, one line per value of ``group`` (e.g. the method),
-    each point annotated with ``label`` (e.g. r). Non-finite errors are left out."""
+    each point annotated with ``label`` (e.g. r). Non-finite errors are left out. ``marks``:
+    ``{name: cost}`` drawn as labelled vertical lines (e.g. the full model's step)."""
     plt = pyplot()
 
     fig, ax = plt.subplots(figsize=(6.4, 4.2))
+    for k, (name, value) in enumerate((marks or {}).items()):
+        if value is not None and np.isfinite(value) and value > 0:
+            ax.axvline(value, color="0.4", ls=("--", ":", "-.")[k % 3], lw=1.0, label=str(name))
     for name in dict.fromkeys(r[group] for r in rows):
         sel = [r for r in rows if r[group] == name and np.isfinite(r[error]) and r[error] > 0]
         if not sel:
@@ -173,6 +177,10 @@ def plot_accuracy_cost_groups(path, rows: list[dict], cost: str, error: str, lab
     ax.set_xlabel(cost)
     ax.set_ylabel(error)
     ax.grid(alpha=0.3, which="both")
+    x_low, x_high = ax.get_xlim()
+    if x_high > 10 * x_low:            # decade labels only: the minor ones overlap on wide axes
+        from matplotlib.ticker import NullFormatter
+        ax.xaxis.set_minor_formatter(NullFormatter())
     ax.legend(fontsize=8)
     if title:
         ax.set_title(title, fontsize=10)
