@@ -750,3 +750,24 @@ def test_a_learner_takes_a_solver_object_and_refuses_a_name():
         LagrangianOpInf(["damping"], solver="clarabel")
     with pytest.raises(ValueError, match="cannot solve the regression's semidefinite program"):
         LagrangianOpInf(["damping"], solver=ConicSolver("osqp"))
+
+
+def test_an_uncertified_fit_is_said_with_its_status_and_gap():
+    """A learner whose solver stops short of its certificate warns, naming the status and the gap;
+    the same fit with the default solver is certified and silent. The first-order path with
+    a single ADMM iteration cannot certify the random r = 12 problem (about half of the
+    eigenvalues on their bounds), while the default settings do."""
+    import warnings
+
+    from femrom.inference import FastSolver
+
+    data = random_data(np.random.default_rng(3), 12, 120)
+    short = FastSolver(method="first_order", max_iterations=1, polish_first=5, polish_every=5)
+    with pytest.warns(UserWarning, match=r"solver ended '(max_iterations|stalled)' at a relative gap of"):
+        model = LagrangianOpInf(["damping"], solver=short).fit(data)
+    assert not model.solver_info_["status"].startswith("optimal")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        certified = LagrangianOpInf(["damping"]).fit(data)
+    assert certified.solver_info_["status"] == "optimal"
+    assert certified.objective_ < model.objective_

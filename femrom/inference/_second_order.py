@@ -307,6 +307,14 @@ class SecondOrderLearner(Learner):
         Y, blocks_data = self._target(data), self._datablocks(data)
         problem = self._regression(data, Y, blocks_data)
         X, info = self._solve(problem)
+        status = str(info.get("status", "optimal"))
+        if not status.startswith("optimal"):
+            gap = info.get("gap_estimate")
+            warnings.warn(
+                f"{type(self).__name__}: the {info.get('solver', 'regression')} solver ended {status!r}"
+                + ("" if gap is None else f" at a relative gap of {gap:.2g}")
+                + ": the operators are feasible but not certified optimal (a smaller r, another solver or "
+                  "more iterations)", UserWarning, stacklevel=2)
         self.coefficients_ = {b.name: X[:, s] for b, s in zip(problem.blocks, problem.slices())}
         terms = [cls.from_coefficients(self.coefficients_[cls.name]) for cls in learned]
         output = term_class("output").fit(data, self.regularization["output"])
