@@ -94,6 +94,10 @@ def test_states_alone_when_the_derivatives_are_differences(runs):
     assert smooth.diagnostics["smoothing"]["fields"] == "states"
     assert list(smooth.diagnostics["smoothing"]["trajectories"][0][0]["noise"]) == ["states"]
     assert _relative(smooth.states, exact.states) < 0.5 * _relative(noisy.states, exact.states)
+    # derivatives that are placeholders (zeros, as after upsampling) are no measurement either
+    blank = SecondOrderData(noisy.states, np.zeros_like(noisy.states), np.zeros_like(noisy.states),
+                            times=noisy.times)
+    assert Smoothing().apply(blank).diagnostics["smoothing"]["fields"] == "states"
 
 
 def test_each_trajectory_is_smoothed_on_its_own(runs):

@@ -45,7 +45,7 @@ from math import comb
 
 import numpy as np
 
-from femrom._errors import FemromValueError, nonnegative_integer, positive_integer
+from femrom._errors import FemromTypeError, FemromValueError, nonnegative_integer, positive_integer
 
 #: Which fields a smoothing fits: the states with the measured derivatives, or the states alone.
 SMOOTHING_FIELDS = ("auto", "all", "states")
@@ -67,7 +67,7 @@ class Smoothing:
         ``"all"``: fit the states, velocities and accelerations together (they must be independent
         measurements); ``"states"``: the states alone (derivatives from the curve); ``"auto"``: the
         states alone when the data's derivatives are finite differences of the states
-        (``diagnostics["derivative_source"]``), else all three.
+        (``diagnostics["derivative_source"]``) or placeholders (all zero), else all three.
     noise_order : int
         ``p``: the order of the differences that estimate each field's noise.
     log_lambda : float or None
@@ -105,7 +105,6 @@ class Smoothing:
             return cls()
         if isinstance(value, cls):
             return value
-        from femrom._errors import FemromTypeError
         raise FemromTypeError(f"smoothing must be a Smoothing, True or None, got {value!r}")
 
     def apply(self, data):
@@ -119,7 +118,8 @@ class Smoothing:
         step = _step(data)
         fields = self.fields
         if fields == "auto":
-            fields = "states" if data.diagnostics.get("derivative_source") in _DERIVED else "all"
+            placeholders = not (np.any(data.velocities) and np.any(data.accelerations))
+            fields = "states" if placeholders or data.diagnostics.get("derivative_source") in _DERIVED else "all"
         use = (0,) if fields == "states" else (0, 1, 2)
         bounds = list(data.starts) + [data.n_samples]
         out = [np.empty_like(data.states) for _ in range(3)]
