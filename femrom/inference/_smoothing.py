@@ -280,21 +280,16 @@ def _inverse_band(U: np.ndarray) -> np.ndarray:
     R = np.zeros((n, b + 1))
     for d in range(1, b + 1):
         R[:n - d, d] = U[b - d, d:] / diag[:n - d]
-    Z = np.zeros((n + b, b + 1))          # Z[i, d] = Z_{i, i+d}, padded below
+    Z = np.zeros((n, b + 1))              # Z[i, d] = Z_{i, i+d}
+    block = np.zeros((b, b))              # Z at rows and columns i+1 .. i+b (zero beyond n)
     for i in range(n - 1, -1, -1):
-        # Z_{i+l, i+d} for l, d = 1..b: from stored rows (symmetric: Z_{p,q} = Z[min, |p - q|])
         r = R[i, 1:]
-        rows = Z[i + 1:i + b + 1]                          # rows i+1..i+b, offsets 0..b
-        # column j = i + d, d = 1..b: sum_l r_l Z_{i+l, i+d}
-        out = np.zeros(b + 1)
-        for d in range(1, b + 1):
-            s = 0.0
-            for l in range(1, b + 1):
-                off = d - l
-                s += r[l - 1] * (rows[l - 1, off] if off >= 0 else Z[i + d, -off])
-            out[d] = -s
-        out[0] = 1.0 / diag[i] ** 2 - float(r @ out[1:])
-        Z[i] = out
+        off = -(block @ r)                # Z_{i, i+d}, d = 1..b
+        Z[i, 0] = 1.0 / diag[i] ** 2 - float(r @ off)
+        Z[i, 1:] = off
+        block[1:, 1:] = block[:-1, :-1].copy()
+        block[0, 0] = Z[i, 0]
+        block[0, 1:] = block[1:, 0] = off[:-1]
     band = np.zeros_like(U)
     for d in range(b + 1):
         band[b - d, d:] = Z[:n - d, d]
