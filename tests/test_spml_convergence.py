@@ -11,7 +11,7 @@ import pytest
 
 from _required import extra
 from benchmarks.spml_systems import SYSTEMS, predict, prediction_errors
-from femrom.inference import SpML, SpMLConfig
+from femrom.inference import Smoothing, SpML, SpMLConfig
 from femrom.rom import SecondOrderROM
 from femrom.study import spml_error_split
 
@@ -100,27 +100,53 @@ def test_the_rollout_is_the_discrete_gradient_scheme_and_refines_without_harm(ex
     np.testing.assert_allclose(v, rom.v[:, ::2], rtol=0, atol=1e-9 * np.abs(rom.v).max())
 
 
-@pytest.mark.slow
-@pytest.mark.parametrize("name", sorted(SYSTEMS))
-def test_one_percent_noise(name):
-    """1 % noise (of each field's RMS) on states, velocities and accelerations. The optimiser reaches the
-    truth's loss (the fit is as good as the data allow); the targets at 10x the exact ones do not all
-    hold (docs/spml.md, "Convergence"): the errors are the estimator's (noise in the states is noise in
-    the regressors, which biases K^ by sigma^2 / var of the weak modes), not the optimiser's."""
-    system = SYSTEMS[name]()
+@pytest.fixture(scope="module", params=sorted(SYSTEMS))
+def noisy(request):
+    """(name, system, 1 % noisy training runs, validation run, the unseen amplitude exactly over three
+    windows, the fit on the raw data, the fit on the smoothed data): noise of 1 % of each field's RMS
+    on states, velocities and accelerations (seed 0)."""
+    system = SYSTEMS[request.param]()
     train, validation = system.training(noise=0.01)
-    test = system.test(3.0)
-    learner = _fit(train, validation)
-    split = spml_error_split(learner.operators_, system.operators, train, test)
+    raw = _fit(train, validation)
+    smooth = SpML(["damping"], config=SpMLConfig(seed=0), smoothing=Smoothing(), progress=False).fit(
+        train, validation=validation)
+    return request.param, system, train, validation, system.test(3.0), raw, smooth
+
+
+def test_one_percent_noise_raw_data_fit_as_well_as_the_data_allow_but_miss(noisy):
+    """Without smoothing the optimiser reaches the truth's loss, yet the force misses its target by 3x
+    (Duffing) to 30x (chain): the error is the estimator's (noise in the states is noise in the
+    regressors), not the optimiser's. This is the lower side of the smoothing test below: the fit
+    on raw data cannot pass it."""
+    name, system, train, _, test, raw, _ = noisy
+    split = spml_error_split(raw.operators_, system.operators, train, test)
     # observed: chain 4.57e-3 against the truth's 4.62e-3; Duffing 3.33e-4 against 3.35e-4
     assert split.loss <= split.truth_loss, split
-    errors = prediction_errors(learner.operators_, system, test)
+    # observed: chain force 3.4e-2, mass 3.0e-2; Duffing 3.2e-3, 2.3e-2 (the targets: 1e-3 and the
+    # smoothed fits' 3e-3 / 4e-4)
+    assert split.potential > 2e-3 and split.mass > 1e-2, split
+
+
+def test_one_percent_noise_smoothed_data_meet_the_prediction_targets(noisy):
+    """The same data smoothed first (one spline per coordinate through the states, velocities and
+    accelerations, the smoothing chosen from the data): the unseen amplitude within 1e-2 over the
+    training window's length and 1e-1 over three times it (10x the exact-data targets). The force
+    error falls 3-4x but stays above its 1e-3 target: what remains is the noise inside the signal's
+    band, which no smoothing removes (over six noise seeds the error of the mean force is 1/sqrt(6)
+    of the mean error: variance, not bias; docs/spml.md, "Convergence")."""
+    name, system, train, _, test, raw, smooth = noisy
+    split = spml_error_split(smooth.operators_, system.operators, train, test)
+    raw_split = spml_error_split(raw.operators_, system.operators, train, test)
+    errors = prediction_errors(smooth.operators_, system, test)
     assert errors["finite"]
-    # observed: chain force 3.4e-2, prediction 2.1e-2 / 0.10; Duffing 3.2e-3, 1.0e-2 / 3.5e-2
-    met = split.potential <= 1e-3 and errors["window"] <= 1e-2 and errors["total"] <= 1e-1
-    if not met:
-        pytest.xfail(f"1 % noise, {name}: force {split.potential:.2e}, prediction {errors['window']:.2e} / "
-                     f"{errors['total']:.2e} against 1e-3, 1e-2 / 1e-1")
+    # observed (seed 0): chain 6.1e-3 / 2.1e-2, Duffing 4.7e-3 / 1.7e-2; over five noise seeds at most
+    # 9.1e-3 / 5.5e-2 (the raw fits: up to 2.6e-2 / 0.15)
+    assert errors["window"] <= 1e-2 and errors["total"] <= 1e-1, errors
+    # the force 3-4x and the mass 8-60x closer (observed chain 8.2e-3 against 3.4e-2 and 3.4e-3 against
+    # 3.0e-2; Duffing 1.1e-3 against 3.2e-3 and 3.9e-4 against 2.3e-2)
+    assert split.potential < 0.5 * raw_split.potential and split.mass < 0.3 * raw_split.mass, (split, raw_split)
+    if split.potential > 1e-3:
+        pytest.xfail(f"1 % noise, {name}, smoothed: force {split.potential:.2e} against 1e-3 (the in-band noise)")
 
 
 def test_predict_helper_returns_the_samples():

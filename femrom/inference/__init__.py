@@ -9,7 +9,8 @@
   :class:`ReducedOperators` holds a model's terms, :func:`galerkin` projects
   every registered term;
 - data: :func:`finite_difference`, :func:`reduce_snapshots` /
-  :class:`SecondOrderData`, :func:`reduce_canonical_snapshots` /
+  :class:`SecondOrderData`, denoised before a fit by :class:`Smoothing` (every second-order
+  learner's ``smoothing=`` option), :func:`reduce_canonical_snapshots` /
   :class:`CanonicalData`; snapshots every k-th step refined between by the model
   (:func:`alternating_fill`);
 - learners (``fit(data, *, validation=None) -> self``, ``operators_``; :func:`registered_learners`
@@ -94,6 +95,7 @@ from femrom.inference._realization import (
     system_markov_from_observer,
 )
 from femrom.inference._sdp import ConicSolver, solve_conic
+from femrom.inference._smoothing import SMOOTHING_FIELDS, Smoothing, noise_level
 from femrom.inference._second_order import ErrorSplit, SecondOrderLearner
 from femrom.inference._state_space import StateSpaceOperators, markov_parameters
 from femrom.inference._terms import (
@@ -145,5 +147,5 @@ __all__ = [
     "LargeHankelWarning", "block_hankel", "era_realization", "impulse_response", "markov_parameters", "observer_markov_parameters",
     "markov_from_observer", "okid_markov_parameters", "okid_observer_gain", "system_impulse_response",
     "system_markov_from_observer",
-    "IwanLOpInf", "TrainingSet", "LearnedHysteresis", "SliderState", "slider_stretches", "spml_module",
+    "IwanLOpInf", "TrainingSet", "SMOOTHING_FIELDS", "Smoothing", "noise_level", "LearnedHysteresis", "SliderState", "slider_stretches", "spml_module",
 ]

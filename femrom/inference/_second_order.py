@@ -38,6 +38,7 @@ from femrom.inference._learner import Learner, Regularization
 from femrom.inference._operators import ReducedForces, ReducedOperators
 from femrom.inference._problem import Block, GramProblem
 from femrom.inference._sdp import CONIC_SOLVERS, ConicSolver
+from femrom.inference._smoothing import Smoothing
 from femrom.inference._structured_lstsq import FastSolver
 from femrom.inference._terms import ReducedTerm, registered_terms, term_class
 
@@ -114,6 +115,10 @@ class SecondOrderLearner(Learner):
         warns that ``M^ = I`` is then an assumption that breaks symmetry.
     stiffness_margin : float
         ``eps = margin * ||Y||_F / ||D_j||_F`` in ``X_j >= eps I`` for ``"spd"`` terms.
+    smoothing : Smoothing, True or None
+        Denoise each training and validation trajectory before the fit (:class:`Smoothing`: one
+        smooth curve per coordinate through the states and measured derivatives; ``True``: the
+        defaults); ``None`` (default): the data as given.
 
     Attributes
     ----------
@@ -133,7 +138,8 @@ class SecondOrderLearner(Learner):
 
     def __init__(self, terms=(), *, regularization=0.0, solver=FastSolver(),
                  mass: np.ndarray | None = None, mass_orthonormal: bool = True,
-                 stiffness_margin: float = 1e-10):
+                 stiffness_margin: float = 1e-10, smoothing: Smoothing | bool | None = None):
+        self.smoothing = Smoothing.of(smoothing)
         if isinstance(terms, (str, type, ReducedTerm)):
             terms = (terms,)
         if not callable(getattr(solver, "solve", None)) or not isinstance(getattr(solver, "name", None), str):
@@ -300,6 +306,9 @@ class SecondOrderLearner(Learner):
         -------
         self
         """
+        if self.smoothing is not None:
+            data = self.smoothing.apply(data)
+            validation = None if validation is None else self.smoothing.apply(validation)
         data = concatenate(data) if isinstance(data, (list, tuple)) else data
         learned = self._learned(data)
         # the target (a projected known force costs a force evaluation per snapshot)
@@ -361,7 +370,8 @@ class SecondOrderLearner(Learner):
                "regularization": self.regularization.to_dict(),
                "mass": "identity" if self.mass is None else "given",
                "mass_orthonormal": self.mass_orthonormal,
-               "nonlinear": self.nonlinear is not None}
+               "nonlinear": self.nonlinear is not None,
+               "smoothing": None if self.smoothing is None else asdict(self.smoothing)}
         info = getattr(self, "solver_info_", None)
         if info is not None:
             out["solver_info"] = {k: v for k, v in info.items() if k != "active"}

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import time
 import warnings
+from dataclasses import asdict
 
 import numpy as np
 
@@ -12,6 +13,7 @@ from femrom.inference._data import SecondOrderData, concatenate, sampling_step
 from femrom.inference._learner import Learner, register_learner
 from femrom.inference._operators import ReducedOperators
 from femrom.inference._sdp import ConicSolver
+from femrom.inference._smoothing import Smoothing
 from femrom.inference._terms import term_class
 from femrom.inference.terms.learned_hysteresis import LearnedHysteresis, slider_stretches
 
@@ -73,6 +75,9 @@ class IwanLOpInf(Learner):
     solver : ConicSolver
         The cvxpy solver of the second-order cone program, with its options (default
         ``ConicSolver("clarabel")``).
+    smoothing : Smoothing, True or None
+        Denoise each training and validation trajectory before the fit (:class:`Smoothing`);
+        ``None`` (default): the data as given.
 
     Attributes
     ----------
@@ -91,7 +96,8 @@ class IwanLOpInf(Learner):
 
     def __init__(self, terms=("damping",), *, thresholds=32, threshold_span=(1e-3, 1.0), direction=None,
                  monotone: bool = True, band=None, regularization: float = 1e-9, stiffness_margin: float = 1e-10,
-                 solver: ConicSolver = ConicSolver()):
+                 solver: ConicSolver = ConicSolver(), smoothing: Smoothing | bool | None = None):
+        self.smoothing = Smoothing.of(smoothing)
         terms = (terms,) if isinstance(terms, str) else tuple(terms)
         unknown = [t for t in terms if t not in LINEAR_TERMS]
         if unknown:
@@ -294,6 +300,9 @@ class IwanLOpInf(Learner):
 
         ``validation`` (optional data) only reports :attr:`validation_residual_`."""
         tic = time.perf_counter()
+        if self.smoothing is not None:
+            data = self.smoothing.apply(data)
+            validation = None if validation is None else self.smoothing.apply(validation)
         data = concatenate(data) if isinstance(data, (list, tuple)) else data
         if data.accelerations is None:
             raise FemromValueError("iwan_lopinf: the data need accelerations")
@@ -346,7 +355,8 @@ class IwanLOpInf(Learner):
         out = {"method": self.method, "terms": ["stiffness", *self.terms, "learned_hysteresis"],
                "threshold_span": list(self.threshold_span), "monotone": self.monotone,
                "band": None if self.band is None else list(self.band), "regularization": self.regularization,
-               "solver": self.solver.name}
+               "solver": self.solver.name,
+               "smoothing": None if self.smoothing is None else asdict(self.smoothing)}
         if getattr(self, "hysteresis_", None) is not None:
             out.update(hysteresis=self.hysteresis_.describe(), residual=self.residual_,
                        linear_residual=self.linear_residual_, validation_residual=self.validation_residual_)

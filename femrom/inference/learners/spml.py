@@ -15,6 +15,7 @@ from femrom.inference._data import SecondOrderData, concatenate, sampling_step
 from femrom.inference._learner import Learner, register_learner
 from femrom.inference._operators import ReducedOperators
 from femrom.inference._second_order import system_terms, terms_for_training
+from femrom.inference._smoothing import Smoothing
 from femrom.inference._structured_lstsq import FastSolver
 from femrom.inference._terms import ReducedTerm, term_class
 from femrom.inference.learners.iwan_lopinf import LINEAR_TERMS as SLIDER_LINEAR_TERMS
@@ -258,6 +259,10 @@ class SpML(Learner):
         every least-squares stage (non-negative, in the monotone shape) and refined by L-BFGS with
         every other weight. The model then steps with Newmark (a return mapping; the sliders' state).
     config : SpMLConfig
+    smoothing : Smoothing, True or None
+        Denoise each training and validation trajectory before both steps (:class:`Smoothing`; for
+        noisy states: their noise is noise in the regressors, docs/spml.md, "Convergence"); ``None``
+        (default): the data as given.
     progress : bool or None
         The progress line with the loss (``None``: on a terminal, in a log every 30 s).
 
@@ -291,12 +296,13 @@ class SpML(Learner):
 
     def __init__(self, terms=(), *, config: SpMLConfig = SpMLConfig(), regularization=0.0, solver=FastSolver(),
                  mass: np.ndarray | None = None, mass_orthonormal: bool = True, stiffness_margin: float = 1e-10,
-                 progress: bool | None = None):
+                 smoothing: Smoothing | bool | None = None, progress: bool | None = None):
         if not torch_available():
             raise ImportError(TORCH_MISSING)
         if not isinstance(config, SpMLConfig):
             raise FemromTypeError(f"config must be an SpMLConfig, got {type(config).__name__}")
         self.config, self.progress = config, progress
+        self.smoothing = Smoothing.of(smoothing)
         terms = (terms,) if isinstance(terms, (str, type, ReducedTerm)) else tuple(terms)
         sliders = [t for t in terms if t is LearnedHysteresis or (isinstance(t, str) and t in HYSTERESIS_TERMS)]
         if len(sliders) > 1:
@@ -390,6 +396,9 @@ class SpML(Learner):
         import torch
 
         tic = time.perf_counter()
+        if self.smoothing is not None:
+            data = self.smoothing.apply(data)
+            validation = None if validation is None else self.smoothing.apply(validation)
         pieces = list(data) if isinstance(data, (list, tuple)) else [data]
         held = None if validation is None else list(validation) if isinstance(validation, (list, tuple)) \
             else [validation]
@@ -524,6 +533,7 @@ class SpML(Learner):
 
     def describe(self) -> dict:
         out = {"method": self.method, "config": asdict(getattr(self, "config_", self.config)),
+               "smoothing": None if self.smoothing is None else asdict(self.smoothing),
                "linear": self.linear.describe() if self.linear.is_fitted else {"method": self.linear.method}}
         if getattr(self, "history_", None) is not None:
             out.update(loss=self.loss_, linear_loss=self.linear_loss_, iterations=self.iterations_,
