@@ -324,3 +324,40 @@ def test_epmc_damping_rises_with_the_dashpot_as_its_first_order_work():
         ratio = (damping[0.03] - damping[0.0]) / (0.03 * np.array(estimate))
         assert np.all(np.abs(ratio - 1) < tolerance), ratio
     assert np.all(np.abs((damping[0.3] - damping[0.0]) / (0.3 * np.array(estimate)) - 1) < 0.1)
+
+
+# -- reduced and hyper-reduced models --------------------------------------------------------------------------
+def test_galerkin_and_ecsw_models_run_the_dashpot():
+    """A Galerkin model keeps the velocity-dependent joint (its projected damping tangent ``W^T C W``), and the
+    ECSW model with every pair at weight one is it: force and both tangents equal to round-off at a reclosing
+    motion; both with an exact harmonic-balance Jacobian (the reduced coordinates carried)."""
+    from femrom.inference import galerkin
+    from femrom.rom import JointSampling, hyper_reduced_system
+
+    L = law(2.0)
+    state = preload_state(L)
+    force = joint(L, gaps=(0.002, 0.003, 0.004))
+    V = np.linalg.qr(np.random.default_rng(4).standard_normal((9, 5)))[0]
+    reduced = galerkin(system(force), V, reference=np.zeros(9), reference_state=state).system
+    hyper, z_hyper = hyper_reduced_system(reduced, JointSampling.all_pairs(PAIRS), state)
+    assert reduced.nonlinear.velocity_dependent and hyper.nonlinear.velocity_dependent
+    for seed in range(100):                              # a motion where a reclosed point's dashpot presses
+        rng = np.random.default_rng(seed)
+        q, v = 0.02 * rng.standard_normal(5), 0.3 * rng.standard_normal(5)
+        x, xdot = V @ q, V @ v
+        if L._dashpot(force.gaps(x), force.rates(xdot), state)[2].any():
+            break
+    C_full = force.tangent(x, xdot, state)[1].toarray()
+    f_r, K_r, C_r = reduced.nonlinear.dense_force_and_tangent(q, v, state)
+    assert np.allclose(C_r, V.T @ C_full @ V, rtol=0, atol=1e-12) and np.abs(C_r).max() > 0.1
+    assert np.allclose(f_r, V.T @ force.force(x, xdot, state), rtol=0, atol=1e-12)
+    f_h, K_h, C_h = hyper.nonlinear.dense_force_and_tangent(q, v, z_hyper)
+    assert np.allclose(f_h - hyper.load, f_r - (0.0 if reduced.load is None else reduced.load), rtol=0, atol=1e-12)
+    assert np.allclose(C_h, C_r, rtol=0, atol=1e-12)
+    for model, start in ((reduced, state), (hyper, z_hyper)):
+        hb = HarmonicBalance(model, 0, harmonics=2, samples=16, state=start, tangent="exact")
+        z = 0.02 * np.random.default_rng(6).standard_normal(hb.n_unknowns)
+        J_fd, dW_fd = aft_differences(hb, z, 7.0, 1e-7)
+        aft = hb.aft(z, 7.0)
+        assert np.abs(aft.jacobian - J_fd).max() < 1e-7 * np.abs(J_fd).max()
+        assert np.abs(aft.omega_derivative - dW_fd).max() < 1e-6 * np.abs(dW_fd).max()
