@@ -142,8 +142,14 @@ def test_the_damping_travels_with_the_parameters_and_the_restricted_joint():
     assert part.velocity_dependent and part.law.closing_damping == 2.5
     shifted = transform_force(force, None, reference=1e-3 * np.ones(9))
     assert shifted.velocity_dependent and shifted.step_derivative_rates
-    projected = ProjectedNonlinearForce(force, np.linalg.qr(np.random.default_rng(0).standard_normal((9, 4)))[0])
+    basis = np.linalg.qr(np.random.default_rng(0).standard_normal((9, 4)))[0]
+    projected = ProjectedNonlinearForce(force, basis)
     assert projected.velocity_dependent
+    h5py = pytest.importorskip("h5py")
+    with h5py.File("in_memory.h5", "w", driver="core", backing_store=False) as file:
+        projected.save(file.create_group("term"))
+        loaded = ProjectedNonlinearForce.load(file["term"], basis=basis)
+    assert loaded.force_model.law == L and loaded.velocity_dependent
     # the joint's damping tangent: A_i c_n at the damped normal entries
     x = np.zeros(9)
     x[5] = -0.01                                          # pair 1 pressed 5 mm through its 5 mm gap

@@ -261,7 +261,7 @@ class JointedBeamModel:
 
     def fit_measured_range(self, calibrated: CalibratedBeam, response_controlled, hammer, damping_ratio: float, *,
                            start: MeasuredRangeJoint | None = None, evaluations: int = 45, progress=print,
-                           parameters=("friction_coefficient", "chi", "closing")) -> dict:
+                           parameters=("friction_coefficient", "chi", "closing"), samples: int | None = None) -> dict:
         """The :class:`MeasuredRangeJoint`'s ``parameters`` (default ``mu``, ``chi``, ``kappa``; the others, ``beta``
         and the shaker mass as in ``start``) fitted on two measured backbones at acc3 together: the
         response-controlled stepped sine's (:func:`~femrom.post.phase_resonance_backbone`, with the shaker's mass)
@@ -270,7 +270,12 @@ class JointedBeamModel:
         ``parameters``: any of ``friction_coefficient``, ``chi``, ``closing`` and ``closing_damping``
         (:data:`RANGE_FIT_PARAMETERS`), fitted as ``log mu``, ``logit((chi + 1) / 2)`` (``-1 < chi < 1``),
         ``log kappa`` and ``log c_n`` (``closing`` and ``closing_damping`` must then start above 0); the
-        initial simplex steps ``mu``, ``kappa`` and ``c_n`` by a factor 0.5 and the logit by 1.
+        initial simplex steps ``mu``, ``kappa`` and ``c_n`` by a factor 0.5 and the logit by 1. ``samples``: EPMC's
+        samples per period (default 8, :func:`~femrom.integrators.default_samples`); the dashpot acts over the short
+        contacts of the reclosing points, which 8 samples resolve poorly: ask for more with ``closing_damping``
+        (measured on the default model at 27-90 m/s^2: the dashpot's first-order damping on 8 samples is 0.81-1.69
+        times the period's integral, on 64 samples 1.00-1.02; a backbone costs about 14 s with 8 samples and
+        130-165 s with 64 on 2 cores).
 
         Each evaluation re-solves the full model's equilibrium under the joint, projects it on the modes
         (every pair) and runs EPMC (H = 1) of mode 1 on the modal model, with and without the shaker's
@@ -300,8 +305,8 @@ class JointedBeamModel:
             free, z0 = self.measured_range(calibrated, joint, damping_ratio, attached=False)
             shaker = with_attached_mass(free, 1, joint.shaker_mass)
             try:
-                f, z = at(self.measured_range_backbone(shaker, z0)[1], a_rc)
-                f0, z0h = at(self.measured_range_backbone(free, z0)[1], a_h)
+                f, z = at(self.measured_range_backbone(shaker, z0, samples=samples)[1], a_rc)
+                f0, z0h = at(self.measured_range_backbone(free, z0, samples=samples)[1], a_h)
             except FemromError as exc:
                 progress(f"  fit {len(history) + 1}: {joint} failed ({exc})")
                 return 1e6
