@@ -6,10 +6,22 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from femrom.fem import JointForce, force_from_parameters, interface_law_from_parameters, transform_force
+from femrom.fem import (
+    JointForce,
+    force_from_parameters,
+    interface_law_from_parameters,
+    transform_force,
+)
 from femrom.fem.interface_laws.clamped_iwan import ClampedIwanLaw
 from femrom.inference import ProjectedNonlinearForce
-from femrom.integrators import EnergyBalance, HarmonicBalance, Newmark, Newton, epmc, integrate
+from femrom.integrators import (
+    EnergyBalance,
+    HarmonicBalance,
+    Newmark,
+    Newton,
+    epmc,
+    integrate,
+)
 from femrom.scene import SecondOrderSystem
 
 PAIRS = 3
@@ -155,7 +167,7 @@ def test_the_damping_travels_with_the_parameters_and_the_restricted_joint():
     x[5] = -0.01                                          # pair 1 pressed 5 mm through its 5 mm gap
     xdot = np.zeros(9)
     xdot[5] = -0.1
-    K, C = force.local_tangent(x, xdot, preload_state(L))
+    _, C = force.local_tangent(x, xdot, preload_state(L))
     assert sp.issparse(C) and np.count_nonzero(C.toarray()) == 1 and C[5, 5] == pytest.approx(1.25 * 2.5)
     assert force.local_force(x, xdot, preload_state(L))[5] == pytest.approx(1.25 * (KAPPA * 200 * -0.005 - 0.25))
 
@@ -260,9 +272,10 @@ def test_harmonic_balance_is_the_marched_steady_state():
     """A forced response (Rayleigh damping 0.05 K, force 2 at omega 6) with two pairs reclosing over part of the
     period: H = 7 against Newmark at 256 steps a period after 10 periods. Measured: fundamental phasors 3.3e-4
     apart (of the largest), the dashpot moving them by 6.5e-3 (c_n 1 against 0.5)."""
+    import dataclasses
+
     from femrom.integrators import first_harmonic
     from femrom.scene import Signal, SignalVector
-    import dataclasses
 
     omega, F = 6.0, 2.0
     phasors = {}
@@ -354,10 +367,10 @@ def test_galerkin_and_ecsw_models_run_the_dashpot():
         if L._dashpot(force.gaps(x), force.rates(xdot), state)[2].any():
             break
     C_full = force.tangent(x, xdot, state)[1].toarray()
-    f_r, K_r, C_r = reduced.nonlinear.dense_force_and_tangent(q, v, state)
+    f_r, _, C_r = reduced.nonlinear.dense_force_and_tangent(q, v, state)
     assert np.allclose(C_r, V.T @ C_full @ V, rtol=0, atol=1e-12) and np.abs(C_r).max() > 0.1
     assert np.allclose(f_r, V.T @ force.force(x, xdot, state), rtol=0, atol=1e-12)
-    f_h, K_h, C_h = hyper.nonlinear.dense_force_and_tangent(q, v, z_hyper)
+    f_h, _, C_h = hyper.nonlinear.dense_force_and_tangent(q, v, z_hyper)
     assert np.allclose(f_h - hyper.load, f_r - (0.0 if reduced.load is None else reduced.load), rtol=0, atol=1e-12)
     assert np.allclose(C_h, C_r, rtol=0, atol=1e-12)
     for model, start in ((reduced, state), (hyper, z_hyper)):
