@@ -224,6 +224,23 @@ def test_the_measured_range_fit_reproduces_its_documented_misfit(brb_data):
 def test_the_measured_range_joint_refuses_bad_parameters():
     from femrom.study import MeasuredRangeJoint
     for name, value in (("shaker_mass", -1e-3), ("chi", -1.0), ("closing", float("nan")),
-                        ("friction_coefficient", 0.0), ("beta", "0.3")):
+                        ("friction_coefficient", 0.0), ("beta", "0.3"), ("closing_damping", -1.0)):
         with pytest.raises(ValueError, match=f"MeasuredRangeJoint: {name}"):
             MeasuredRangeJoint(**{name: value})
+    assert MeasuredRangeJoint().closing_damping == 0.0
+
+
+def test_the_measured_range_fit_refuses_an_unknown_parameter_in_one_line():
+    """Checked before any model is built (the arguments are not looked at)."""
+    from femrom._errors import FemromError
+    from femrom.study import JointedBeamModel, MeasuredRangeJoint
+    fit = JointedBeamModel().fit_measured_range
+    with pytest.raises(FemromError) as error:
+        fit(None, None, None, 0.00138, parameters=("friction_coefficient", "kappa"))
+    assert str(error.value) == ("fit_measured_range: parameters must be among friction_coefficient, chi, closing, "
+                                "closing_damping, got 'kappa'")
+    for parameters, message in (((), "at least one"), (("chi", "chi"), "distinct")):
+        with pytest.raises(FemromError, match=message):
+            fit(None, None, None, 0.00138, parameters=parameters)
+    with pytest.raises(FemromError, match="closing_damping is fitted on a log scale; start it above 0, got 0.0"):
+        fit(None, None, None, 0.00138, parameters=("closing_damping",), start=MeasuredRangeJoint())

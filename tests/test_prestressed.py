@@ -68,3 +68,16 @@ def test_the_iwan_joint_about_a_uniform_preload_keeps_its_equilibrium(pressed_bl
     assert np.abs(q0 - q).max() < 1e-8 * np.abs(q).max()
     traction = system.nonlinear.tractions(q0, z0)
     assert np.abs(traction[:, :2]).max() < 1e-6 * np.abs(traction[:, 2]).max()
+
+
+def test_the_iwan_joint_carries_the_reclosed_points_dashpot(pressed_blocks):
+    # the dashpot of the reclosed points reaches the law and makes the joint velocity dependent; the static
+    # equilibrium (at rest: no rate) is the one without it, bit for bit
+    arguments = (pressed_blocks.fom.system, pressed_blocks.preload.displacement, pressed_blocks.preload.state,
+                 pressed_blocks.supports)
+    options = {"friction_coefficient": 0.6, "chi": -0.5, "beta": 0.9, "closing": 1e-3, "closing_friction": 0.6}
+    damped, q0, z0 = clamped_iwan_joint(*arguments, **options, closing_damping=2e7)
+    plain, q1, z1 = clamped_iwan_joint(*arguments, **options)
+    assert damped.nonlinear.law.closing_damping == 2e7 and damped.nonlinear.velocity_dependent
+    assert not plain.nonlinear.velocity_dependent
+    assert np.array_equal(q0, q1) and np.array_equal(z0, z1)

@@ -166,6 +166,11 @@ class InterfaceLaw:
     """
 
     name: ClassVar[str] = ""
+    #: Whether the traction also depends on the gap's rate ``gdot`` (s, 3) (a dashpot): such a law gives
+    #: :meth:`evaluate_rate` its rate tangent, and its ``step_derivative`` (when it has one) takes
+    #: ``rate=`` and ``drate=`` (s, 3, m) keywords; :class:`~femrom.fem.JointForce` then passes the
+    #: pairs' relative velocities and is ``velocity_dependent`` itself.
+    velocity_dependent: ClassVar[bool] = False
 
     def initial_state(self, n_points: int) -> np.ndarray:
         """The state of ``n_points`` virgin contact points (every slider at zero)."""
@@ -174,6 +179,12 @@ class InterfaceLaw:
     def evaluate(self, gap: np.ndarray, state: np.ndarray, tangent: bool = True):
         """``(traction (s, 3), dt/dgap (s, 3, 3) or None)`` at ``gap`` (s, 3) with ``state`` frozen."""
         raise NotImplementedError
+
+    def evaluate_rate(self, gap: np.ndarray, rate: np.ndarray, state: np.ndarray, tangent: bool = True):
+        """``(traction (s, 3), dt/dgap (s, 3, 3) or None, dt/drate (s, 3, 3) or None)`` at ``gap`` and its rate
+        ``rate`` (s, 3) with ``state`` frozen. A law without rate dependence: :meth:`evaluate`'s, and ``None``."""
+        traction, D = self.evaluate(gap, state, tangent)
+        return traction, D, None
 
     def traction(self, gap: np.ndarray, state: np.ndarray) -> np.ndarray:
         """(s, 3) traction at ``gap`` with ``state`` frozen."""

@@ -23,6 +23,11 @@ with ``L`` (3 s, n) the sparse map ``q -> (R_i (u_b - u_a))_i``: a
 :class:`femrom.fem.NonlinearForce` whose local coordinates are the pairs'
 relative displacements, so Newton condenses onto them and a reduced basis
 projects them like any other force.
+
+A law with a rate term (:attr:`femrom.fem.InterfaceLaw.velocity_dependent`, e.g. the reclosed
+points' dashpot of :class:`~femrom.fem.ClampedIwanLaw`) also reads the pairs' relative velocities
+``dDelta_i/dt = L_i v`` (the rate of the initial gap is zero): ``g_i = A_i t_i(Delta_i, dDelta_i/dt; z_i)``,
+and the force has the damping tangent ``dg/dxdot = blockdiag(A_i dt_i / d(dDelta_i/dt))``.
 """
 
 from __future__ import annotations
@@ -176,18 +181,46 @@ class JointForce(NonlinearForce):
     def _state(self, state):
         return self.law.initial_state(self.n_pairs) if state is None else state
 
+    @property
+    def velocity_dependent(self) -> bool:  # type: ignore[override]
+        """Whether the law reads the gaps' rates (:attr:`femrom.fem.InterfaceLaw.velocity_dependent`)."""
+        return bool(getattr(self.law, "velocity_dependent", False))
+
+    #: :meth:`local_step_derivative` takes the rates' derivative too (``xdot=``, ``dxdot=``), so that
+    #: :class:`femrom.integrators.HarmonicBalance` keeps the exact Jacobian of a velocity-dependent law.
+    step_derivative_rates = True
+
+    def rates(self, xdot) -> np.ndarray:
+        """(s, 3) rates ``dDelta/dt`` of the local relative displacements from local velocities ``xdot`` (3 s,)
+        (zero for ``None``)."""
+        if xdot is None:
+            return np.zeros((self.n_pairs, 3))
+        return np.asarray(xdot, dtype=float).reshape(self.n_pairs, 3)
+
     def local_force(self, x, xdot=None, state=None):
-        traction, _ = self.law.evaluate(self.gaps(x), self._state(state), tangent=False)
+        if self.velocity_dependent:
+            traction = self.law.evaluate_rate(self.gaps(x), self.rates(xdot), self._state(state), tangent=False)[0]
+        else:
+            traction, _ = self.law.evaluate(self.gaps(x), self._state(state), tangent=False)
         return (self.areas[:, None] * traction).ravel()
 
-    def local_tangent(self, x, xdot=None, state=None):
-        _, D = self.law.evaluate(self.gaps(x), self._state(state), tangent=True)
+    def _block_matrix(self, D):
         blocks = self.areas[:, None, None] * D
         shape = (3 * self.n_pairs,) * 2
-        return sp.csr_matrix((blocks.ravel(), self._tangent_indices, self._tangent_indptr), shape=shape), None
+        return sp.csr_matrix((blocks.ravel(), self._tangent_indices, self._tangent_indptr), shape=shape)
+
+    def local_tangent(self, x, xdot=None, state=None):
+        """``(dg/dx, dg/dxdot)`` (3 s, 3 s) block-diagonal csr; ``dg/dxdot`` is ``None`` unless the law reads
+        the rates."""
+        if self.velocity_dependent:
+            _, D, C = self.law.evaluate_rate(self.gaps(x), self.rates(xdot), self._state(state), tangent=True)
+            return self._block_matrix(D), self._block_matrix(C)
+        _, D = self.law.evaluate(self.gaps(x), self._state(state), tangent=True)
+        return self._block_matrix(D), None
 
     def local_force_and_blocks(self, x, state=None):
-        """``(g (3 s,), A_i dt_i/dDelta_i (s, 3, 3))``: force and tangent blocks from one law evaluation."""
+        """``(g (3 s,), A_i dt_i/dDelta_i (s, 3, 3))``: force and tangent blocks from one law evaluation
+        (the rates taken as zero: a velocity-dependent joint's damping tangent is :meth:`local_tangent`'s)."""
         traction, D = self.law.evaluate(self.gaps(x), self._state(state), tangent=True)
         return (self.areas[:, None] * traction).ravel(), self.areas[:, None, None] * D
 
@@ -203,16 +236,23 @@ class JointForce(NonlinearForce):
         coordinates, ``dstate`` ``state.shape + (m,)`` of the frozen state; ``dg`` (3 s, m) of the
         force ``A_i t_i`` and ``dstate_new`` of the committed state, from the law's
         ``step_derivative``. :class:`femrom.integrators.HarmonicBalance` carries it over the
-        sampled period for an exact Jacobian.
+        sampled period for an exact Jacobian. A velocity-dependent law also gets the local velocities
+        ``xdot`` (3 s,) and their derivative ``dxdot`` (3 s, m) (keywords; default zero).
         """
         if not callable(getattr(self.law, "step_derivative", None)):
             return None
         return self._local_step_derivative
 
-    def _local_step_derivative(self, x, state, dx, dstate):
+    def _local_step_derivative(self, x, state, dx, dstate, xdot=None, dxdot=None):
         s = self.n_pairs
         dx = np.asarray(dx, dtype=float)
-        dtraction, dz = self.law.step_derivative(self.gaps(x), self._state(state), dx.reshape(s, 3, -1), dstate)
+        if self.velocity_dependent:
+            rates = {"rate": self.rates(xdot),
+                     "drate": None if dxdot is None else np.asarray(dxdot, dtype=float).reshape(s, 3, -1)}
+        else:
+            rates = {}
+        dtraction, dz = self.law.step_derivative(self.gaps(x), self._state(state), dx.reshape(s, 3, -1), dstate,
+                                                 **rates)
         return (self.areas[:, None, None] * dtraction).reshape(3 * s, -1), dz
 
     @property
@@ -288,6 +328,14 @@ class JointForce(NonlinearForce):
         """Energy the sliders dissipate in the step from the committed ``state`` to ``commit(q, ., state)``:
         ``sum_i A_i D_i`` [J]."""
         return float(self.areas @ self.law.dissipation(self.gaps(self.localize(q)), self._state(state)))
+
+    def damping_power(self, q: np.ndarray, v: np.ndarray, state=None) -> float:
+        """Power the law's rate term dissipates at ``(q, v)`` with ``state`` frozen, ``sum_i A_i P_i`` [W]
+        (:meth:`femrom.fem.ClampedIwanLaw.damping_power`; zero for a law without one)."""
+        power = getattr(self.law, "damping_power", None)
+        if power is None or not self.velocity_dependent:
+            return 0.0
+        return float(self.areas @ power(self.gaps(self.localize(q)), self.rates(self.localize(v)), self._state(state)))
 
     def stored_energy(self, q: np.ndarray, state=None) -> float:
         """Elastic energy in the interface springs at ``q`` with the sliders at ``state`` [J]."""

@@ -142,7 +142,12 @@ class TransformedForce(NonlinearForce):
             return None
         if self.local_offset is None:
             return inner
-        return lambda x, state, dx, dstate: inner(self._shifted(x), state, dx, dstate)
+        return lambda x, state, dx, dstate, **rates: inner(self._shifted(x), state, dx, dstate, **rates)
+
+    @property
+    def step_derivative_rates(self) -> bool:
+        """Whether :attr:`local_step_derivative` also takes the local velocities' derivative (the original's)."""
+        return bool(getattr(self.force_model, "step_derivative_rates", False))
 
     @property
     def local_step_force(self):

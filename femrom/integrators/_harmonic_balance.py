@@ -57,7 +57,12 @@ return-map step in the coordinates and the state, :class:`femrom.fem.JenkinsForc
 ``transformed`` force) has that
 dependence carried along the march, which makes the Jacobian the exact derivative of the
 discrete map (checked against finite differences in ``tests/test_harmonic_balance.py``).
-``dR/dOmega`` is the derivative of ``A`` plus the velocity tangent's term.
+``dR/dOmega`` is the derivative of ``A`` plus the velocity tangent's term. A force with memory
+that also depends on the velocity (a joint whose law has a dashpot) keeps the exact Jacobian when its
+``local_step_derivative`` takes the local velocities and their derivative (``step_derivative_rates``):
+the samples' local rates ``Omega L (E D Z)_j`` are carried along the same directions (their
+derivative ``Omega (E D)_j``) and along one more, ``Omega`` (``L (E D Z)_j``), whose force
+derivative is the velocity term of ``dF_nl/dOmega``.
 """
 
 from __future__ import annotations
@@ -340,11 +345,15 @@ class HarmonicBalance:
                 raise FemromValueError(f"tangent='exact': {why}")
             return None
 
-        if f is None or not self.stateful or getattr(f, "velocity_dependent", False):
-            return unavailable("the model has no force with memory of the coordinates alone")
+        if f is None or not self.stateful:
+            return unavailable("the model has no force with memory")
+        velocity = bool(getattr(f, "velocity_dependent", False))
         # a projected force (a reduced model's term) is its force on the reduced coordinates, same state
         local = getattr(f, "transformed", None)
         f = f if local is None else local
+        if velocity and not getattr(f, "step_derivative_rates", False):
+            return unavailable(f"{type(f).__name__} depends on the velocities and its local_step_derivative "
+                               "does not take them")
         if not callable(getattr(f, "local_step_derivative", None)) or not hasattr(f, "local_map"):
             return unavailable(f"{type(f).__name__} gives no local_step_derivative")
         carried = min(f.n_local, self.n_dofs) if self.dense else f.n_local    # directions the march carries
@@ -408,15 +417,29 @@ class HarmonicBalance:
             # the directions carried through the march: the model's unknowns z when they are fewer
             # than the force's local ones (a reduced model), else the local coefficients
             on_dofs = self.dense and n < s
-            m = basis.size * (n if on_dofs else s)
+            m_z = basis.size * (n if on_dofs else s)
             seed = hook if on_dofs else np.eye(s)
             seeds = [np.kron(E[j], seed) for j in range(N)]
+            if velocity:
+                # a velocity-dependent force: the local rates omega L (E D Z)_j move along the same directions
+                # (omega (E D)_j (x) seed) and, in one more direction, with Omega (L (E D Z)_j); the gaps do
+                # not move with Omega
+                m = m_z + 1
+                rates = [stepper.localize(v[j]) for j in range(N)]
+                rate_seeds = [np.column_stack([omega * np.kron(ED[j], seed),
+                                               stepper.localize(ED[j] @ Z)]) for j in range(N)]
+                seeds = [np.column_stack([d, np.zeros(s)]) for d in seeds]
+                step = [{"xdot": rates[j], "dxdot": rate_seeds[j]} for j in range(N)]
+            else:
+                m = m_z
+                step = [{}] * N
             dstate = np.zeros(np.shape(state) + (m,))
             dg = np.empty((N, s, m))
         for _ in range(self.passes - 1):
             for j in range(N):
                 if hook is not None:
-                    _, dstate = stepper.local_step_derivative(stepper.localize(q[j]), state, seeds[j], dstate)
+                    _, dstate = stepper.local_step_derivative(stepper.localize(q[j]), state, seeds[j], dstate,
+                                                              **step[j])
                 state = f.commit(q[j], v[j], state)
         before = _state_vector(state) if self.stateful else None
         forces = np.empty((N, n))
@@ -436,7 +459,8 @@ class HarmonicBalance:
                 if velocity:
                     Ct[j] = _tangent_matrix(dv, n, self.dense)
             if hook is not None:
-                dg[j], dstate = stepper.local_step_derivative(stepper.localize(q[j]), state, seeds[j], dstate)
+                dg[j], dstate = stepper.local_step_derivative(stepper.localize(q[j]), state, seeds[j], dstate,
+                                                              **step[j])
             state = f.commit(q[j], v[j], state) if self.stateful else state
         change = 0.0
         if self.stateful:
@@ -451,14 +475,15 @@ class HarmonicBalance:
         if not jacobian:
             return AFTResult(F, state_change=change, state=state)
         if hook is not None:
+            PG = np.einsum("hj,jsm->hsm", P, dg, optimize=on_dofs)    # (2H+1, s, m)
             if on_dofs:                           # dg (N, s, nz): the local force's derivative along z
-                J = np.einsum("sa,hsm->ham", hook, np.einsum("hj,jsm->hsm", P, dg, optimize=True),
-                              optimize=True).reshape(nz, nz)
+                J = np.einsum("sa,hsm->ham", hook, PG[..., :m_z], optimize=True).reshape(nz, nz)
+                dW = (PG[..., m_z] @ hook).reshape(-1) if velocity else np.zeros(nz)
             else:
-                J_local = np.einsum("hj,jam->ham", P, dg).reshape(basis.size * stepper.n_local, -1)
                 Lk = self._kron(self._eye, hook)
-                J = Lk.T @ J_local @ Lk
-            return AFTResult(F, J, np.zeros(nz), change, state)
+                J = Lk.T @ PG[..., :m_z].reshape(basis.size * s, -1) @ Lk
+                dW = np.asarray(Lk.T @ PG[..., m_z].reshape(-1)).reshape(-1) if velocity else np.zeros(nz)
+            return AFTResult(F, J, dW, change, state)
         J, dW = self._aft_jacobian(Kt, Ct, omega, v)
         return AFTResult(F, J, dW, change, state)
 

@@ -127,7 +127,8 @@ def calibrate_law_parameter(model: PrestressedModel, name: str, target_hz: float
 
 
 def clamped_iwan_joint(system, displacement, state, supports, *, friction_coefficient: float, chi: float,
-                       beta: float, closing: float = 0.0, closing_friction: float = 0.0):
+                       beta: float, closing: float = 0.0, closing_friction: float = 0.0,
+                       closing_damping: float = 0.0):
     """``(system, q0, z0)``: ``system``'s ``dry_friction`` joint replaced by the ``clamped_iwan`` law about a
     preload (``displacement``, ``state``), at its static equilibrium.
 
@@ -139,7 +140,7 @@ def clamped_iwan_joint(system, displacement, state, supports, *, friction_coeffi
     ``beta``: the Iwan density's exponent and the weight of its delta (:class:`~femrom.fem.ClampedIwanLaw`);
     the normal and tangential stiffnesses are the dry-friction law's. ``closing``: ``kappa``, points open at the
     preload close again under the normal penalty ``kappa k_n`` (the law's ``closing``; 0: they stay open), with Coulomb
-    coefficient ``closing_friction``.
+    coefficient ``closing_friction`` and the normal dashpot ``closing_damping`` ``c_n`` [Pa s/m] (the law's; 0: none).
     """
     joint = system.nonlinear
     law = joint.law.parameters()
@@ -147,7 +148,7 @@ def clamped_iwan_joint(system, displacement, state, supports, *, friction_coeffi
     clamped = clamped_state(gaps, state, normal_stiffness=law["normal_stiffness"],
                             friction_coefficient=friction_coefficient)
     iwan = ClampedIwanLaw(law["normal_stiffness"], law["tangential_stiffness"], chi, beta, closing=closing,
-                          closing_friction=closing_friction)
+                          closing_friction=closing_friction, closing_damping=closing_damping)
     force = JointForce.from_parameters({**joint.parameters(), "law": iwan.parameters()})
     model = dataclasses.replace(system, nonlinear=force)
     static = solve_static(model, system.load, supports=supports, state=clamped_iwan_state(iwan, gaps, clamped),

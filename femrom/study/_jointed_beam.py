@@ -236,13 +236,14 @@ class JointedBeamModel:
     def measured_range(self, calibrated: CalibratedBeam, joint: "MeasuredRangeJoint", damping_ratio: float, *,
                        attached: bool = True):
         """``(reduced, z0)``: the full model with the ``clamped_iwan`` joint of ``joint`` (reclosing points
-        included) at its static equilibrium about the preload, Galerkin on the modes (:meth:`reduced`, every
+        included, with their normal dashpot ``joint.closing_damping``) at its static equilibrium about the preload, Galerkin on the modes (:meth:`reduced`, every
         pair), and with ``attached`` the shaker's mass on input 1 (:func:`with_attached_mass`)."""
         beam = calibrated.beam
         model, q0, z0 = clamped_iwan_joint(calibrated.system, beam.preload.displacement, beam.preload.state,
                                            calibrated.left_face, friction_coefficient=joint.friction_coefficient,
                                            chi=joint.chi, beta=joint.beta, closing=joint.closing,
-                                           closing_friction=joint.friction_coefficient)
+                                           closing_friction=joint.friction_coefficient,
+                                           closing_damping=joint.closing_damping)
         reduced = self.reduced(calibrated, model, q0, z0, damping_ratio)
         return (with_attached_mass(reduced, 1, joint.shaker_mass) if attached else reduced), z0
 
@@ -259,19 +260,35 @@ class JointedBeamModel:
         return modes, epmc_backbone(modes, quantity="acceleration", output=2)
 
     def fit_measured_range(self, calibrated: CalibratedBeam, response_controlled, hammer, damping_ratio: float, *,
-                           start: MeasuredRangeJoint | None = None, evaluations: int = 45, progress=print) -> dict:
-        """The :class:`MeasuredRangeJoint`'s ``mu``, ``chi``, ``kappa`` (``beta`` and the shaker mass as in
-        ``start``) fitted on two measured backbones at acc3 together: the response-controlled stepped
-        sine's (:func:`~femrom.post.phase_resonance_backbone`, with the shaker's mass) and the hammer's
-        (:func:`~femrom.post.measured_backbone` of acc3 at 2.5, 5, 10 and 14 m/s^2, without it).
+                           start: MeasuredRangeJoint | None = None, evaluations: int = 45, progress=print,
+                           parameters=("friction_coefficient", "chi", "closing"), samples: int | None = None) -> dict:
+        """The :class:`MeasuredRangeJoint`'s ``parameters`` (default ``mu``, ``chi``, ``kappa``; the others, ``beta``
+        and the shaker mass as in ``start``) fitted on two measured backbones at acc3 together: the
+        response-controlled stepped sine's (:func:`~femrom.post.phase_resonance_backbone`, with the shaker's mass)
+        and the hammer's (:func:`~femrom.post.measured_backbone` of acc3 at 2.5, 5, 10 and 14 m/s^2, without it).
+
+        ``parameters``: any of ``friction_coefficient``, ``chi``, ``closing`` and ``closing_damping``
+        (:data:`RANGE_FIT_PARAMETERS`), fitted as ``log mu``, ``logit((chi + 1) / 2)`` (``-1 < chi < 1``),
+        ``log kappa`` and ``log c_n`` (``closing`` and ``closing_damping`` must then start above 0); the
+        initial simplex steps ``mu``, ``kappa`` and ``c_n`` by a factor 0.5 and the logit by 1. ``samples``: EPMC's
+        samples per period (default 8, :func:`~femrom.integrators.default_samples`); the dashpot acts over the short
+        contacts of the reclosing points, which 8 samples resolve poorly: ask for more with ``closing_damping``
+        (measured on the default model at 27-90 m/s^2: the dashpot's first-order damping on 8 samples is 0.81-1.69
+        times the period's integral, on 64 samples 1.00-1.02; a backbone costs about 14 s with 8 samples and
+        130-165 s with 64 on 2 cores).
 
         Each evaluation re-solves the full model's equilibrium under the joint, projects it on the modes
         (every pair) and runs EPMC (H = 1) of mode 1 on the modal model, with and without the shaker's
         mass (:meth:`measured_range_backbone`; about 15-40 s on 2 cores). The misfit: frequency errors
         over 0.1 Hz and logs of the damping ratios' quotients over ``log 1.2`` (the issue's tolerances),
-        one sum of squares; Nelder-Mead on ``log mu``, ``logit((chi + 1) / 2)`` (``-1 < chi < 1``) and
-        ``log kappa`` from ``start``, at most ``evaluations`` evaluations. Returns the best joint, its misfit, the history and the per-level errors."""
+        one sum of squares; Nelder-Mead from ``start``, at most ``evaluations`` evaluations. Returns the best
+        joint, its misfit, the history, the per-level errors and the fitted ``parameters``."""
+        names = _range_fit_parameters(parameters)
         start = start or MeasuredRangeJoint()
+        for name in names:
+            if name in ("closing", "closing_damping") and not getattr(start, name) > 0:
+                raise FemromValueError(f"fit_measured_range: {name} is fitted on a log scale; start it above 0, "
+                                       f"got {getattr(start, name)!r}")
         a_rc = np.asarray(response_controlled.amplitude)
         a_h = np.array([2.5, 5.0, 10.0, 14.0])
         f_h, z_h = hammer.at_amplitude(a_h)
@@ -283,13 +300,13 @@ class JointedBeamModel:
                     np.interp(np.log(amplitudes), la, backbone.damping_ratio))
 
         def misfit(x):
-            joint = dataclasses.replace(start, friction_coefficient=float(np.exp(x[0])),
-                                        chi=float(-1.0 + 2.0 / (1.0 + np.exp(-x[1]))), closing=float(np.exp(x[2])))
+            joint = dataclasses.replace(start, **{name: RANGE_FIT_PARAMETERS[name][1](value)
+                                                  for name, value in zip(names, x)})
             free, z0 = self.measured_range(calibrated, joint, damping_ratio, attached=False)
             shaker = with_attached_mass(free, 1, joint.shaker_mass)
             try:
-                f, z = at(self.measured_range_backbone(shaker, z0)[1], a_rc)
-                f0, z0h = at(self.measured_range_backbone(free, z0)[1], a_h)
+                f, z = at(self.measured_range_backbone(shaker, z0, samples=samples)[1], a_rc)
+                f0, z0h = at(self.measured_range_backbone(free, z0, samples=samples)[1], a_h)
             except FemromError as exc:
                 progress(f"  fit {len(history) + 1}: {joint} failed ({exc})")
                 return 1e6
@@ -300,21 +317,19 @@ class JointedBeamModel:
             history.append({"misfit": value, **joint.parameters(), "frequency_hz": f.tolist(),
                             "damping_ratio": z.tolist(), "hammer_frequency_hz": f0.tolist(),
                             "hammer_damping_ratio": z0h.tolist()})
-            progress(f"  fit {len(history)}: mu {joint.friction_coefficient:.3f}, chi {joint.chi:+.3f}, "
-                     f"kappa {joint.closing:.3g}: misfit {value:.2f}")
+            shown = ", ".join(f"{RANGE_FIT_PARAMETERS[name][3]} {getattr(joint, name):.4g}" for name in names)
+            progress(f"  fit {len(history)}: {shown}: misfit {value:.2f}")
             return value
 
         tic = time.perf_counter()
-        x0 = np.array([np.log(start.friction_coefficient), np.log((1.0 + start.chi) / (1.0 - start.chi)),
-                       np.log(start.closing)])
-        simplex = [x0] + [x0 + step for step in np.diag([np.log(0.5), 1.0, np.log(0.5)])]
+        x0 = np.array([RANGE_FIT_PARAMETERS[name][0](getattr(start, name)) for name in names])
+        simplex = [x0] + [x0 + step for step in np.diag([RANGE_FIT_PARAMETERS[name][2] for name in names])]
         minimize(misfit, x0, method="Nelder-Mead",
                  options={"maxfev": evaluations, "xatol": 1e-2, "fatol": 1e-2, "initial_simplex": simplex})
         best = min(history, key=lambda h: h["misfit"])
-        joint = dataclasses.replace(start, friction_coefficient=best["friction_coefficient"], chi=best["chi"],
-                                    closing=best["closing"])
+        joint = dataclasses.replace(start, **{name: best[name] for name in names})
         return {"joint": joint, "misfit": best["misfit"], "evaluations": len(history), "history": history,
-                "seconds": time.perf_counter() - tic,
+                "seconds": time.perf_counter() - tic, "parameters": list(names),
                 "fitted_on": f"response-controlled stepped sine at acc3 {a_rc.min():.3g}-{a_rc.max():.3g} m/s^2 "
                              f"and the hammer backbone at acc3 {a_h[0]:g}-{a_h[-1]:g} m/s^2"}
 
@@ -364,6 +379,31 @@ def modal_qsma(reduced, z0, amplitudes, damping_ratio: float):
     return with_linear_damping(result.backbone(0), damping_ratio)
 
 
+#: The :class:`MeasuredRangeJoint` parameters :meth:`JointedBeamModel.fit_measured_range` can fit: ``name ->
+#: (to the fit's variable, back, the initial simplex's step, the label)``.
+RANGE_FIT_PARAMETERS = {
+    "friction_coefficient": (np.log, lambda x: float(np.exp(x)), np.log(0.5), "mu"),
+    "chi": (lambda chi: np.log((1.0 + chi) / (1.0 - chi)), lambda x: float(-1.0 + 2.0 / (1.0 + np.exp(-x))), 1.0,
+            "chi"),
+    "closing": (np.log, lambda x: float(np.exp(x)), np.log(0.5), "kappa"),
+    "closing_damping": (np.log, lambda x: float(np.exp(x)), np.log(0.5), "c_n"),
+}
+
+
+def _range_fit_parameters(parameters) -> tuple:
+    """``parameters`` checked: a non-empty sequence of distinct names of :data:`RANGE_FIT_PARAMETERS`."""
+    known = ", ".join(RANGE_FIT_PARAMETERS)
+    names = (parameters,) if isinstance(parameters, str) else tuple(parameters)
+    if not names:
+        raise FemromValueError(f"fit_measured_range: parameters must name at least one of {known}")
+    for name in names:
+        if name not in RANGE_FIT_PARAMETERS:
+            raise FemromValueError(f"fit_measured_range: parameters must be among {known}, got {name!r}")
+    if len(set(names)) != len(names):
+        raise FemromValueError(f"fit_measured_range: parameters must be distinct, got {list(names)}")
+    return names
+
+
 @dataclass(frozen=True)
 class MeasuredRangeJoint:
     r"""The joint that covers the measured range, 5-80 m/s^2 at acc3, and the shaker's attachment.
@@ -378,7 +418,9 @@ class MeasuredRangeJoint:
     shaker patch (the stinger and force gauge), read off the data, not fitted: the shaker test's
     phase-resonance frequency at 5 m/s^2 lies 0.107 Hz below the hammer test's at the same acc3
     amplitude, and ``Delta m = 2 m_eff Delta f / f`` with the modal mass at acc3 the test gives at
-    resonance (``m_eff = F / (2 zeta A) = 1.95`` kg) is 5.2 g.
+    resonance (``m_eff = F / (2 zeta A) = 1.95`` kg) is 5.2 g. ``closing_damping`` [Pa s/m]: ``c_n``, the normal
+    dashpot of the reclosed points (the law's ``closing_damping``: ``t_n = min(kappa k_n g_n + c_n gdot_n, 0)``);
+    0 (default, not fitted yet): none.
     """
 
     friction_coefficient: float = 0.3206
@@ -386,11 +428,13 @@ class MeasuredRangeJoint:
     beta: float = 0.3
     closing: float = 2.986e-4
     shaker_mass: float = 5.2e-3
+    closing_damping: float = 0.0
 
     def __post_init__(self):
         for name, ok, valid in (("friction_coefficient", lambda v: v > 0, "> 0"), ("chi", lambda v: v > -1, "> -1"),
                                 ("beta", lambda v: v >= 0, ">= 0"), ("closing", lambda v: v >= 0, ">= 0"),
-                                ("shaker_mass", lambda v: v >= 0, ">= 0 [kg]")):
+                                ("shaker_mass", lambda v: v >= 0, ">= 0 [kg]"),
+                                ("closing_damping", lambda v: v >= 0, ">= 0 [Pa s/m]")):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and np.isfinite(value) and ok(value)):
                 raise FemromValueError(f"MeasuredRangeJoint: {name} must be {valid}, got {value!r}")
