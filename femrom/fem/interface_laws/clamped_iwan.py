@@ -35,26 +35,29 @@ near the edge of the clamped region close in bending and stiffen the joint at la
 amplitudes (docs/cases/jointed_beam.md). The penalty is kinked: the trapezoidal rule can gain energy when a
 point opens inside a step, as with ``dry_friction``; harmonic balance has no such issue.
 
-``closing_damping = c_n > 0`` adds a normal dashpot at the reclosed points (a unilateral
-Kelvin-Voigt contact, as Hunt-Crossley's: never adhesive): with ``gdot_n`` the normal gap's rate,
+``closing_damping = lambda > 0`` adds a normal dashpot at the reclosed points, Hunt and Crossley's
+(1975) penetration-weighted one: with ``g_n`` the normal gap, ``gdot_n`` its rate and
+``p = -g_n >= 0`` the penetration,
 
 .. math::
 
-    t_n = \min\big(\kappa k_n g_n + c_n \dot g_n,\ 0\big) \qquad (g_n < 0,\ \text{reclosed}),
+    t_n = \min\big(\kappa k_n g_n - \lambda g_n \dot g_n,\ 0\big) \qquad (g_n < 0,\ \text{reclosed}),
 
-so a point that separates faster than ``kappa k_n (-g_n) / c_n`` carries no traction until its
-gap opens. The friction of a reclosed point keeps the elastic pressure ``kappa k_n (-g_n)`` (its
+the compressive traction ``kappa k_n p + lambda p pdot`` (Hunt-Crossley's ``k delta + lambda delta
+delta_dot`` with a linear spring), ``lambda`` in [Pa s/m^2]. It is the standard impact-damping form: the
+damping force grows with the penetration, so the traction is continuous where a point touches
+(zero at ``p = 0``, whatever the rate) as well as where it separates, and a touch adds no jump to
+harmonic balance's force. It is never adhesive: a point that separates faster than
+``kappa k_n / lambda`` (``pdot < -kappa k_n / lambda``) carries no traction until its gap opens.
+The friction of a reclosed point keeps the elastic pressure ``kappa k_n (-g_n)`` (its
 slip limit ``mu_c kappa k_n (-g_n) f_m``): the sliders' state then depends on the gaps alone, as
 without the dashpot, and the dashpot dissipates only normally, ``(t_n - kappa k_n g_n) gdot_n >= 0``
-per unit area (:meth:`ClampedIwanLaw.damping_power`). The law is then velocity dependent
-(:attr:`ClampedIwanLaw.velocity_dependent`): :meth:`ClampedIwanLaw.evaluate_rate` gives the traction
-with the rate tangent ``dt / dgdot`` (s, 3, 3) (``c_n`` in the normal entry of the damped points)
-and :meth:`ClampedIwanLaw.step_derivative` takes the rate's derivative. With ``c_n = 0`` (default)
-nothing changes. The traction jumps by ``c_n gdot_n`` where a point touches while closing (the
-Kelvin-Voigt contact's impact; it is continuous where a point separates): harmonic balance's force is
-then discontinuous in the coefficients where a sample sits at a touch, and Newton can stall there
-(seen on a two-pair model at one of twenty amplitude and coefficient pairs with 32 samples a period,
-none with 128).
+per unit area (``-lambda g_n gdot_n^2`` where it does not pull; :meth:`ClampedIwanLaw.damping_power`).
+The law is then velocity dependent (:attr:`ClampedIwanLaw.velocity_dependent`):
+:meth:`ClampedIwanLaw.evaluate_rate` gives the traction with the gap tangent's normal entry
+``kappa k_n - lambda gdot_n`` and the rate tangent ``dt / dgdot`` (s, 3, 3) (``-lambda g_n = lambda p``
+in the normal entry of the damped points), and :meth:`ClampedIwanLaw.step_derivative` takes the
+rate's derivative. With ``lambda = 0`` (default) nothing changes.
 
 Parameters
 ----------
@@ -78,8 +81,8 @@ closing_friction : float
     Its sliders are the closed points' scaled by ``kappa`` (stiffness ``kappa k_m``, macro-slip
     traction ``mu_c kappa k_n (-g_n)``, following the penetration).
 closing_damping : float
-    ``c_n >= 0`` [Pa s/m]: the normal dashpot of a reclosed point (default 0: none); only with
-    ``closing > 0``.
+    ``lambda >= 0`` [Pa s/m^2]: the Hunt-Crossley normal dashpot of a reclosed point, traction
+    ``-lambda g_n gdot_n`` (default 0: none); only with ``closing > 0``.
 
 State: (s, N + 1, 2): rows ``0..N-1`` the slider positions ``z_m``, row ``N`` the
 point's ``(tau_s [Pa], c)``; set from a ``dry_friction`` preload by
@@ -253,15 +256,15 @@ class ClampedIwanLaw(InterfaceLaw):
 
     def _dashpot(self, gap, rate, state):
         """``(elastic, total, damped, pulling)`` (s,) of the reclosed points' normal dashpot: the penalty's
-        traction ``kappa k_n g_n``, ``kappa k_n g_n + c_n gdot_n``, where it acts (reclosed, not pulling)
-        and where it would pull (reclosed, total > 0: the traction is zero)."""
+        traction ``kappa k_n g_n``, ``kappa k_n g_n - lambda g_n gdot_n``, where it acts (reclosed, not
+        pulling) and where it would pull (reclosed, total > 0: the traction is zero)."""
         _, g_n = split_gap(gap)
         rate = np.asarray(rate, dtype=float)
         if rate.shape != (g_n.size, 3):
             raise FemromValueError(f"rate must be ({g_n.size}, 3) like the gap, got shape {rate.shape}")
         reclosed = self._reclosed(gap, state)
         elastic = self.closing * self.normal_stiffness * g_n
-        total = elastic + self.closing_damping * rate[:, 2]
+        total = elastic - self.closing_damping * g_n * rate[:, 2]
         pulling = reclosed & (total > 0.0)
         return elastic, total, reclosed & ~pulling, pulling
 
@@ -269,10 +272,11 @@ class ClampedIwanLaw(InterfaceLaw):
         r"""``(traction (s, 3), dt/dgap (s, 3, 3) or None, dt/drate (s, 3, 3) or None)`` at ``gap`` and its rate
         ``rate`` (s, 3) with ``state`` frozen.
 
-        :meth:`evaluate` with the reclosed points' normal dashpot: ``t_n = min(kappa k_n g_n + c_n
-        gdot_n, 0)`` (module docstring); where the sum would pull, ``t_n = 0`` and its derivatives are
-        zero. The rate tangent is ``c_n`` in the ``(n, n)`` entry of the damped points, zero elsewhere;
-        ``None`` (and :meth:`evaluate`'s result, bit for bit) when the law has no dashpot.
+        :meth:`evaluate` with the reclosed points' Hunt-Crossley dashpot: ``t_n = min(kappa k_n g_n - lambda
+        g_n gdot_n, 0)`` (module docstring); where the sum would pull, ``t_n = 0`` and its derivatives are
+        zero. At the damped points the gap tangent's ``(n, n)`` entry is ``kappa k_n - lambda gdot_n`` and
+        the rate tangent's is ``-lambda g_n``, zero elsewhere; ``None`` (and :meth:`evaluate`'s result, bit
+        for bit) when the law has no dashpot.
         """
         traction, D = self.evaluate(gap, state, tangent)
         if not self.velocity_dependent:
@@ -281,14 +285,17 @@ class ClampedIwanLaw(InterfaceLaw):
         traction[:, 2] = np.where(damped, total, np.where(pulling, 0.0, traction[:, 2]))
         if not tangent:
             return traction, None, None
+        g_n, gdot_n = np.asarray(gap, dtype=float)[:, 2], np.asarray(rate, dtype=float)[:, 2]
+        D[:, 2, 2] += np.where(damped, -self.closing_damping * gdot_n, 0.0)
         D[pulling, 2, 2] = 0.0
         C = np.zeros_like(D)
-        C[:, 2, 2] = np.where(damped, self.closing_damping, 0.0)
+        C[:, 2, 2] = np.where(damped, -self.closing_damping * g_n, 0.0)
         return traction, D, C
 
     def damping_power(self, gap, rate, state) -> np.ndarray:
         """(s,) power per unit area the dashpot dissipates, ``(t_n - kappa k_n g_n) gdot_n >= 0`` at the reclosed
-        points (``c_n gdot_n^2`` where it does not pull; zero without a dashpot)."""
+        points (``-lambda g_n gdot_n^2`` where it does not pull, ``-kappa k_n g_n gdot_n`` where it would pull;
+        zero without a dashpot)."""
         if not self.velocity_dependent:
             return np.zeros(np.shape(gap)[0])
         elastic, total, damped, pulling = self._dashpot(gap, rate, state)
@@ -325,10 +332,10 @@ class ClampedIwanLaw(InterfaceLaw):
 
         With a dashpot (:attr:`velocity_dependent`), ``rate`` (s, 3) is the gap's rate (default zero)
         and ``drate`` (s, 3, m) its derivative along the same directions (default zero): a damped point
-        adds ``c_n dgdot_n`` to ``dt_n``, a pulling one has ``dt_n = 0``; the state's derivative does not
-        depend on the rate (the friction keeps the elastic pressure).
+        adds ``-lambda gdot_n dg_n - lambda g_n dgdot_n`` to ``dt_n``, a pulling one has ``dt_n = 0``; the
+        state's derivative does not depend on the rate (the friction keeps the elastic pressure).
         """
-        g_t, g_n, closed, reclosed, k, _, _, ratio, direction, slipping = self._sliders(gap, state)
+        _, g_n, closed, reclosed, k, _, _, ratio, direction, slipping = self._sliders(gap, state)
         N = self.n_elements
         dgap = np.asarray(dgap, dtype=float)
         dstate = np.asarray(dstate, dtype=float)
@@ -343,9 +350,11 @@ class ClampedIwanLaw(InterfaceLaw):
         dtraction[:, :2] = dt.sum(axis=1)
         dtraction[:, 2] = self._normal_stiffness(closed, reclosed)[:, None] * dgap[:, 2]
         if self.velocity_dependent:
-            _, _, damped, pulling = self._dashpot(gap, np.zeros((g_n.size, 3)) if rate is None else rate, state)
+            rate = np.zeros((g_n.size, 3)) if rate is None else np.asarray(rate, dtype=float)
+            _, _, damped, pulling = self._dashpot(gap, rate, state)
+            dtraction[:, 2] += np.where(damped, -self.closing_damping * rate[:, 2], 0.0)[:, None] * dgap[:, 2]
             if drate is not None:
-                dtraction[:, 2] += np.where(damped[:, None], self.closing_damping * np.asarray(drate)[:, 2], 0.0)
+                dtraction[:, 2] += np.where(damped, -self.closing_damping * g_n, 0.0)[:, None] * np.asarray(drate)[:, 2]
             dtraction[pulling, 2] = 0.0
         new = dstate.copy()
         new[:, :N] = np.where(slipping[..., None, None], dg_t - dt / km, dstate[:, :N])
