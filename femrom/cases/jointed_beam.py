@@ -148,7 +148,7 @@ def measured_range_section(config: JointedBeamCase, setup, damping: float, data_
                                         progress=progress)
         joint = fit.pop("joint")
         seconds["fit_measured_range"] = fit["seconds"]
-    dashpot = f", closing damping {joint.closing_damping:.3g} Pa s/m" if joint.closing_damping else ""
+    dashpot = f", closing damping {joint.closing_damping:.3g} Pa s/m^2" if joint.closing_damping else ""
     progress(f"jointed beam: measured-range joint (mu {joint.friction_coefficient:.3g}, chi {joint.chi:+.3g}, "
              f"beta {joint.beta:.3g}, closing {joint.closing:.3g}{dashpot}, shaker mass {1e3 * joint.shaker_mass:.3g} g) "
              "...")

@@ -140,7 +140,8 @@ def clamped_iwan_joint(system, displacement, state, supports, *, friction_coeffi
     ``beta``: the Iwan density's exponent and the weight of its delta (:class:`~femrom.fem.ClampedIwanLaw`);
     the normal and tangential stiffnesses are the dry-friction law's. ``closing``: ``kappa``, points open at the
     preload close again under the normal penalty ``kappa k_n`` (the law's ``closing``; 0: they stay open), with Coulomb
-    coefficient ``closing_friction`` and the normal dashpot ``closing_damping`` ``c_n`` [Pa s/m] (the law's; 0: none).
+    coefficient ``closing_friction`` and the Hunt-Crossley normal dashpot ``closing_damping`` ``lambda`` [Pa s/m^2]
+    (the law's, ``t_n = min(kappa k_n g_n - lambda g_n gdot_n, 0)``; 0: none).
     """
     joint = system.nonlinear
     law = joint.law.parameters()

@@ -269,13 +269,13 @@ class JointedBeamModel:
 
         ``parameters``: any of ``friction_coefficient``, ``chi``, ``closing`` and ``closing_damping``
         (:data:`RANGE_FIT_PARAMETERS`), fitted as ``log mu``, ``logit((chi + 1) / 2)`` (``-1 < chi < 1``),
-        ``log kappa`` and ``log c_n`` (``closing`` and ``closing_damping`` must then start above 0); the
-        initial simplex steps ``mu``, ``kappa`` and ``c_n`` by a factor 0.5 and the logit by 1. ``samples``: EPMC's
+        ``log kappa`` and ``log lambda`` (``closing`` and ``closing_damping`` must then start above 0); the
+        initial simplex steps ``mu``, ``kappa`` and ``lambda`` by a factor 0.5 and the logit by 1. ``samples``: EPMC's
         samples per period (default 8, :func:`~femrom.integrators.default_samples`); the dashpot acts over the short
-        contacts of the reclosing points, which 8 samples resolve poorly: ask for more with ``closing_damping``
-        (measured on the default model at 27-90 m/s^2: the dashpot's first-order damping on 8 samples is 0.81-1.69
-        times the period's integral, on 64 samples 1.00-1.02; a backbone costs about 14 s with 8 samples and
-        130-165 s with 64 on 2 cores).
+        contacts of the reclosing points, which 8 samples resolve poorly: ask for 16 with ``closing_damping``
+        (measured on the default model with ``closing_damping = 6e12``: the backbone's damping at 36-90 m/s^2 is
+        within 2 % of 64 samples' with 16, within 8 % with 8; a backbone costs about 10 s with 8 samples, 43 s with
+        16 and 112 s with 64 on 2 cores).
 
         Each evaluation re-solves the full model's equilibrium under the joint, projects it on the modes
         (every pair) and runs EPMC (H = 1) of mode 1 on the modal model, with and without the shaker's
@@ -386,7 +386,7 @@ RANGE_FIT_PARAMETERS = {
     "chi": (lambda chi: np.log((1.0 + chi) / (1.0 - chi)), lambda x: float(-1.0 + 2.0 / (1.0 + np.exp(-x))), 1.0,
             "chi"),
     "closing": (np.log, lambda x: float(np.exp(x)), np.log(0.5), "kappa"),
-    "closing_damping": (np.log, lambda x: float(np.exp(x)), np.log(0.5), "c_n"),
+    "closing_damping": (np.log, lambda x: float(np.exp(x)), np.log(0.5), "lambda"),
 }
 
 
@@ -418,9 +418,9 @@ class MeasuredRangeJoint:
     shaker patch (the stinger and force gauge), read off the data, not fitted: the shaker test's
     phase-resonance frequency at 5 m/s^2 lies 0.107 Hz below the hammer test's at the same acc3
     amplitude, and ``Delta m = 2 m_eff Delta f / f`` with the modal mass at acc3 the test gives at
-    resonance (``m_eff = F / (2 zeta A) = 1.95`` kg) is 5.2 g. ``closing_damping`` [Pa s/m]: ``c_n``, the normal
-    dashpot of the reclosed points (the law's ``closing_damping``: ``t_n = min(kappa k_n g_n + c_n gdot_n, 0)``);
-    0 (default, not fitted yet): none.
+    resonance (``m_eff = F / (2 zeta A) = 1.95`` kg) is 5.2 g. ``closing_damping`` [Pa s/m^2]: ``lambda``, the
+    Hunt-Crossley normal dashpot of the reclosed points (the law's ``closing_damping``: ``t_n = min(kappa k_n g_n -
+    lambda g_n gdot_n, 0)``, continuous at a touch); 0 (default, not fitted yet): none.
     """
 
     friction_coefficient: float = 0.3206
@@ -434,7 +434,7 @@ class MeasuredRangeJoint:
         for name, ok, valid in (("friction_coefficient", lambda v: v > 0, "> 0"), ("chi", lambda v: v > -1, "> -1"),
                                 ("beta", lambda v: v >= 0, ">= 0"), ("closing", lambda v: v >= 0, ">= 0"),
                                 ("shaker_mass", lambda v: v >= 0, ">= 0 [kg]"),
-                                ("closing_damping", lambda v: v >= 0, ">= 0 [Pa s/m]")):
+                                ("closing_damping", lambda v: v >= 0, ">= 0 [Pa s/m^2]")):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and np.isfinite(value) and ok(value)):
                 raise FemromValueError(f"MeasuredRangeJoint: {name} must be {valid}, got {value!r}")
