@@ -14,6 +14,8 @@ Candidates, on the interface pairs open at the preload (the ones that re-close i
 
 - ``dashpot``: a normal dashpot while a point is in contact, traction ``c_n d(pen)/dt``, per unit
   ``c_n`` [Pa s/m];
+- ``hunt_crossley``: Hunt and Crossley's penetration-weighted dashpot, traction ``lambda pen d(pen)/dt``
+  (the law's ``closing_damping``), per unit ``lambda`` [Pa s/m^2];
 - ``loss_factor``: a hysteretic (loss-factor) normal contact on the re-closing penalty
   ``kappa k_n``, ``W = pi eta sum_i A_i kappa k_n |pen_i1|^2`` (``pen_i1``: the first harmonic of the
   penetration), per unit ``eta``;
@@ -66,7 +68,8 @@ def unit_dampings(force, joint_law, kappa, areas, reclosing, Z, omega, a):
     A = areas[reclosing]
     pen = np.maximum(-g, 0.0)
     rate = np.gradient(pen, theta, axis=0) * omega
-    out = {"dashpot": float(np.sum(A[None] * rate**2) * period / SAMPLES / scale)}
+    out = {"dashpot": float(np.sum(A[None] * rate**2) * period / SAMPLES / scale),
+           "hunt_crossley": float(np.sum(A[None] * pen * rate**2) * period / SAMPLES / scale)}
     first = 2.0 / SAMPLES * np.abs(np.fft.rfft(pen, axis=0)[1])
     out["loss_factor"] = float(np.pi * np.sum(A * kappa * joint_law["normal_stiffness"] * first**2) / scale)
     g_rate = np.gradient(g, theta, axis=0) * omega
