@@ -267,9 +267,12 @@ def fused_step(scheme, system, dt: float, effective_matrix, implicit):
 
 
 #: The chord march holds its Jacobian into the next step when the step converged in at most this many updates
-#: (what a Jacobian formed at the step's first iterate takes from the extrapolated predictor); a step that took
-#: more forms a new one at the next step's first iterate. ``0``: a new Jacobian every step.
-HOLD_UPDATES = 2
+#: (2: what a Jacobian formed at the step's first iterate takes from the extrapolated predictor); a step that
+#: took more forms a new one at the next step's first iterate. ``0`` (the default): a new Jacobian every step.
+#: Holding it saves Jacobians but costs updates (the held one contracts less well): on the default SpML shapes
+#: at r = 8 (``benchmarks/spml_rom_step.py``) 2.29 updates and 0.29 Jacobians a step against 2.00 and 1.00,
+#: the same time; at r = 12 2.44 and 0.45, 9 % slower.
+HOLD_UPDATES = 0
 
 #: The degree of the polynomial that extrapolates the learned terms' force into the chord march's predictor.
 EXTRAPOLATION_ORDER = 3
@@ -340,10 +343,12 @@ class FusedDiscreteGradientStep:
 
         ``scheme.newton.refactor_ratio = 0``: Newton at every iterate, the steps of :meth:`__call__` (and of
         the numpy reference) to round-off, with their iteration counts. Otherwise (the default ``0.1``) the
-        chord iteration: the Jacobian held across steps while each update is at most ``refactor_ratio``
-        times the one before (Newton for the rest of a step that contracts more slowly), from the quadratic
-        extrapolation of the previous steps' midpoint velocities; the same fixed point to the same update
-        test, a failing step redone by Newton. A failing step raises :class:`ConvergenceError` or
+        chord iteration: one Jacobian a step (formed at its first iterate; or held across steps,
+        :data:`HOLD_UPDATES`), values and gradients at the other iterates, while each update is at most
+        ``refactor_ratio`` times the one before (Newton for the rest of a step that contracts more slowly),
+        from a predictor that solves the step's linear part exactly with the learned force extrapolated
+        from the previous steps; the same fixed point to the same update test, a failing step redone by
+        Newton from the reference's predictor. A failing step raises :class:`ConvergenceError` or
         :class:`NonFiniteState` with its number in ``step``."""
         h, rtol, max_iterations, accelerations = self._scalars
         r, n = q0.size, int(n_steps)
