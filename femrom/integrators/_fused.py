@@ -24,7 +24,9 @@ A model whose nonlinear force is a learned potential of ``q^`` and/or a learned 
 function of ``q^'`` (SpML's :class:`~femrom.inference.LearnedPotential` and
 :class:`~femrom.inference.LearnedDissipation`, which offer a :class:`~femrom.fem.CompiledScalar`)
 steps the discrete-gradient scheme the same way (:class:`FusedDiscreteGradientStep`, the kernel
-``discrete_gradient_step`` of :func:`femrom.fem.compiled_scalar_kernels`).
+``discrete_gradient_step`` of :func:`femrom.fem.compiled_scalar_kernels`), and a whole trajectory in one
+call (:meth:`FusedDiscreteGradientStep.march`, ``discrete_gradient_march``), by default by a chord
+iteration with one Jacobian a step.
 
 The numpy path stays the reference: the scheme takes it whenever the force offers no compiled
 joint, and at every step where the compiled laws are switched off

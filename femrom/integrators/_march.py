@@ -10,8 +10,9 @@ prediction's inputs, a controller's moves), and the states are kept in arrays:
 - :func:`march`: a whole trajectory with any registered scheme. A linear model with
   dense operators runs the scheme's precomputed step map, one small matrix-vector
   product a step (:func:`run_linear`); a model whose fused step can march (learned
-  sliders, :mod:`._fused`) runs in one compiled call; any other model calls the
-  scheme's ``step``;
+  sliders under the Newmark family, learned potentials and dissipations under the
+  discrete-gradient scheme, :mod:`._fused`) runs in one compiled call; any other model
+  calls the scheme's ``step``;
 - :func:`march_batch`: ``B`` runs of one model (different inputs, starts, force states) at
   once; on a reduced model with a compiled joint all their steps go in one compiled call;
 - :class:`Stepper`: one step at a time, ``y = stepper.step(u)``, for a controller
