@@ -4,7 +4,8 @@ A scalar function ``phi(x) = T3[x,x,x] + T4[x,x,x,x] + sum |a_k . x|^3 / 3 + sum
 + N(x) - N(0) - grad N(0) . x`` (any part may be absent) is a tuple of arrays, :attr:`CompiledScalar.parts`;
 :func:`scalar_vgh` returns its value and writes its gradient and Hessian, the same formulas as the
 numpy reference (:mod:`femrom.inference._networks`), equal to round-off: the symmetric tensors contracted on
-their first index in sweeps over contiguous slices, the layers' products as BLAS products, ``tanh`` by one
+their leading indices in sweeps over contiguous slices (``T4[x, x, ., .]`` over the index pairs ``i <= l``
+once), the layers' products as BLAS products, ``tanh`` by one
 ``exp`` (:func:`_tanh`), the network's Hessian forward over reverse, ``J^T diag(delta sigma'') J`` with the layer Jacobians
 ``J_l = W_l diag(sigma'_{l-1}) J_{l-1} + U_l``, formed only when the Hessian is asked for. A step allocates
 its workspaces once (:func:`_workspace`) and evaluates values alone (no gradient, no Jacobian) where only
@@ -178,31 +179,31 @@ def _vgh(x, parts, mode, grad, hess, work):
             for j in range(r):
                 hess[i, j] = 0.0
     # -- monomials: B3 = T3[x,.,.], B4 = T4[x,x,.,.]; the tensors are symmetric (SymmetricPolynomial), so the
-    # contractions run on the first index: sums of x_l times the contiguous slices T[l] (numpy contracts the
-    # last index; equal to round-off, and twice as fast as a product with rows of length r)
+    # contractions run on the leading indices: sums of coefficients times the contiguous slices T[i] and
+    # T[i, l] (numpy contracts the last index; equal to round-off)
     if T3.shape[0] > 0:
         mono = work[3]
         n3, n2 = r * r * r, r * r
-        y4 = mono[0:n3]
         b4 = mono[n3:n3 + n2]
         b3 = mono[n3 + n2:n3 + 2 * n2]
-        F4 = T4.reshape((r, n3))
+        F4 = T4.reshape((n2, n2))
         F3 = T3.reshape((r, n2))
-        c = x[0]
-        for i in range(n3):
-            y4[i] = c * F4[0, i]
-        for l in range(1, r):
-            c = x[l]
-            for i in range(n3):
-                y4[i] += c * F4[l, i]
+        # B4 = sum_{i <= l} (2 - [i = l]) x_i x_l T4[i, l, ., .]: the symmetric pairs once (r (r + 1) / 2 sweeps
+        # of length r^2 instead of r^4 + r^3 products)
+        for i in range(n2):
+            b4[i] = 0.0
+        for i in range(r):
+            for l in range(i, r):
+                c = x[i] * x[l] * (1.0 if l == i else 2.0)
+                row = i * r + l
+                for j in range(n2):
+                    b4[j] += c * F4[row, j]
         c = x[0]
         for i in range(n2):
-            b4[i] = c * y4[i]
             b3[i] = c * F3[0, i]
         for l in range(1, r):
             c = x[l]
             for i in range(n2):
-                b4[i] += c * y4[l * n2 + i]
                 b3[i] += c * F3[l, i]
         for a in range(r):
             c3, c4 = 0.0, 0.0
