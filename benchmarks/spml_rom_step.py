@@ -1,21 +1,31 @@
-"""Cost of one reduced step of an SpML ROM (discrete-gradient scheme): the fused compiled step against
-the numpy step and against a linear ROM step, and the compiled kernels' first-call cost.
+"""Cost of one reduced step of an SpML ROM (discrete-gradient scheme): the compiled march (the chord
+iteration and Newton), the fused compiled step called step by step, the numpy step and a linear ROM step,
+and the compiled kernels' first-call cost.
 
 The model: the default networks (potential: monomials of degree 3 and 4 and a tanh MLP 32 x 32;
 dissipation: convex powers and a softplus network of width 16), random weights exported from the
 training module (``spml_module(r).export()`` after a random perturbation, as ``spml_step.py``),
 a random SPD stiffness and light damping, ringing down from a random state; r = 4, 8, 12.
-Three paths, ``--steps`` steps each, in alternating blocks (``--repeats``) in one process:
+Five paths, ``--steps`` steps each, in alternating blocks (``--repeats``) in one process, each through
+:func:`femrom.integrators.march` (what ``predict`` calls):
 
-- ``linear``: the same ROM without the learned terms (the midpoint rule, one solve a step);
+- ``linear``: the same ROM without the learned terms (the midpoint rule's linear map);
 - ``numpy``: the reference (``use_compiled_laws(False)``): the terms' numpy value, gradient and
   Hessian at the two Gauss nodes, the Newton loop in Python;
-- ``compiled``: the whole step in one numba call (:class:`femrom.integrators._fused.FusedDiscreteGradientStep`).
+- ``step``: the fused compiled step (:class:`femrom.integrators._fused.FusedDiscreteGradientStep`), one
+  numba call a step from the Python loop (``march(..., whole=False)``; the path before the march);
+- ``newton``: the whole trajectory in one compiled call, Newton at every iterate (``Newton(refactor_ratio=0)``:
+  the reference's iteration);
+- ``march``: the default, the whole trajectory in one compiled call by the chord iteration (one Jacobian a
+  step or fewer, the predictor from the extrapolated learned force).
 
-Reported: the median over blocks of the stepping time per step (``predict``'s ``stepping_seconds``),
-its spread (min-max over blocks), the Newton iterations per step, and the ratios numpy / compiled and
-compiled / linear. The compile cost: the first ``predict`` of one step in a fresh process with an empty
-numba cache directory (cold) and again in a second fresh process on that cache (warm).
+Reported: the median over blocks of the stepping time per step (``march``'s ``stepping_seconds``), its
+spread (min-max over blocks), the Newton iterations (updates) and Jacobians per step (a Jacobian: the
+potential's Hessian at the two Gauss nodes and the dissipation's at ``v_m``), the ratios, the largest
+difference of the chord march's ``q`` from the numpy reference's relative to its largest entry, and
+whether the Newton march takes the reference's iterations. The compile cost: the first ``predict`` of
+one step in a fresh process with an empty numba cache directory (cold) and again in a second fresh
+process on that cache (warm).
 
 Run ``python -m benchmarks.spml_rom_step``; writes ``benchmarks/results/spml_rom_step.json``.
 """
@@ -64,16 +74,24 @@ def spml_rom(r: int, seed: int = 0):
     return SecondOrderROM(linear.with_terms(*terms)), SecondOrderROM(linear), q0, np.zeros(r), len(terms)
 
 
-def per_step(rom, q0, v0, steps: int, compiled: bool | None):
-    from femrom.fem import use_compiled_laws
+PATHS = ("linear", "numpy", "step", "newton", "march")
 
-    previous = use_compiled_laws(bool(compiled) if compiled is not None else True)
+
+def per_step(rom, linear, q0, v0, steps: int, path: str):
+    """``(seconds, iterations, jacobians)`` per step and the run (``march``'s dict) of one path."""
+    from femrom.fem import use_compiled_laws
+    from femrom.integrators import DiscreteGradient, Newton, march
+
+    scheme = DiscreteGradient(newton=Newton(refactor_ratio=0.0)) if path == "newton" else DiscreteGradient()
+    previous = use_compiled_laws(path != "numpy")
     try:
-        s = rom.predict(DT * np.arange(steps + 1), initial=(q0, v0), scheme="discrete_gradient")
+        model = (linear if path == "linear" else rom).model
+        run = march(model, scheme, DT * np.arange(steps + 1), q0, v0, whole=path != "step")
     finally:
         use_compiled_laws(previous)
-    iterations = s.info.get("newton_iterations", 0)
-    return s.info["stepping_seconds"] / steps, float(np.sum(iterations)) / steps, s
+    iterations = float(np.sum(run["newton_iterations"]))
+    jacobians = float(run.get("jacobians", iterations))      # Newton forms one an iteration
+    return run["stepping_seconds"] / steps, iterations / steps, jacobians / steps, run
 
 
 FIRST_CALL = """
@@ -110,33 +128,38 @@ def main(argv=None) -> int:
     rows = []
     for r in args.sizes:
         rom, linear, q0, v0, n_terms = spml_rom(r)
-        fast, _, s_fast = per_step(rom, q0, v0, 5, True)           # compile / load before timing
-        _, _, s_ref = per_step(rom, q0, v0, args.steps, False)
-        _, _, s_fast = per_step(rom, q0, v0, args.steps, True)
-        difference = float(np.abs(s_fast.q - s_ref.q).max() / np.abs(s_ref.q).max())
-        same_iterations = s_fast.info["newton_iterations"] == s_ref.info["newton_iterations"]
-        times = {"linear": [], "numpy": [], "compiled": []}
-        iterations = {}
+        for path in PATHS:                                          # compile / load before timing
+            per_step(rom, linear, q0, v0, 5, path)
+        runs = {path: per_step(rom, linear, q0, v0, args.steps, path)[3] for path in ("numpy", "newton", "march")}
+        reference = runs["numpy"]
+        difference = float(np.abs(runs["march"]["q"] - reference["q"]).max() / np.abs(reference["q"]).max())
+        same_iterations = runs["newton"]["newton_iterations"] == reference["newton_iterations"]
+        times = {path: [] for path in PATHS}
+        counts = {}
         for _ in range(args.repeats):
-            for name, rom_, compiled in (("linear", linear, None), ("numpy", rom, False), ("compiled", rom, True)):
-                seconds, its, _ = per_step(rom_, q0, v0, args.steps, compiled)
-                times[name].append(seconds)
-                iterations[name] = its
+            for path in PATHS:
+                seconds, its, jacobians, _ = per_step(rom, linear, q0, v0, args.steps, path)
+                times[path].append(seconds)
+                counts[path] = {"iterations": its, "jacobians": jacobians}
         med = {k: float(np.median(v)) for k, v in times.items()}
-        row = {"r": r, "learned_terms": n_terms, "newton_iterations_per_step": iterations["compiled"],
-               "same_iterations": bool(same_iterations), "max_relative_q_difference": difference,
+        row = {"r": r, "learned_terms": n_terms,
+               "newton_iterations_per_step": {p: counts[p]["iterations"] for p in PATHS if p != "linear"},
+               "jacobians_per_step": {p: counts[p]["jacobians"] for p in PATHS if p != "linear"},
+               "potential_hessians_per_step": {p: 2 * counts[p]["jacobians"] for p in PATHS if p != "linear"},
+               "newton_march_same_iterations_as_numpy": bool(same_iterations),
+               "march_max_relative_q_difference": difference,
                **{f"{k}_us": med[k] * 1e6 for k in med},
                **{f"{k}_spread_us": [min(v) * 1e6, max(v) * 1e6] for k, v in times.items()},
-               "numpy_over_compiled": med["numpy"] / med["compiled"],
-               "compiled_over_linear": med["compiled"] / med["linear"]}
+               "numpy_over_march": med["numpy"] / med["march"], "step_over_march": med["step"] / med["march"],
+               "march_over_linear": med["march"] / med["linear"]}
         row["first_call_s"] = first_call(r)
         rows.append(row)
-        print(f"r = {r:2d}: linear {row['linear_us']:6.1f} us, numpy {row['numpy_us']:7.1f} us, compiled "
-              f"{row['compiled_us']:6.1f} us [{row['compiled_spread_us'][0]:.1f}, {row['compiled_spread_us'][1]:.1f}]"
-              f" ({iterations['compiled']:.2f} Newton it./step), numpy/compiled {row['numpy_over_compiled']:5.1f}, "
-              f"compiled/linear {row['compiled_over_linear']:4.1f}; q equal to {difference:.1e}, same iterations "
-              f"{same_iterations}; first call cold {row['first_call_s']['cold']:.1f} s, warm "
-              f"{row['first_call_s']['warm']:.2f} s", flush=True)
+        print(f"r = {r:2d}: " + ", ".join(f"{p} {row[p + '_us']:.1f} us [{row[p + '_spread_us'][0]:.1f}, "
+                                          f"{row[p + '_spread_us'][1]:.1f}]" for p in PATHS), flush=True)
+        print(f"        iterations/step " + ", ".join(f"{p} {counts[p]['iterations']:.2f}" for p in PATHS[1:])
+              + "; Jacobians/step " + ", ".join(f"{p} {counts[p]['jacobians']:.2f}" for p in PATHS[1:])
+              + f"; march q equal to {difference:.1e}, Newton march same iterations {same_iterations}; first call "
+              f"cold {row['first_call_s']['cold']:.1f} s, warm {row['first_call_s']['warm']:.2f} s", flush=True)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps({"date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
                                     "machine": {"platform": platform.platform(), "cpus": os.cpu_count(),

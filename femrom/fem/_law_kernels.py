@@ -86,7 +86,8 @@ class CompiledScalar:
     kernels ``scalar_vgh`` and ``discrete_gradient_step`` of :func:`compiled_scalar_kernels` read:
     ``(T3 (r,r,r), T4 (r,r,r,r), A (n3, r), B (n4, r), widths, has_weight, has_input, bias_offsets,
     weight_offsets, input_offsets, biases, weights, input_weights, output, activation, N(0), grad N(0))``
-    (empty arrays for an absent part; the layers' matrices flattened row by row; activation 0 tanh,
+    (``T3``, ``T4`` symmetric, as :class:`~femrom.inference.SymmetricPolynomial` forms them: the kernels
+    contract them on their first index; empty arrays for an absent part; the layers' matrices flattened row by row; activation 0 tanh,
     1 softplus). The numpy functions (:mod:`femrom.inference._networks`) are the reference.
 
     Attributes

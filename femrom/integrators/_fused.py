@@ -24,7 +24,9 @@ A model whose nonlinear force is a learned potential of ``q^`` and/or a learned 
 function of ``q^'`` (SpML's :class:`~femrom.inference.LearnedPotential` and
 :class:`~femrom.inference.LearnedDissipation`, which offer a :class:`~femrom.fem.CompiledScalar`)
 steps the discrete-gradient scheme the same way (:class:`FusedDiscreteGradientStep`, the kernel
-``discrete_gradient_step`` of :func:`femrom.fem.compiled_scalar_kernels`).
+``discrete_gradient_step`` of :func:`femrom.fem.compiled_scalar_kernels`), and a whole trajectory in one
+call (:meth:`FusedDiscreteGradientStep.march`, ``discrete_gradient_march``), by default by a chord
+iteration with one Jacobian a step.
 
 The numpy path stays the reference: the scheme takes it whenever the force offers no compiled
 joint, and at every step where the compiled laws are switched off
@@ -220,9 +222,10 @@ class FusedSlidersStep(_FusedStep):
             self._raise(status, iterations, norm, tolerance)
         return q1, v1, a1, self.sliders.state(stretch1, coordinate1), iterations
 
-    def march(self, q0, v0, a0, state, forces, n_steps: int):
+    def march(self, q0, v0, a0, state, forces, n_steps: int, forces_end=None):
         """``(Q, V, A (r, n + 1), final state, newton_iterations)`` of ``n = n_steps`` steps, the forcing of
-        step ``k`` in ``forces[:, k]`` ((r, n) or ``None``). A failing step raises :class:`ConvergenceError`
+        step ``k`` in ``forces[:, k]`` ((r, n) or ``None``; ``forces_end``, the forcing on the grid, is not
+        used: the Newmark family carries its accelerations). A failing step raises :class:`ConvergenceError`
         (Newton) or :class:`NonFiniteState` (a non-finite ``q``) with its number in ``step``."""
         stretch, coordinate = self._parts(state)
         r, n = q0.size, int(n_steps)
@@ -263,6 +266,18 @@ def fused_step(scheme, system, dt: float, effective_matrix, implicit):
     if sliders is not None:
         return FusedSlidersStep(scheme, system, dt, effective_matrix, sliders, force.initial_state)
     return None
+
+
+#: The chord march holds its Jacobian into the next step when the step converged in at most this many updates
+#: (2: what a Jacobian formed at the step's first iterate takes from the extrapolated predictor); a step that
+#: took more forms a new one at the next step's first iterate. ``0`` (the default): a new Jacobian every step.
+#: Holding it saves Jacobians but costs updates (the held one contracts less well): on the default SpML shapes
+#: at r = 8 (``benchmarks/spml_rom_step.py``) 2.29 updates and 0.29 Jacobians a step against 2.00 and 1.00,
+#: the same time; at r = 12 2.44 and 0.45, 9 % slower.
+HOLD_UPDATES = 0
+
+#: The degree of the polynomial that extrapolates the learned terms' force into the chord march's predictor.
+EXTRAPOLATION_ORDER = 3
 
 
 class FusedDiscreteGradientStep:
@@ -320,6 +335,57 @@ class FusedDiscreteGradientStep:
                 raise ConvergenceError(f"Newton's matrix is singular at iteration {iterations}{where}")
             raise ConvergenceError(f"Newton did not converge in {self._newton.max_iterations} iterations{where}")
         return q1, v1, (a1 if accelerations else None), state, iterations
+
+    def march(self, q0, v0, a0, state, forces, n_steps: int, forces_end=None):
+        r"""``(Q, V, A (r, n + 1), state, newton_iterations, jacobians)`` of ``n = n_steps`` steps in one compiled
+        call (``discrete_gradient_march``), the forcing of step ``k`` at ``t_k + h/2`` in ``forces[:, k]`` and
+        at ``t_{k+1}`` in ``forces_end[:, k]`` ((r, n) each, or ``None``); ``newton_iterations`` and
+        ``jacobians`` (n,) int, per step: updates and Jacobians formed (each the potential's Hessian at the
+        two Gauss nodes and the dissipation's at ``v_m``).
+
+        ``scheme.newton.refactor_ratio = 0``: Newton at every iterate, the steps of :meth:`__call__` (and of
+        the numpy reference) to round-off, with their iteration counts. Otherwise (the default ``0.1``) the
+        chord iteration: one Jacobian a step (formed at its first iterate; or held across steps,
+        :data:`HOLD_UPDATES`), values and gradients at the other iterates, while each update is at most
+        ``refactor_ratio`` times the one before (Newton for the rest of a step that contracts more slowly),
+        from a predictor that solves the step's linear part exactly with the learned force extrapolated
+        from the previous steps; the same fixed point to the same update test, a failing step redone by
+        Newton from the reference's predictor. A failing step raises :class:`ConvergenceError` or
+        :class:`NonFiniteState` with its number in ``step``."""
+        h, rtol, max_iterations, accelerations = self._scalars
+        r, n = q0.size, int(n_steps)
+        has_force = forces is not None
+        if has_force:
+            forces = np.asarray(forces, dtype=float)
+            if forces.shape != (r, n):
+                raise FemromValueError(f"forces must be ({r}, {n}), got shape {forces.shape}")
+            forces = np.ascontiguousarray(forces.T)
+            ends = np.zeros((n, r)) if forces_end is None else np.ascontiguousarray(
+                np.asarray(forces_end, dtype=float).reshape(r, n).T)
+        else:
+            forces = ends = np.zeros((n, r))
+        Q, V, A = (np.empty((n + 1, r)) for _ in range(3))
+        Q[0], V[0] = q0, v0
+        A[0] = a0 if a0 is not None else np.nan
+        iterations = np.zeros(n, dtype=np.int64)
+        jacobians = np.zeros(n, dtype=np.int64)
+        M, C, has_C, K, J = self._matrices
+        done, status = self._kernels.discrete_gradient_march(
+            forces, has_force, ends, M, C, has_C, K, J, h, rtol, max_iterations, accelerations,
+            float(self._newton.refactor_ratio), HOLD_UPDATES, EXTRAPOLATION_ORDER, *self._terms, Q, V, A, iterations,
+            jacobians)
+        if status:
+            if status == self._kernels.STATE_NOT_FINITE:
+                raise NonFiniteState(done + 1)
+            if status == self._kernels.NOT_FINITE:
+                err = ConvergenceError(f"Newton residual is not finite at iteration {iterations[done]}")
+            elif status == self._kernels.SINGULAR:
+                err = ConvergenceError(f"Newton's matrix is singular at iteration {iterations[done]}")
+            else:
+                err = ConvergenceError(f"Newton did not converge in {self._newton.max_iterations} iterations")
+            err.step = done + 1
+            raise err
+        return Q.T.copy(), V.T.copy(), A.T.copy(), state, iterations, jacobians
 
 
 def fused_discrete_gradient(scheme, system, dt: float, matrix):

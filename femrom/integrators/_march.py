@@ -10,8 +10,9 @@ prediction's inputs, a controller's moves), and the states are kept in arrays:
 - :func:`march`: a whole trajectory with any registered scheme. A linear model with
   dense operators runs the scheme's precomputed step map, one small matrix-vector
   product a step (:func:`run_linear`); a model whose fused step can march (learned
-  sliders, :mod:`._fused`) runs in one compiled call; any other model calls the
-  scheme's ``step``;
+  sliders under the Newmark family, learned potentials and dissipations under the
+  discrete-gradient scheme, :mod:`._fused`) runs in one compiled call; any other model
+  calls the scheme's ``step``;
 - :func:`march_batch`: ``B`` runs of one model (different inputs, starts, force states) at
   once; on a reduced model with a compiled joint all their steps go in one compiled call;
 - :class:`Stepper`: one step at a time, ``y = stepper.step(u)``, for a controller
@@ -157,7 +158,7 @@ def dense_solver(A, spd: bool = True):
     return make_solver(A, "dense" if not hasattr(A, "tocsr") else "auto", spd=spd)
 
 
-def march(system, scheme, times, q0, v0, *, inputs=None, state0=None, solver=None) -> dict:
+def march(system, scheme, times, q0, v0, *, inputs=None, state0=None, solver=None, whole: bool = True) -> dict:
     r"""Step ``system`` over the uniform grid ``times`` from ``(q0, v0)`` and the force state ``state0``.
 
     Parameters
@@ -176,13 +177,19 @@ def march(system, scheme, times, q0, v0, *, inputs=None, state0=None, solver=Non
     solver : callable, optional
         ``(A, spd=...) -> LinearSolver`` for the scheme's set-up (default by the matrix:
         dense for a reduced model).
+    whole : bool
+        Whether a fused step that can march the whole trajectory in one compiled call does (default);
+        ``False`` calls the scheme's step at each step (the compiled step included): the reference the
+        whole march is tested and timed against.
 
     Returns
     -------
     dict with ``q``, ``v``, ``a`` ((n, k) ndarrays), ``state`` (at the end), ``newton_iterations``,
     ``stepping_seconds`` (the loop alone) and ``path`` (``"linear map"``, ``"steps"``, or ``"compiled
     steps"``: a scheme whose step is one compiled call for this model and that can march the whole
-    trajectory in one, learned sliders under the Newmark family, :mod:`._fused`).
+    trajectory in one: learned sliders under the Newmark family, learned potentials and dissipations under
+    the discrete-gradient scheme, :mod:`._fused`; the latter also gives ``jacobians``, the Newton
+    Jacobians formed).
     """
     scheme = time_scheme(scheme)
     scheme.check(system)
@@ -222,18 +229,23 @@ def march(system, scheme, times, q0, v0, *, inputs=None, state0=None, solver=Non
     a = mass_solver.solve(rhs)
     cache = scheme.init(system, h, factory, lambda: mass_solver, times[0], q0, v0, a, state)
     fused = getattr(cache, "fused", None)
-    if callable(getattr(fused, "march", None)) and fused.enabled():
+    if whole and callable(getattr(fused, "march", None)) and fused.enabled():
         # the whole trajectory in one compiled call (the same steps as the loop below)
         tic = time.perf_counter()
         try:
-            Q, V, Acc, state, iterations = fused.march(q0, v0, a, state, F_input[:, :n_steps] if present else None,
-                                                       n_steps)
+            out = fused.march(q0, v0, a, state, F_input[:, :n_steps] if present else None, n_steps,
+                              forces_end=F_grid[:, 1:] if present else None)
         except ConvergenceError as err:
             raise ConvergenceError(f"step {err.step} (t = {times[err.step]:.6g}): {err}") from None
         except NonFiniteState as err:
             raise FemromRuntimeError(f"the state became non-finite at t = {times[err.step]:.6g}") from None
-        return {"q": Q, "v": V, "a": Acc, "state": state, "newton_iterations": iterations,
-                "stepping_seconds": time.perf_counter() - tic, "path": "compiled steps"}
+        seconds = time.perf_counter() - tic
+        Q, V, Acc, state, iterations = out[:5]
+        result = {"q": Q, "v": V, "a": Acc, "state": state, "newton_iterations": int(np.sum(iterations)),
+                  "stepping_seconds": seconds, "path": "compiled steps"}
+        if len(out) > 5:
+            result["jacobians"] = int(np.sum(out[5]))
+        return result
     Q, V, Acc = (np.empty((n, times.size)) for _ in range(3))
     Q[:, 0], V[:, 0], Acc[:, 0] = q0, v0, a
     q, v, iterations = q0, v0, 0

@@ -160,6 +160,8 @@ class SecondOrderROM(ReducedModel):
         info = {"scheme": step.name, "dt": h, "n_steps": times.size - 1}
         if ops.nonlinear is not None:
             info["newton_iterations"] = run["newton_iterations"]
+            if "jacobians" in run:
+                info["newton_jacobians"] = run["jacobians"]
         stepping = run["stepping_seconds"]
         info.update(seconds=time.perf_counter() - tic, stepping_seconds=stepping,
                     seconds_per_step=stepping / max(times.size - 1, 1))

@@ -141,7 +141,12 @@ class DiscreteGradient(ImplicitMidpoint):
     ||v_k|| + h ||a_k|| / 2)`` or when, from the third iteration on, the updates stop
     shrinking (the round-off floor: near rest the absolute round-off of a network's
     gradient exceeds ``rtol ||v||``). Small dense models solve the Jacobian densely, the
-    full model with its sparse strategy.
+    full model with its sparse strategy. A small model whose nonlinear force is a learned
+    potential and/or dissipation with compiled functions steps in one compiled call, and
+    ``march``/``predict`` step its whole trajectory in one, by default by a chord iteration to
+    the same fixed point and update test (one Jacobian a step, the predictor from the
+    extrapolated learned force; ``Newton.refactor_ratio = 0``: this Newton, iteration for
+    iteration; :meth:`femrom.integrators._fused.FusedDiscreteGradientStep.march`).
 
     Attributes
     ----------
