@@ -183,11 +183,12 @@ def test_the_measured_range_joint_by_harmonic_balance(metrics):
     assert backbone[0]["amplitude_m_s2"] < 5 and backbone[-1]["amplitude_m_s2"] > 80
     rows = result["against_response_controlled"]
     assert len(rows) == 8
-    # regression pins of the fitted joint (docs/cases/jointed_beam.md): every level within 0.2 Hz
-    # (measured at most 0.14 Hz), the damping within 50 % (measured -44 % at 80 m/s^2: the miss the
-    # docs report); a model without the reclosing contact keeps softening (0.35 Hz low at 80 m/s^2)
+    # the fitted joint against the measured backbone (docs/cases/jointed_beam.md): every level within
+    # 0.2 Hz (measured at most 0.155 Hz, at 40 m/s^2) and the damping within the issue's 20 % (measured
+    # -1 to +13 %; the fit without the Hunt-Crossley dashpot missed by -43 % at 80 m/s^2); a model
+    # without the reclosing contact keeps softening (0.35 Hz low at 80 m/s^2)
     assert max(abs(r["frequency_difference_hz"]) for r in rows) < 0.2
-    assert max(abs(r["damping_relative_error"]) for r in rows) < 0.5
+    assert max(abs(r["damping_relative_error"]) for r in rows) < 0.2
     # the force-controlled peaks the response-controlled levels imply: 1.5 N lies between the 60.2 m/s^2
     # level (smallest force 1.103 N at 80.35 Hz) and the 70.3 m/s^2 one (1.549 N at 80.45 Hz); by hand,
     # log-log: x = ln(1.5 / 1.103) / ln(1.549 / 1.103) = 0.9055, 60.2 (70.3 / 60.2)^x = 69.3 m/s^2 at 80.44 Hz;
@@ -201,11 +202,12 @@ def test_the_measured_range_joint_by_harmonic_balance(metrics):
 
 @pytest.mark.slow
 def test_the_measured_range_fit_reproduces_its_documented_misfit(brb_data):
-    """The fit of the measured-range joint (docs/cases/jointed_beam.md: misfit 25.0 at mu 0.321,
-    chi -0.038, kappa 2.99e-4, the case's defaults, rounded to 4 digits). Four evaluations from the
-    defaults (a few minutes): the first is the defaults' misfit, deterministic up to what a different
-    BLAS moves in EPMC; the band's lower side fails a misfit that drops the damping terms (their share
-    is about 20 of the 25) and its upper side a joint with half the closing stiffness (47 in the fit)."""
+    """The fit of the measured-range joint (docs/cases/jointed_beam.md: misfit 6.64 at mu 0.467,
+    kappa 1.99e-4, lambda 8.48e12 with chi = 0, the case's defaults, rounded to 4 digits; the case's
+    fitted parameters and AFT samples). Four evaluations from the defaults (a few minutes): the first is
+    the defaults' misfit, deterministic up to what a different BLAS moves in EPMC; the band's lower
+    side fails a misfit that drops the damping terms (about 2.5 of the 6.6) and its upper side the fit's
+    start (8.85) or a joint without the dashpot (25 and more)."""
     from femrom.post import measured_backbone, phase_resonance_backbone, read_hammer_impact, \
         read_response_controlled
     from femrom.study import MeasuredRangeJoint
@@ -213,11 +215,12 @@ def test_the_measured_range_fit_reproduces_its_documented_misfit(brb_data):
     setup = config.calibrated(config.scene(case.SCENE))
     fit = config.fit_measured_range(setup, phase_resonance_backbone(read_response_controlled(brb_data)),
                                     measured_backbone(read_hammer_impact(brb_data), channel="acc3"), 0.00138,
-                                    start=MeasuredRangeJoint(), evaluations=4, progress=lambda line: None)
+                                    start=MeasuredRangeJoint(), evaluations=4, progress=lambda line: None,
+                                    parameters=case.RANGE_FIT_PARAMETERS, samples=case.RANGE_FIT_SAMPLES)
     assert fit["evaluations"] == 4 and len(fit["history"]) == 4
     first = fit["history"][0]
     assert first["friction_coefficient"] == pytest.approx(MeasuredRangeJoint().friction_coefficient)
-    assert 24.0 < first["misfit"] < 26.0, first["misfit"]
+    assert 6.0 < first["misfit"] < 7.3, first["misfit"]
     assert fit["misfit"] <= first["misfit"]
 
 
@@ -227,7 +230,7 @@ def test_the_measured_range_joint_refuses_bad_parameters():
                         ("friction_coefficient", 0.0), ("beta", "0.3"), ("closing_damping", -1.0)):
         with pytest.raises(ValueError, match=f"MeasuredRangeJoint: {name}"):
             MeasuredRangeJoint(**{name: value})
-    assert MeasuredRangeJoint().closing_damping == 0.0
+    assert MeasuredRangeJoint().closing_damping > 0.0            # the fitted Hunt-Crossley dashpot
 
 
 def test_the_measured_range_fit_refuses_an_unknown_parameter_in_one_line():
@@ -243,4 +246,4 @@ def test_the_measured_range_fit_refuses_an_unknown_parameter_in_one_line():
         with pytest.raises(FemromError, match=message):
             fit(None, None, None, 0.00138, parameters=parameters)
     with pytest.raises(FemromError, match="closing_damping is fitted on a log scale; start it above 0, got 0.0"):
-        fit(None, None, None, 0.00138, parameters=("closing_damping",), start=MeasuredRangeJoint())
+        fit(None, None, None, 0.00138, parameters=("closing_damping",), start=MeasuredRangeJoint(closing_damping=0.0))

@@ -24,9 +24,10 @@ The bolted half Brake-Reuss beam of ``jointed_beam.toml`` (free-free, three bolt
    error removed (:func:`femrom.post.period_corrected`: ``f = tan(pi f_h dt) / (pi dt)``).
 6. **The measured backbone** of the same processing (``data/brb/hammer_impact.npz``).
 7. **The measured range** (:class:`femrom.study.MeasuredRangeJoint`): the ``clamped_iwan`` joint whose
-   points open at the preload touch again (``closing``), ``mu``, ``beta`` and ``closing`` fitted on the
+   points open at the preload touch again (``closing``) with a Hunt-Crossley normal dashpot
+   (``closing_damping``); ``mu``, ``closing`` and ``closing_damping`` fitted on the
    response-controlled stepped sine (5-80 m/s^2 at acc3) and the hammer's backbone at acc3
-   (``--fit-range`` refits, about 20-30 min; the defaults are that fit's result), with the shaker's
+   (``--fit-range`` refits, about 30-40 min; the defaults are that fit's result), with the shaker's
    attached mass read off the data; its modal model hyper-reduced by ECSW trained on periodic
    solutions (:func:`femrom.study.periodic_training`).
 8. **The forced response** at the shaker (``shaker1``) by harmonic balance
@@ -60,6 +61,10 @@ from femrom.study import JointedBeamModel, MeasuredRangeJoint, backbone_shift, c
     harmonic_balance_sweep, modal_qsma, output_ring_down, periodic_training, stepped_sine_response, with_impulse
 
 SCENE = Path(__file__).with_suffix(".toml")
+#: What ``--fit-range`` fits of the measured-range joint (``chi`` stays at its start, Mindlin-Goodman's
+#: cubic micro-slip, ``chi = 0``), and the AFT's samples a period in each EPMC of the fit.
+RANGE_FIT_PARAMETERS = ("friction_coefficient", "closing", "closing_damping")
+RANGE_FIT_SAMPLES = 16
 BAND, WINDOW = (60.0, 100.0), 0.2
 
 
@@ -141,10 +146,11 @@ def measured_range_section(config: JointedBeamCase, setup, damping: float, data_
     if config.fit_range:
         if levels is None:
             raise DatasetNotFoundError("--fit-range needs the response-controlled data (femrom data fetch brb)")
-        progress("jointed beam: fitting the measured-range joint (mu, chi, kappa) on the response-controlled "
-                 "and hammer backbones at acc3 (EPMC per evaluation) ...")
+        progress("jointed beam: fitting the measured-range joint (mu, kappa, lambda; chi fixed) on the "
+                 "response-controlled and hammer backbones at acc3 (EPMC per evaluation) ...")
         hammer = measured_backbone(read_hammer_impact(None if data_dir is None else Path(data_dir)), channel="acc3")
         fit = config.fit_measured_range(setup, phase_resonance_backbone(levels), hammer, damping, start=joint,
+                                        parameters=RANGE_FIT_PARAMETERS, samples=RANGE_FIT_SAMPLES,
                                         progress=progress)
         joint = fit.pop("joint")
         seconds["fit_measured_range"] = fit["seconds"]

@@ -408,27 +408,28 @@ def _range_fit_parameters(parameters) -> tuple:
 class MeasuredRangeJoint:
     r"""The joint that covers the measured range, 5-80 m/s^2 at acc3, and the shaker's attachment.
 
-    The ``clamped_iwan`` law (:class:`~femrom.fem.ClampedIwanLaw`) with its three fitted parameters
+    The ``clamped_iwan`` law (:class:`~femrom.fem.ClampedIwanLaw`) with three fitted parameters:
     ``friction_coefficient`` (``mu``: the macro-slip traction ``mu p_0`` of the preload's closed
-    points), ``chi`` (the Iwan density's exponent) and ``closing`` (``kappa``: the points open at the
-    preload touch again under the penalty ``kappa k_n``, with Coulomb friction ``mu``), ``beta``
-    (the weight of the density's delta) fixed; fitted by :meth:`JointedBeamModel.fit_measured_range` on the response-controlled
-    stepped sine and the hammer's backbone at acc3 together (the defaults are that fit's result on the
-    default mesh, docs/cases/jointed_beam.md). ``shaker_mass`` [kg]: a rigid mass moving with the
-    shaker patch (the stinger and force gauge), read off the data, not fitted: the shaker test's
-    phase-resonance frequency at 5 m/s^2 lies 0.107 Hz below the hammer test's at the same acc3
-    amplitude, and ``Delta m = 2 m_eff Delta f / f`` with the modal mass at acc3 the test gives at
-    resonance (``m_eff = F / (2 zeta A) = 1.95`` kg) is 5.2 g. ``closing_damping`` [Pa s/m^2]: ``lambda``, the
-    Hunt-Crossley normal dashpot of the reclosed points (the law's ``closing_damping``: ``t_n = min(kappa k_n g_n -
-    lambda g_n gdot_n, 0)``, continuous at a touch); 0 (default, not fitted yet): none.
+    points), ``closing`` (``kappa``: the points open at the preload touch again under the penalty
+    ``kappa k_n``, with Coulomb friction ``mu``) and ``closing_damping`` [Pa s/m^2] (``lambda``: the
+    Hunt-Crossley normal dashpot of those re-closed points, ``t_n = min(kappa k_n g_n - lambda g_n gdot_n,
+    0)``, continuous at a touch); ``chi`` (the Iwan density's exponent, 0: Mindlin-Goodman's cubic
+    micro-slip) and ``beta`` (the weight of the density's delta) fixed. Fitted by
+    :meth:`JointedBeamModel.fit_measured_range` on the response-controlled stepped sine and the hammer's
+    backbone at acc3 together (the defaults are that fit's result on the default mesh,
+    docs/cases/jointed_beam.md). ``shaker_mass`` [kg]: a rigid mass moving with the shaker patch (the
+    stinger and force gauge), read off the data, not fitted: the shaker test's phase-resonance frequency
+    at 5 m/s^2 lies 0.107 Hz below the hammer test's at the same acc3 amplitude, and ``Delta m = 2 m_eff
+    Delta f / f`` with the modal mass at acc3 the test gives at resonance (``m_eff = F / (2 zeta A) =
+    1.95`` kg) is 5.2 g.
     """
 
-    friction_coefficient: float = 0.3206
-    chi: float = -0.03822
+    friction_coefficient: float = 0.4667
+    chi: float = 0.0
     beta: float = 0.3
-    closing: float = 2.986e-4
+    closing: float = 1.993e-4
     shaker_mass: float = 5.2e-3
-    closing_damping: float = 0.0
+    closing_damping: float = 8.482e12
 
     def __post_init__(self):
         for name, ok, valid in (("friction_coefficient", lambda v: v > 0, "> 0"), ("chi", lambda v: v > -1, "> -1"),
