@@ -190,7 +190,7 @@ def test_learner_names_are_checked_against_the_registry():
     with pytest.raises(SceneError, match=r"\[rom.learners\[1\]\] options must be a table"):
         Scene.from_dict(_bracket_dict(learners=["galerkin", {"learner": "lopinf", "options": [1]}]))
     with pytest.raises(SceneError, match=r"\[rom.learners\[1\]\] 'iwan_lopinf' has no option 'thresholdz'; valid: "
-                                         r"band, direction, monotone, regularization, solver, stiffness_margin, terms"):
+                                         r"band, direction, monotone, regularization, smoothing, solver, stiffness_margin, terms"):
         check_rom_config(Scene.from_dict(_bracket_dict(learners=["galerkin", {"learner": "iwan_lopinf",
                                                                               "options": {"thresholdz": 8}}])).rom)
     with pytest.raises(SceneError, match=r"\[rom.experiments\[0\]\] unknown experiment 'peak'; registered: "
