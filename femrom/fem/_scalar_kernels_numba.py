@@ -58,36 +58,17 @@ def _dot(x, y):
 @njit(cache=True)
 def _lu_solve(A, b):
     """Solve ``A x = b`` in place (``A`` overwritten by its LU factors, ``b`` by ``x``); False if singular."""
-    n = A.shape[0]
-    for k in range(n):
-        pivot, largest = k, abs(A[k, k])
-        for i in range(k + 1, n):
-            if abs(A[i, k]) > largest:
-                pivot, largest = i, abs(A[i, k])
-        if largest == 0.0 or not math.isfinite(largest):
-            return False
-        if pivot != k:
-            for j in range(n):
-                A[k, j], A[pivot, j] = A[pivot, j], A[k, j]
-            b[k], b[pivot] = b[pivot], b[k]
-        for i in range(k + 1, n):
-            factor = A[i, k] / A[k, k]
-            if factor != 0.0:
-                for j in range(k + 1, n):
-                    A[i, j] -= factor * A[k, j]
-                b[i] -= factor * b[k]
-    for i in range(n - 1, -1, -1):
-        total = b[i]
-        for j in range(i + 1, n):
-            total -= A[i, j] * b[j]
-        b[i] = total / A[i, i]
+    pivots = np.empty(A.shape[0], dtype=np.int64)
+    if not _lu_factor(A, pivots):
+        return False
+    _lu_back(A, pivots, b)
     return True
 
 
 @njit(cache=True)
 def _lu_factor(A, pivots):
     """``A`` (n, n) overwritten by its LU factors with partial pivoting (row ``k`` swapped with ``pivots[k]``);
-    False if singular. :func:`_lu_back` solves with them, the same operations as :func:`_lu_solve`."""
+    False if singular; :func:`_lu_back` solves with them."""
     n = A.shape[0]
     for k in range(n):
         pivot, largest = k, abs(A[k, k])
