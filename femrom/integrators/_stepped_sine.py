@@ -241,6 +241,37 @@ def _force_amplitudes(values) -> tuple[float, ...]:
     return tuple(float(x) for x in F)
 
 
+
+class _LevelRecord:
+    """One force level's steady states as a stepped sine goes through its frequencies: each frequency's
+    phasors, periods, convergence and estimated transient, a warning where it did not settle."""
+
+    def __init__(self):
+        self.columns, self.periods, self.converged, self.remaining = [], [], [], []
+
+    def add(self, monitor, F: float, f: float, criterion, progress) -> None:
+        self.columns.append(monitor.phasors)
+        self.periods.append(monitor.periods)
+        self.converged.append(monitor.converged)
+        self.remaining.append(monitor.remaining)
+        if not monitor.converged:
+            warnings.warn(f"stepped sine F = {F:g}, f = {f:g} Hz: not steady after "
+                          f"{monitor.periods} periods (estimated transient left "
+                          f"{monitor.remaining:.2e} > tolerance {criterion.tolerance:g})",
+                          SteadyStateWarning, stacklevel=3)
+        if progress is not None:
+            amplitude = float(np.max(np.abs(monitor.phasors)))
+            status = "steady" if monitor.converged else "NOT STEADY"
+            progress(f"F = {F:g} N  f = {f:.4f} Hz  periods = {monitor.periods:4d}  {status}  "
+                     f"max |Y| = {amplitude:.4g}")
+
+    def response(self, F: float, frequencies_hz, plant) -> "FrequencyResponse":
+        return FrequencyResponse(
+            force_n=F, frequencies_hz=np.asarray(frequencies_hz), phasors=np.column_stack(self.columns),
+            output_names=tuple(plant.output_names), quantity=plant.quantity,
+            periods=np.asarray(self.periods, dtype=int), converged=np.asarray(self.converged, dtype=bool),
+            remaining=np.asarray(self.remaining, dtype=float))
+
 @dataclass(frozen=True)
 class SteppedSine:
     r"""A stepped-sine sweep: frequencies, steps per period, steady-state criterion, prewarping.
@@ -316,31 +347,14 @@ class SteppedSine:
         levels = []
         for F in amplitudes:
             plant.reset()
-            columns, periods, converged, remaining = [], [], [], []
+            record = _LevelRecord()
             for f, f_drive in zip(self.frequencies_hz, driven):
                 monitor = criterion.monitor()
                 for samples in plant.periods(F, float(f_drive), N, criterion.max_periods):
                     if monitor.update(first_harmonic(samples)):
                         break
-                columns.append(monitor.phasors)
-                periods.append(monitor.periods)
-                converged.append(monitor.converged)
-                remaining.append(monitor.remaining)
-                if not monitor.converged:
-                    warnings.warn(f"stepped sine F = {F:g}, f = {f:g} Hz: not steady after "
-                                  f"{monitor.periods} periods (estimated transient left "
-                                  f"{monitor.remaining:.2e} > tolerance {criterion.tolerance:g})",
-                                  SteadyStateWarning, stacklevel=2)
-                if progress is not None:
-                    amplitude = float(np.max(np.abs(monitor.phasors)))
-                    status = "steady" if monitor.converged else "NOT STEADY"
-                    progress(f"F = {F:g} N  f = {f:.4f} Hz  periods = {monitor.periods:4d}  {status}  "
-                             f"max |Y| = {amplitude:.4g}")
-            levels.append(FrequencyResponse(
-                force_n=F, frequencies_hz=np.asarray(self.frequencies_hz), phasors=np.column_stack(columns),
-                output_names=tuple(plant.output_names), quantity=plant.quantity,
-                periods=np.asarray(periods, dtype=int), converged=np.asarray(converged, dtype=bool),
-                remaining=np.asarray(remaining, dtype=float)))
+                record.add(monitor, F, f, criterion, progress)
+            levels.append(record.response(F, self.frequencies_hz, plant))
         return SteppedSineResult(levels=tuple(levels), steps_per_period=N, prewarp=bool(self.prewarp),
                                  criterion=criterion, direction=self.direction)
 
@@ -384,7 +398,7 @@ class SteppedSine:
             start = system.nonlinear.initial_state() if rest is None or rest.state is None else rest.state
             states = [np.array(start) if isinstance(start, np.ndarray) else start for _ in range(L)]
         F = np.asarray(amplitudes)
-        results = [{"columns": [], "periods": [], "converged": [], "remaining": []} for _ in range(L)]
+        results = [_LevelRecord() for _ in range(L)]
         for f, f_drive in zip(self.frequencies_hz, driven):
             dt = 1.0 / (float(f_drive) * N)
             sines = np.sin(2.0 * np.pi * np.arange(1, N + 1) / N)
@@ -415,26 +429,7 @@ class SteppedSine:
                         still.append(i)
                 active = still
             for i, monitor in enumerate(monitors):
-                record = results[i]
-                record["columns"].append(monitor.phasors)
-                record["periods"].append(monitor.periods)
-                record["converged"].append(monitor.converged)
-                record["remaining"].append(monitor.remaining)
-                if not monitor.converged:
-                    warnings.warn(f"stepped sine F = {F[i]:g}, f = {f:g} Hz: not steady after "
-                                  f"{monitor.periods} periods (estimated transient left "
-                                  f"{monitor.remaining:.2e} > tolerance {criterion.tolerance:g})",
-                                  SteadyStateWarning, stacklevel=2)
-                if progress is not None:
-                    amplitude = float(np.max(np.abs(monitor.phasors)))
-                    status = "steady" if monitor.converged else "NOT STEADY"
-                    progress(f"F = {F[i]:g} N  f = {f:.4f} Hz  periods = {monitor.periods:4d}  {status}  "
-                             f"max |Y| = {amplitude:.4g}")
-        levels = tuple(FrequencyResponse(
-            force_n=float(F[i]), frequencies_hz=np.asarray(self.frequencies_hz),
-            phasors=np.column_stack(record["columns"]), output_names=tuple(plant.output_names),
-            quantity=plant.quantity, periods=np.asarray(record["periods"], dtype=int),
-            converged=np.asarray(record["converged"], dtype=bool), remaining=np.asarray(record["remaining"], dtype=float))
-            for i, record in enumerate(results))
+                results[i].add(monitor, float(F[i]), f, criterion, progress)
+        levels = tuple(record.response(float(F[i]), self.frequencies_hz, plant) for i, record in enumerate(results))
         return SteppedSineResult(levels=levels, steps_per_period=N, prewarp=bool(self.prewarp),
                                  criterion=criterion, direction=self.direction)
