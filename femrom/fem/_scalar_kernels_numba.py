@@ -39,6 +39,8 @@ _NODE0 = 0.5 - 0.5 / math.sqrt(3.0)
 _NODE1 = 0.5 + 0.5 / math.sqrt(3.0)
 
 
+# _norm and _lu_solve repeat femrom.fem._law_kernels_numba's on purpose: numba's on-disk cache keys a
+# compiled function on its own file, so a kernel calling another file's would keep a stale copy of it.
 @njit(cache=True)
 def _norm(x):
     total = 0.0
