@@ -7,7 +7,7 @@ import pytest
 
 from benchmarks.spml_systems import chain, duffing
 from femrom._errors import FemromError
-from femrom.inference import LagrangianOpInf, SecondOrderData, Smoothing, noise_level
+from femrom.inference import LagrangianOpInf, SecondOrderData, Smoothing, concatenate, noise_level
 from femrom.inference._smoothing import _inverse_band
 
 
@@ -30,6 +30,38 @@ def test_noise_level_reads_the_noise_off_the_differences():
     assert noise_level(y + 0.01 * rng.standard_normal(t.size)) == pytest.approx(0.01, rel=0.1)
     # a smooth signal alone: the sixth differences at 100 samples a period are (2 pi / 100)^6 of it
     assert noise_level(y) < 1e-6
+
+
+def test_the_robust_noise_level_ignores_kinks_the_mean_square_one_counts():
+    """A stick-slip-like signal (a jump in the slope every 250 samples) without noise: the mean-square
+    estimate reads its kinks as noise; the median one does not, and both read white noise alike."""
+    t = np.linspace(0.0, 20.0, 2001)
+    y = np.abs(np.sin(0.8 * t))                                   # kinks at the zeros of the sine
+    assert noise_level(y) > 1e-4                                  # observed 1.1e-3
+    assert noise_level(y, robust=True) < 1e-6                     # observed 3e-8: the smooth arcs
+    noisy = y + 0.01 * np.random.default_rng(2).standard_normal(t.size)
+    assert noise_level(noisy, robust=True) == pytest.approx(0.01, rel=0.1)
+
+
+def test_auto_smooths_the_noisy_trajectory_and_keeps_the_exact_one(runs):
+    """:meth:`Smoothing.auto` judges each trajectory by its regressors' estimated noise: the 1 %
+    noisy run is smoothed as :class:`Smoothing` would, the exact one passes bit for bit (its
+    estimate, 1e-7, is four orders below the threshold)."""
+    exact, noisy = runs
+    auto = Smoothing.auto()
+    assert auto.threshold == 1e-3 and Smoothing.of("auto") == auto
+    levels = auto.noise(exact) + auto.noise(noisy)
+    assert levels[0] < 1e-5 and 5e-3 < levels[1] < 5e-2, levels      # observed 4e-7 and 1.5e-2
+    kept = auto.apply(exact)
+    assert np.array_equal(kept.states, exact.states)
+    assert np.array_equal(kept.accelerations, exact.accelerations)
+    assert kept.diagnostics["smoothing"]["trajectories"] == [{"kept": True, "noise": levels[0]}]
+    smoothed, always = auto.apply(noisy), Smoothing().apply(noisy)
+    np.testing.assert_array_equal(smoothed.states, always.states)
+    # both in one data set: each trajectory on its own
+    both = auto.apply(concatenate([exact, noisy]))
+    np.testing.assert_array_equal(both.states[:, :exact.n_samples], exact.states)
+    np.testing.assert_array_equal(both.states[:, exact.n_samples:], always.states)
 
 
 def test_the_band_of_the_inverse_is_exact():
@@ -128,7 +160,8 @@ def test_lagrangian_opinf_with_smoothing_learns_a_better_stiffness():
 @pytest.mark.parametrize("options, culprit", [
     ({"degree": 4}, "Smoothing.degree"), ({"degree": 2.0}, "Smoothing.degree"),
     ({"penalty_order": 5}, "Smoothing.penalty_order"), ({"fields": "some"}, "Smoothing.fields"),
-    ({"noise_order": 0}, "Smoothing.noise_order"), ({"log_lambda": float("nan")}, "Smoothing.log_lambda")])
+    ({"noise_order": 0}, "Smoothing.noise_order"), ({"log_lambda": float("nan")}, "Smoothing.log_lambda"),
+    ({"threshold": -1e-3}, "Smoothing.threshold"), ({"threshold": float("inf")}, "Smoothing.threshold")])
 def test_bad_settings_are_refused_in_one_line(options, culprit):
     with pytest.raises(FemromError, match=culprit) as info:
         Smoothing(**options)

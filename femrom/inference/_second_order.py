@@ -115,10 +115,11 @@ class SecondOrderLearner(Learner):
         warns that ``M^ = I`` is then an assumption that breaks symmetry.
     stiffness_margin : float
         ``eps = margin * ||Y||_F / ||D_j||_F`` in ``X_j >= eps I`` for ``"spd"`` terms.
-    smoothing : Smoothing, True or None
+    smoothing : Smoothing, True, "auto" or None
         Denoise each training and validation trajectory before the fit (:class:`Smoothing`: one
         smooth curve per coordinate through the states and measured derivatives; ``True``: the
-        defaults); ``None`` (default): the data as given.
+        defaults; ``"auto"``: only trajectories estimated noisy, :meth:`Smoothing.auto`);
+        ``None`` (default): the data as given.
 
     Attributes
     ----------
@@ -138,7 +139,7 @@ class SecondOrderLearner(Learner):
 
     def __init__(self, terms=(), *, regularization=0.0, solver=FastSolver(),
                  mass: np.ndarray | None = None, mass_orthonormal: bool = True,
-                 stiffness_margin: float = 1e-10, smoothing: Smoothing | bool | None = None):
+                 stiffness_margin: float = 1e-10, smoothing: Smoothing | bool | str | None = None):
         self.smoothing = Smoothing.of(smoothing)
         if isinstance(terms, (str, type, ReducedTerm)):
             terms = (terms,)

@@ -34,8 +34,10 @@ states, which carry the states' noise) only the states' term is used.
 On exact data the estimated noise is the smooth part's own differences, ``lambda`` comes out tiny
 and, fitting all three fields, the curve stays within the spline's approximation error (relative
 1e-8 in the states, 1e-6 in the accelerations on the systems of ``benchmarks/spml_systems.py``);
-from the states alone it costs 1e-3 in the accelerations there. The option is off by default in
-every learner (``smoothing=None``).
+from the states alone it costs 1e-3 in the accelerations there. :meth:`Smoothing.auto` therefore
+smooths only the trajectories whose regressors' estimated noise is at least :data:`AUTO_THRESHOLD`
+of their RMS; it is :class:`~femrom.inference.SpML`'s default. The other learners take the data as
+given unless asked (``smoothing=None``).
 """
 
 from __future__ import annotations
@@ -46,6 +48,12 @@ from math import comb
 import numpy as np
 
 from femrom._errors import FemromTypeError, FemromValueError, nonnegative_integer, positive_integer
+
+#: :meth:`Smoothing.auto`'s threshold on the estimated relative noise. Noise ``sigma`` in the states
+#: biases a least-squares stiffness by about ``sigma^2`` (relative); the smoothing's own error on exact
+#: data is about 2e-6 in the learned force (benchmarks/spml_convergence.py): below 1e-3 relative noise
+#: (a bias below 1e-6) smoothing costs more than it removes.
+AUTO_THRESHOLD = 1e-3
 
 #: Which fields a smoothing fits: the states with the measured derivatives, or the states alone.
 SMOOTHING_FIELDS = ("auto", "all", "states")
@@ -72,6 +80,10 @@ class Smoothing:
         ``p``: the order of the differences that estimate each field's noise.
     log_lambda : float or None
         ``log10`` of ``lambda`` relative to ``tr N / tr P`` (given: no search).
+    threshold : float
+        A trajectory whose regressors' estimated noise (:meth:`noise`) is below ``threshold`` is kept
+        as measured (0: always smooth).
+        :meth:`auto` sets it to :data:`AUTO_THRESHOLD`.
     """
 
     degree: int = 5
@@ -79,6 +91,7 @@ class Smoothing:
     fields: str = "auto"
     noise_order: int = 6
     log_lambda: float | None = None
+    threshold: float = 0.0
 
     def __post_init__(self):
         k = positive_integer(self.degree, "Smoothing.degree")
@@ -92,20 +105,63 @@ class Smoothing:
         p = positive_integer(self.noise_order, "Smoothing.noise_order")
         if self.log_lambda is not None and not np.isfinite(float(self.log_lambda)):
             raise FemromValueError(f"Smoothing.log_lambda must be finite or None, got {self.log_lambda!r}")
+        if not float(self.threshold) >= 0.0 or not np.isfinite(float(self.threshold)):
+            raise FemromValueError(f"Smoothing.threshold must be finite and >= 0, got {self.threshold!r}")
+        object.__setattr__(self, "threshold", float(self.threshold))
         object.__setattr__(self, "degree", k)
         object.__setattr__(self, "penalty_order", m)
         object.__setattr__(self, "noise_order", p)
 
     @classmethod
+    def auto(cls) -> "Smoothing":
+        """Smooth only the trajectories whose estimated noise exceeds :data:`AUTO_THRESHOLD`."""
+        return cls(threshold=AUTO_THRESHOLD)
+
+    @classmethod
     def of(cls, value) -> "Smoothing | None":
-        """``None``/``False``: no smoothing; ``True``: the defaults; a :class:`Smoothing` as is."""
+        """``None``/``False``: no smoothing; ``True``: the defaults (always smooth); ``"auto"``:
+        :meth:`auto`; a :class:`Smoothing` as is."""
         if value is None or value is False:
             return None
         if value is True:
             return cls()
+        if isinstance(value, str) and value == "auto":
+            return cls.auto()
         if isinstance(value, cls):
             return value
-        raise FemromTypeError(f"smoothing must be a Smoothing, True or None, got {value!r}")
+        raise FemromTypeError(f"smoothing must be a Smoothing, True, 'auto' or None, got {value!r}")
+
+    def noise(self, data) -> list[float]:
+        """Per trajectory of ``data``, the largest estimated noise of a regressor over the coordinates,
+        relative to its RMS: the states' and, when they are measured (``fields`` "all"), the
+        velocities' (what :attr:`threshold` is compared with). The noise that biases a fit is the
+        regressors' (errors in variables); the accelerations are its target, and integrator data
+        carry their under-resolved fast content there (the jointed beam's Newmark runs: 1e-3 in
+        the accelerations, 1e-5 .. 1e-4 in the states and velocities). The estimate is the robust one
+        of :func:`noise_level`, blind to a stick-slip kink or a blow's end."""
+        use = (0,) if self._fields(data) == "states" else (0, 1)
+        bounds = list(data.starts) + [data.n_samples]
+        fields = (data.states, data.velocities, data.accelerations)
+        out = []
+        for a, b in zip(bounds[:-1], bounds[1:]):
+            worst = 0.0
+            for i in use:
+                y = fields[i][:, a:b]
+                rms = np.sqrt(np.mean(y * y, axis=1))
+                # a coordinate at round-off against the largest one (a POD tail) is not judged by its own
+                # scale: relative to 1e-6 of the largest
+                rms = np.maximum(rms, 1e-6 * rms.max(initial=0.0))
+                for j in range(data.r):
+                    if rms[j] > 0.0:
+                        worst = max(worst, noise_level(y[j], self.noise_order, robust=True) / rms[j])
+            out.append(worst)
+        return out
+
+    def _fields(self, data) -> str:
+        if self.fields != "auto":
+            return self.fields
+        placeholders = not (np.any(data.velocities) and np.any(data.accelerations))
+        return "states" if placeholders or data.diagnostics.get("derivative_source") in _DERIVED else "all"
 
     def apply(self, data):
         """``data`` (a :class:`SecondOrderData`, or a list of them) with each trajectory (split at its
@@ -115,16 +171,17 @@ class Smoothing:
         freedom."""
         if isinstance(data, (list, tuple)):
             return [self.apply(d) for d in data]
-        step = _step(data)
-        fields = self.fields
-        if fields == "auto":
-            placeholders = not (np.any(data.velocities) and np.any(data.accelerations))
-            fields = "states" if placeholders or data.diagnostics.get("derivative_source") in _DERIVED else "all"
+        fields = self._fields(data)
         use = (0,) if fields == "states" else (0, 1, 2)
         bounds = list(data.starts) + [data.n_samples]
-        out = [np.empty_like(data.states) for _ in range(3)]
+        out = [data.states.copy(), data.velocities.copy(), data.accelerations.copy()]
         report = []
-        for a, b in zip(bounds[:-1], bounds[1:]):
+        noise = self.noise(data) if self.threshold > 0.0 else [np.inf] * (len(bounds) - 1)
+        step = _step(data) if any(n >= self.threshold for n in noise) else None
+        for (a, b), level in zip(zip(bounds[:-1], bounds[1:]), noise):
+            if level < self.threshold:
+                report.append({"kept": True, "noise": float(level)})
+                continue
             if b - a < self.degree + 2 * self.noise_order:
                 raise FemromValueError(f"smoothing needs at least {self.degree + 2 * self.noise_order} samples a "
                                        f"trajectory, got {b - a} (columns {a}..{b - 1})")
@@ -137,16 +194,26 @@ class Smoothing:
                     out[i][j, a:b] = curve[i]
                 rows.append(info)
             report.append(rows)
-        diagnostics = dict(data.diagnostics, smoothing={"fields": fields, "trajectories": report})
+        diagnostics = dict(data.diagnostics, smoothing={"fields": fields, "threshold": self.threshold,
+                                                        "trajectories": report})
+        if all(isinstance(t, dict) and t.get("kept") for t in report):
+            return replace(data, diagnostics=diagnostics)
         return replace(data, states=out[0], velocities=out[1], accelerations=out[2], diagnostics=diagnostics)
 
 
-def noise_level(y: np.ndarray, order: int = 6) -> float:
+def noise_level(y: np.ndarray, order: int = 6, *, robust: bool = False) -> float:
     r"""The standard deviation of white noise on a densely sampled smooth signal ``y`` (K,):
     ``sqrt(mean((Delta^p y)^2) / C(2p, p))`` (the ``p``-th differences of the smooth part are
-    ``O((omega dt)^p)`` of it, the noise's have variance ``C(2p, p) sigma^2``)."""
+    ``O((omega dt)^p)`` of it, the noise's have variance ``C(2p, p) sigma^2``). ``robust``: from the
+    median absolute difference instead, ``1.4826 median|Delta^p y| / sqrt(C(2p, p))`` (the same for
+    Gaussian noise, and blind to isolated kinks and jumps of a piecewise smooth signal: a stick-slip
+    transition, a blow's end)."""
     d = np.diff(np.asarray(y, dtype=float), order)
-    return float(np.sqrt(np.mean(d * d) / comb(2 * order, order))) if d.size else 0.0
+    if not d.size:
+        return 0.0
+    if robust:
+        return float(1.482602218505602 * np.median(np.abs(d)) / np.sqrt(comb(2 * order, order)))
+    return float(np.sqrt(np.mean(d * d) / comb(2 * order, order)))
 
 
 def _step(data) -> float:

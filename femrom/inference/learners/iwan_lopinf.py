@@ -75,9 +75,9 @@ class IwanLOpInf(Learner):
     solver : ConicSolver
         The cvxpy solver of the second-order cone program, with its options (default
         ``ConicSolver("clarabel")``).
-    smoothing : Smoothing, True or None
-        Denoise each training and validation trajectory before the fit (:class:`Smoothing`);
-        ``None`` (default): the data as given.
+    smoothing : Smoothing, True, "auto" or None
+        Denoise each training and validation trajectory before the fit (:class:`Smoothing`;
+        ``"auto"``: only trajectories estimated noisy); ``None`` (default): the data as given.
 
     Attributes
     ----------
@@ -96,7 +96,7 @@ class IwanLOpInf(Learner):
 
     def __init__(self, terms=("damping",), *, thresholds=32, threshold_span=(1e-3, 1.0), direction=None,
                  monotone: bool = True, band=None, regularization: float = 1e-9, stiffness_margin: float = 1e-10,
-                 solver: ConicSolver = ConicSolver(), smoothing: Smoothing | bool | None = None):
+                 solver: ConicSolver = ConicSolver(), smoothing: Smoothing | bool | str | None = None):
         self.smoothing = Smoothing.of(smoothing)
         terms = (terms,) if isinstance(terms, str) else tuple(terms)
         unknown = [t for t in terms if t not in LINEAR_TERMS]

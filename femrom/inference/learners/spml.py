@@ -259,10 +259,12 @@ class SpML(Learner):
         every least-squares stage (non-negative, in the monotone shape) and refined by L-BFGS with
         every other weight. The model then steps with Newmark (a return mapping; the sliders' state).
     config : SpMLConfig
-    smoothing : Smoothing, True or None
+    smoothing : Smoothing, True, "auto" or None
         Denoise each training and validation trajectory before both steps (:class:`Smoothing`; for
-        noisy states: their noise is noise in the regressors, docs/spml.md, "Convergence"); ``None``
-        (default): the data as given.
+        noisy states: their noise is noise in the regressors, docs/spml.md, "Convergence").
+        ``"auto"`` (default): :meth:`Smoothing.auto`, only the trajectories whose estimated noise
+        is at least 1e-3 of their RMS (exact and integrator data estimate 1e-12 to 1e-5 and are kept
+        as given); ``True``: every trajectory; ``None``: the data as given.
     progress : bool or None
         The progress line with the loss (``None``: on a terminal, in a log every 30 s).
 
@@ -290,13 +292,15 @@ class SpML(Learner):
     loss_ : float
         The relative training loss of the kept weights; ``linear_loss_`` step 1's.
     training_seconds_ : float
+    smoothed_ : list of bool or None
+        Per training trajectory, whether the smoothing replaced it (``None`` without smoothing).
     """
 
     method = "spml"
 
     def __init__(self, terms=(), *, config: SpMLConfig = SpMLConfig(), regularization=0.0, solver=FastSolver(),
                  mass: np.ndarray | None = None, mass_orthonormal: bool = True, stiffness_margin: float = 1e-10,
-                 smoothing: Smoothing | bool | None = None, progress: bool | None = None):
+                 smoothing: Smoothing | bool | str | None = "auto", progress: bool | None = None):
         if not torch_available():
             raise ImportError(TORCH_MISSING)
         if not isinstance(config, SpMLConfig):
@@ -396,9 +400,12 @@ class SpML(Learner):
         import torch
 
         tic = time.perf_counter()
+        self.smoothed_ = None
         if self.smoothing is not None:
             data = self.smoothing.apply(data)
             validation = None if validation is None else self.smoothing.apply(validation)
+            self.smoothed_ = [not t.get("kept", False) for d in (data if isinstance(data, (list, tuple)) else [data])
+                              for t in _trajectory_reports(d)]
         pieces = list(data) if isinstance(data, (list, tuple)) else [data]
         held = None if validation is None else list(validation) if isinstance(validation, (list, tuple)) \
             else [validation]
@@ -568,3 +575,9 @@ def _scales(data: SecondOrderData, target_norm2: float) -> dict:
     sv = max(float(np.sqrt(np.mean(data.velocities ** 2))), np.finfo(float).tiny)
     force = np.sqrt(target_norm2 / data.states.size)
     return {"q": np.full(r, sq), "v": np.full(r, sv), "potential": force * sq, "dissipation": force * sv}
+
+
+def _trajectory_reports(data) -> list:
+    """The per-trajectory entries of a smoothed trajectory's ``diagnostics["smoothing"]``: a dict for a
+    trajectory kept as measured, a list of per-coordinate fits for a smoothed one."""
+    return [t if isinstance(t, dict) else {} for t in data.diagnostics["smoothing"]["trajectories"]]
