@@ -247,3 +247,6 @@ def test_the_measured_range_fit_refuses_an_unknown_parameter_in_one_line():
             fit(None, None, None, 0.00138, parameters=parameters)
     with pytest.raises(FemromError, match="closing_damping is fitted on a log scale; start it above 0, got 0.0"):
         fit(None, None, None, 0.00138, parameters=("closing_damping",), start=MeasuredRangeJoint(closing_damping=0.0))
+    with pytest.raises(FemromError) as error:
+        fit(None, None, None, 0.00138, norm="l1")
+    assert str(error.value) == "fit_measured_range: norm must be one of squares, max, got 'l1'"

@@ -23,7 +23,11 @@ the energy stored in the interface springs plus what the sliders dissipate
 
 .. math::
 
-    \bar g \cdot \Delta x = \Delta E_{joint} + D_{friction} + \epsilon_k .
+    \bar g \cdot \Delta x = \Delta E_{joint} + D_{friction} + D_{dashpot} + \epsilon_k .
+
+``D_dashpot`` is the work of a law's rate term (the clamped Iwan law's normal dashpot at re-closed
+points, ``damping_power`` of :class:`femrom.fem.JointForce`), taken by the trapezoid of its power,
+``h (P_k + P_{k+1}) / 2``: second order in ``h``, not the step's exact work.
 
 ``epsilon_k`` vanishes in steps that stick or slip throughout; in a step that
 switches between the two, the trapezoidal mean ``bar g`` is not the return
@@ -62,12 +66,13 @@ class EnergyBalance:
 
     Attributes (after the run; (k + 1,) ndarrays over the steps, cumulative from step 0)
     ------------------------------------------------------------------------------------
-    t, kinetic, strain, external_work, rayleigh, nonlinear_work, joint_energy, friction
+    t, kinetic, strain, external_work, rayleigh, nonlinear_work, joint_energy, friction, joint_damping
 
     ``joint_energy`` is the energy stored in the nonlinear forces that report it
     (``stored_energy(q, state)``, else ``potential(q)`` for conservative forces);
     ``friction`` the cumulated ``dissipation(q_{k+1}, state_k)`` of those that
-    report it. The external work includes a constant load ``f_0``.
+    report it; ``joint_damping`` the cumulated trapezoid of ``damping_power(q, v, state)`` of those
+    that report one (zero for rate-independent laws). The external work includes a constant load ``f_0``.
     """
 
     def __init__(self, system, scheme=None):
@@ -76,6 +81,7 @@ class EnergyBalance:
         forces = system.nonlinear_forces
         self._stored = [f for f in forces if hasattr(f, "stored_energy") or f.conservative]
         self._dissipative = [f for f in forces if hasattr(f, "dissipation")]
+        self._damped = [f for f in forces if hasattr(f, "damping_power") and getattr(f, "velocity_dependent", False)]
         self._previous = None
         self._rows: list[tuple] = []
 
@@ -107,8 +113,9 @@ class EnergyBalance:
         kinetic = system.kinetic_energy(v)
         strain = 0.5 * float(q @ (system.stiffness @ q))
         joint = self._joint_energy(q, state)
+        power = sum(force.damping_power(q, v, self._own_state(force, state)) for force in self._damped)
         if self._previous is None:
-            work = rayleigh = nonlinear = friction = 0.0
+            work = rayleigh = nonlinear = friction = damping = 0.0
         else:
             p = self._previous
             dq = q - p["q"]
@@ -126,8 +133,9 @@ class EnergyBalance:
             nonlinear = 0.0 if g is None else 0.5 * float((g + p["g"]) @ (x - p["x"]))
             friction = sum(force.dissipation(q, self._own_state(force, p["state"]))
                            for force in self._dissipative)
-        self._rows.append((t, kinetic, strain, work, rayleigh, nonlinear, joint, friction))
-        self._previous = {"q": q, "v": v, "t": t, "f": f, "x": x, "g": g, "state": state}
+            damping = 0.5 * (t - p["t"]) * (power + p["power"])
+        self._rows.append((t, kinetic, strain, work, rayleigh, nonlinear, joint, friction, damping))
+        self._previous = {"q": q, "v": v, "t": t, "f": f, "x": x, "g": g, "state": state, "power": power}
 
     def __len__(self) -> int:
         return len(self._rows)
@@ -176,6 +184,12 @@ class EnergyBalance:
         return self._column(7, cumulative=True)
 
     @property
+    def joint_damping(self) -> np.ndarray:
+        """Cumulated work of the nonlinear forces' rate terms, ``sum h (P_k + P_{k+1}) / 2`` (a normal
+        dashpot's; zero without one)."""
+        return self._column(8, cumulative=True)
+
+    @property
     def scheme_residual(self) -> np.ndarray:
         r"""(k,) per step: ``W_ext - Delta T - Delta V - D_C - W_nl`` (zero to round-off for average
         acceleration)."""
@@ -183,18 +197,19 @@ class EnergyBalance:
 
     @property
     def joint_residual(self) -> np.ndarray:
-        r"""(k,) per step: ``W_nl - Delta E_joint - D_friction`` (the return map against the trapezoid)."""
-        return np.diff(self.nonlinear_work - self.joint_energy - self.friction)
+        r"""(k,) per step: ``W_nl - Delta E_joint - D_friction - D_dashpot`` (the return map against the
+        trapezoid)."""
+        return np.diff(self.nonlinear_work - self.joint_energy - self.friction - self.joint_damping)
 
     @property
     def residual(self) -> np.ndarray:
-        """(k,) per step: work in minus (kinetic + strain + Rayleigh + joint energy + friction) changes,
-        the sum of :attr:`scheme_residual` and :attr:`joint_residual`."""
+        """(k,) per step: work in minus (kinetic + strain + Rayleigh + joint energy + friction + dashpot)
+        changes, the sum of :attr:`scheme_residual` and :attr:`joint_residual`."""
         return np.diff(self.external_work - self.kinetic - self.strain - self.rayleigh - self.joint_energy
-                       - self.friction)
+                       - self.friction - self.joint_damping)
 
     def as_dict(self) -> dict[str, np.ndarray]:
         """The recorded terms as arrays (for a report or an HDF5 group)."""
         names = ("t", "kinetic", "strain", "external_work", "rayleigh", "nonlinear_work", "joint_energy",
-                 "friction")
+                 "friction", "joint_damping")
         return {name: getattr(self, name) for name in names}

@@ -261,7 +261,8 @@ class JointedBeamModel:
 
     def fit_measured_range(self, calibrated: CalibratedBeam, response_controlled, hammer, damping_ratio: float, *,
                            start: MeasuredRangeJoint | None = None, evaluations: int = 45, progress=print,
-                           parameters=("friction_coefficient", "chi", "closing"), samples: int | None = None) -> dict:
+                           parameters=("friction_coefficient", "chi", "closing"), samples: int | None = None,
+                           norm: str = "squares") -> dict:
         """The :class:`MeasuredRangeJoint`'s ``parameters`` (default ``mu``, ``chi``, ``kappa``; the others, ``beta``
         and the shaker mass as in ``start``) fitted on two measured backbones at acc3 together: the
         response-controlled stepped sine's (:func:`~femrom.post.phase_resonance_backbone`, with the shaker's mass)
@@ -281,9 +282,14 @@ class JointedBeamModel:
         (every pair) and runs EPMC (H = 1) of mode 1 on the modal model, with and without the shaker's
         mass (:meth:`measured_range_backbone`; about 15-40 s on 2 cores). The misfit: frequency errors
         over 0.1 Hz and logs of the damping ratios' quotients over ``log 1.2`` (the issue's tolerances),
-        one sum of squares; Nelder-Mead from ``start``, at most ``evaluations`` evaluations. Returns the best
+        one sum of squares (``norm="squares"``) or the largest of their absolute values (``norm="max"``:
+        the form the tolerances are stated in, every level within them exactly when the misfit is at most 1);
+        Nelder-Mead from ``start``, at most ``evaluations`` evaluations. Returns the best
         joint, its misfit, the history, the per-level errors and the fitted ``parameters``."""
         names = _range_fit_parameters(parameters)
+        if norm not in RANGE_FIT_NORMS:
+            raise FemromValueError(f"fit_measured_range: norm must be one of {', '.join(RANGE_FIT_NORMS)}, "
+                                   f"got {norm!r}")
         start = start or MeasuredRangeJoint()
         for name in names:
             if name in ("closing", "closing_damping") and not getattr(start, name) > 0:
@@ -313,7 +319,7 @@ class JointedBeamModel:
             residual = np.concatenate([(f - response_controlled.frequency_hz) / 0.1,
                                        np.log(z / response_controlled.damping_ratio) / np.log(1.2),
                                        (f0 - f_h) / 0.1, np.log(z0h / z_h) / np.log(1.2)])
-            value = float(residual @ residual)
+            value = float(residual @ residual) if norm == "squares" else float(np.max(np.abs(residual)))
             history.append({"misfit": value, **joint.parameters(), "frequency_hz": f.tolist(),
                             "damping_ratio": z.tolist(), "hammer_frequency_hz": f0.tolist(),
                             "hammer_damping_ratio": z0h.tolist()})
@@ -329,7 +335,7 @@ class JointedBeamModel:
         best = min(history, key=lambda h: h["misfit"])
         joint = dataclasses.replace(start, **{name: best[name] for name in names})
         return {"joint": joint, "misfit": best["misfit"], "evaluations": len(history), "history": history,
-                "seconds": time.perf_counter() - tic, "parameters": list(names),
+                "seconds": time.perf_counter() - tic, "parameters": list(names), "norm": norm,
                 "fitted_on": f"response-controlled stepped sine at acc3 {a_rc.min():.3g}-{a_rc.max():.3g} m/s^2 "
                              f"and the hammer backbone at acc3 {a_h[0]:g}-{a_h[-1]:g} m/s^2"}
 
@@ -388,6 +394,10 @@ RANGE_FIT_PARAMETERS = {
     "closing": (np.log, lambda x: float(np.exp(x)), np.log(0.5), "kappa"),
     "closing_damping": (np.log, lambda x: float(np.exp(x)), np.log(0.5), "lambda"),
 }
+
+
+#: How :meth:`JointedBeamModel.fit_measured_range` sums the scaled residuals: squares, or the largest.
+RANGE_FIT_NORMS = ("squares", "max")
 
 
 def _range_fit_parameters(parameters) -> tuple:
