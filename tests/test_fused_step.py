@@ -198,3 +198,63 @@ def test_the_environment_switches_the_fused_step_off():
            "PYTHONPATH": os.pathsep.join([str(root), os.environ.get("PYTHONPATH", "")])}
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True, cwd=root)
     assert out.stdout.split() == ["True", "False"]
+
+
+def test_a_galerkin_model_of_a_galerkin_model_keeps_the_compiled_joint():
+    """Reducing a reduced model again (the jointed-beam ROM study projects its 10-mode reference on a few POD
+    directions) gives one transformed joint with the map ``L V_1 V_2`` about the first reduction's ``q_0``: the
+    compiled step is offered and runs, and force, tangent and a run equal the twice-projected force
+    ``V_2^T f_1(V_2 q~)`` evaluated through the once-reduced model (round-off). A second reference ``x_0``
+    in the once-reduced coordinates composes too (``transform_force``: about ``q_0 + V_1 x_0``)."""
+    from femrom.fem import transform_force
+
+    system, z0 = lap_joint("clamped_iwan")
+    once = system.nonlinear
+    V2 = np.linalg.qr(np.random.default_rng(4).standard_normal((MODES, 3)))[0]
+    twice = galerkin(system, V2).system
+    force = twice.nonlinear
+    assert force.compiled_joint() is not None
+    assert type(force.transformed.force_model).__name__ == "JointForce"
+    q = 1e-7 * np.array([1.0, -2.0, 0.5])
+    for x0 in (np.zeros(MODES), 1e-8 * np.arange(1.0, MODES + 1)):
+        composed = transform_force(once.transformed, V2, reference=x0)
+        assert type(composed.force_model).__name__ == "JointForce"
+        f_ref = V2.T @ once.force(x0 + V2 @ q, None, z0)
+        D_ref = V2.T @ np.asarray(once.tangent(x0 + V2 @ q, None, z0)[0]) @ V2
+        f, D = composed.force(q, None, z0), composed.tangent(q, None, z0)[0].toarray()
+        np.testing.assert_allclose(f, f_ref, rtol=0, atol=1e-12 * np.abs(f_ref).max())
+        np.testing.assert_allclose(D, D_ref, rtol=0, atol=1e-12 * np.abs(D_ref).max())
+    generic = dataclasses.replace(twice, nonlinear=_generic(once, V2))
+    scheme = Newmark(newton=Newton(rtol=1e-12))
+    *fused, summary = run(twice, z0, scheme, True, steps=120)
+    *reference, reference_summary = run(generic, z0, scheme, True, steps=120)
+    assert summary.details.get("compiled_step") is True and "compiled_step" not in reference_summary.details
+    assert np.abs(fused[3][-1][:, :-1] - z0[:, :-1]).max() > 1e-8        # the sliders moved (observed 1.4e-7 m)
+    for x, x_ref in zip(fused[:4], reference[:4]):
+        _close(x, x_ref)
+
+
+def _generic(once, V2):
+    """The twice-reduced force as ``V_2^T f_1(V_2 q~)`` on the once-reduced model's force (no composed map)."""
+    from femrom.fem import NonlinearForce
+
+    class Generic(NonlinearForce):
+        stateful = True
+
+        def __init__(self):
+            super().__init__(V2.shape[1], name="generic")
+
+        def initial_state(self):
+            return once.initial_state()
+
+        def force(self, q, v=None, state=None):
+            return V2.T @ once.force(V2 @ q, None if v is None else V2 @ v, state)
+
+        def tangent(self, q, v=None, state=None):
+            D = once.tangent(V2 @ q, None if v is None else V2 @ v, state)[0]
+            return V2.T @ np.asarray(D) @ V2, None
+
+        def commit(self, q, v, state):
+            return once.commit(V2 @ q, None if v is None else V2 @ v, state)
+
+    return Generic()

@@ -200,6 +200,27 @@ class TransformedForce(NonlinearForce):
         T[self.touched_dofs] = self.touched_rows
         return TransformedForce(force, T.tocsr(), name=force.name, reference=self.reference)
 
+    def composed(self, transformation, *, reference=None) -> "TransformedForce":
+        """This force's original seen through ``q^ = x_0 + T_2 q~`` as well: ``q = q_0 + T_1 x_0 + T_1 T_2 q~``
+        (``transformation`` ``T_2`` (k, k2), ``reference`` ``x_0`` (k,), default 0), one :class:`TransformedForce`
+        of the original (only the rows of ``T_1`` this force kept are formed)."""
+        T2 = transformation
+        if T2.ndim != 2 or T2.shape[0] != self.n_dofs:
+            raise FemromValueError(f"transformation must be (k, k2) with k = {self.n_dofs} (the force's dofs), "
+                                   f"got shape {T2.shape}")
+        rows = self.touched_rows @ T2
+        rows = rows.toarray() if sp.issparse(rows) else np.asarray(rows, dtype=float)
+        T = sp.lil_matrix((self.original_dofs, T2.shape[1]))
+        T[self.touched_dofs] = rows
+        q0 = np.zeros(self.original_dofs) if self.reference is None else self.reference.copy()
+        if reference is not None:
+            x0 = np.asarray(reference, dtype=float).reshape(-1)
+            if x0.shape != (self.n_dofs,) or not np.all(np.isfinite(x0)):
+                raise FemromValueError(f"reference must be a finite ({self.n_dofs},) vector, got shape {x0.shape}")
+            q0[self.touched_dofs] += np.asarray(self.touched_rows @ x0).reshape(-1)
+        shifted = self.reference is not None or reference is not None
+        return TransformedForce(self.force_model, T.tocsr(), name=self.name, reference=q0 if shifted else None)
+
     def local_force_and_blocks(self, x, state=None):
         """The original's force and 3 x 3 tangent blocks at ``x`` shifted to the reference (a joint's)."""
         return self.force_model.local_force_and_blocks(self._shifted(x), state)
@@ -344,7 +365,9 @@ def transform_force(force: NonlinearForce | None, transformation, *, reference=N
     ``transformation=None`` keeps the coordinates and only shifts them to ``q_0``
     (``q = q_0 + x``: the force of a model about a reference state). A force already so
     shifted and then transformed is one :class:`TransformedForce` of the original
-    (``q = q_0 + T q^``), not a chain of two.
+    (``q = q_0 + T q^``), not a chain of two; so is a transformed force transformed again
+    (``q = q_0 + T_1 (x_0 + T_2 q^)``: one map ``T_1 T_2`` about ``q_0 + T_1 x_0``), which keeps
+    what the original offers (a joint's compiled kernels, its blocks) to the twice-reduced model.
     """
     from femrom.fem._nonlinear import ForceSum, sum_of_forces
 
@@ -361,4 +384,6 @@ def transform_force(force: NonlinearForce | None, transformation, *, reference=N
         if reference is not None:
             raise FemromValueError("a shifted force is transformed about its own reference: give no second one")
         return TransformedForce(force.force_model, transformation, name=force.name, reference=force.reference)
+    if isinstance(force, TransformedForce):
+        return force.composed(transformation, reference=reference)
     return TransformedForce(force, transformation, reference=reference)

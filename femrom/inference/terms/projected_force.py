@@ -48,10 +48,13 @@ class ProjectedNonlinearForce(ReducedTerm):
     def __init__(self, force, basis: np.ndarray):
         self.force_model = force
         self.basis = np.asarray(basis, dtype=float)
-        if getattr(force, "local_map", None) is None:
+        # a projected force projected again (a reduced model reduced further) is the original seen through
+        # one map ``L V_1 V_2``: the same law on fewer coordinates, its compiled kernels included
+        inner = force.transformed if isinstance(force, ProjectedNonlinearForce) else force
+        if getattr(inner, "local_map", None) is None:
             self.transformed, self._local = None, None
         else:
-            self.transformed = transform_force(force, self.basis)
+            self.transformed = transform_force(inner, self.basis)
             self._local = np.ascontiguousarray(self.transformed.local_map.toarray())
 
     @classmethod
@@ -172,8 +175,12 @@ class ProjectedNonlinearForce(ReducedTerm):
         """
         K = Q.shape[1]
         W = self._local
-        if not self.stateful and W is not None and getattr(self.force_model, "columns", False):
-            return W.T @ self.force_model.local_force(W @ Q, None if Vel is None else W @ Vel, None)
+        if not self.stateful and W is not None and getattr(getattr(self.transformed, "force_model", None), "columns",
+                                                            False):
+            # a potential's local force takes columns; the reference's local offset shifts every one
+            X, offset = W @ Q, self.transformed.local_offset
+            X = X if offset is None else X + offset[:, None]
+            return W.T @ self.transformed.force_model.local_force(X, None if Vel is None else W @ Vel, None)
         out = np.empty((self.r, K))
         starts = set(int(s) for s in starts) | {0}
         state = None
