@@ -115,3 +115,62 @@ def test_a_marched_step_that_does_not_converge_fails_as_the_loop_does():
             use_compiled_laws(True)
         messages.append((type(failure.value).__name__, str(failure.value).split(":")[0]))
     assert messages[0] == messages[1]
+
+
+def with_potential(scale: float = 1.0):
+    """:func:`model` with a quartic potential ``U = c sum_m q^m`` over the degree-4 monomials beside the sliders (SpML
+    with sliders, its monomials as the potential): at the blow's largest motion its force is about a quarter of
+    ``K q``."""
+    from femrom.inference import LearnedPotential, SymmetricPolynomial, multi_indices
+
+    system, term = model()
+    index = multi_indices(R, 4)
+    coefficients = scale * 4e6 * np.random.default_rng(5).uniform(0.2, 1.0, len(index))
+    potential = LearnedPotential(R, SymmetricPolynomial(R, {4: (index, coefficients)}))
+    K, C = system.stiffness, system.damping
+    ops = ReducedOperators.from_matrices(K, damping=C, input_matrix=np.ones((R, 1)), nonlinear=potential)
+    ops = ops.with_terms(term)
+    return dataclasses.replace(ops.system, inputs=system.inputs), term, potential
+
+
+def test_sliders_beside_a_learned_potential_step_and_march_compiled():
+    """The sum of the sliders and a learned quartic potential takes the fused step (one compiled call, the
+    potential's gradient and Hessian by the scalar kernels) and the compiled march: equal to the numpy step to
+    round-off, with the same Newton iterations; the potential changes the run (not a sliders-only step)."""
+    system, term, potential = with_potential()
+    assert potential.compiled_scalar() is not None
+    times = DT * np.arange(STEPS + 1)
+    scheme = Newmark(newton=Newton(rtol=1e-12))
+    fused = march(system, scheme, times, np.zeros(R), np.zeros(R), inputs=system.inputs)
+    (q, e, x, its), summary = stepped_sum(system, True)
+    (q_ref, e_ref, x_ref, its_ref), summary_ref = stepped_sum(system, False)
+    assert summary.details.get("compiled_step") is True and "compiled_step" not in summary_ref.details
+    assert fused["path"] == "compiled steps"
+    np.testing.assert_array_equal(its, its_ref)
+    assert fused["newton_iterations"] == its_ref.sum()
+    _close(q, q_ref)
+    _close(e, e_ref)
+    _close(fused["q"][:, 1:].T, q_ref)
+    _close(fused["state"][[i for i, t in enumerate(system.nonlinear.terms) if t is term][0]].stretch, e_ref[-1])
+    quartic = potential.forces(q_ref.T)
+    linear = system.stiffness @ q_ref.T
+    assert 0.05 < np.abs(quartic).max() / np.abs(linear).max() < 1.0          # observed 0.25
+    (q_plain, *_), _ = stepped(model()[0], True)
+    assert np.abs(q - q_plain).max() > 1e-3 * np.abs(q_plain).max()
+
+
+def stepped_sum(system, compiled):
+    """:func:`stepped` for a model whose state is the tuple of its terms' (the sliders' picked out)."""
+    slot = [i for i, t in enumerate(system.nonlinear.terms) if hasattr(t, "compiled_sliders")][0]
+    use_compiled_laws(compiled)
+    try:
+        steps = iterate(system, Newmark(newton=Newton(rtol=1e-12)), None, None, DT, STEPS,
+                        start=StepResult.at_rest(R), progress=False)
+        rows, done = [], 0
+        for result in steps:
+            sliders = result.state[slot]
+            rows.append((result.q, sliders.stretch, sliders.coordinate, steps.newton_iterations - done))
+            done = steps.newton_iterations
+        return [np.array(column) for column in zip(*rows)], steps.summary()
+    finally:
+        use_compiled_laws(True)

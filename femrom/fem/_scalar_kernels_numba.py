@@ -675,3 +675,167 @@ def discrete_gradient_march(forces, has_force, forces_end, mass, damping, has_da
             past[3, i], past[2, i], past[1, i], past[0, i] = past[2, i], past[1, i], past[0, i], nonlinear[i]
         stored += 1
     return n, 0
+
+
+# -- a Newmark-family step of learned sliders beside a learned potential ---------------------------------------
+# _matvec, _newmark_predict and _sliders_force repeat femrom.fem._law_kernels_numba's (numba's per-file cache).
+@njit(cache=True)
+def _matvec(A, x, out):
+    for i in range(A.shape[0]):
+        total = 0.0
+        for j in range(A.shape[1]):
+            total += A[i, j] * x[j]
+        out[i] = total
+    return out
+
+
+@njit(cache=True)
+def _newmark_predict(q, v, a, force, has_force, mass, damping, has_damping, stiffness, h, beta, gamma, alpha_m,
+                     alpha_f):
+    """``(q_pred, v_pred, q_bal, b)``: the Newmark-family predictors, the balance point's displacement before
+    the new acceleration's part, and the linear right-hand side ``force - K q_bal - C v_bal - alpha_m M a``."""
+    r = q.size
+    q_pred = np.empty(r)
+    v_pred = np.empty(r)
+    for i in range(r):
+        q_pred[i] = q[i] + h * v[i] + ((0.5 - beta) * h * h) * a[i]
+        v_pred[i] = v[i] + ((1.0 - gamma) * h) * a[i]
+    if alpha_f == 0.0:
+        q_bal = q_pred
+        v_bal = v_pred
+    else:
+        q_bal = (1.0 - alpha_f) * q_pred + alpha_f * q
+        v_bal = (1.0 - alpha_f) * v_pred + alpha_f * v
+    work = np.empty(r)
+    b = -_matvec(stiffness, q_bal, np.empty(r))
+    if has_damping:
+        b -= _matvec(damping, v_bal, work)
+    if alpha_m != 0.0:
+        b -= alpha_m * _matvec(mass, a, work)
+    if has_force:
+        b = b + force
+    return q_pred, v_pred, q_bal, b
+
+
+@njit(cache=True)
+def _sliders_force(direction, thresholds, weights, stretch, coordinate, q):
+    """``(x, sum_i k_i e_i, sum of the stuck sliders' k_i)`` at ``q``: the return map
+    ``e_i = clip(e_i^0 + (x - x^0), -phi_i, phi_i)``, ``x = a . q``, stuck where ``|trial| < phi_i``."""
+    x = 0.0
+    for j in range(q.size):
+        x += direction[j] * q[j]
+    total = 0.0
+    stuck = 0.0
+    for i in range(thresholds.size):
+        trial = stretch[i] + (x - coordinate)
+        phi = thresholds[i]
+        e = min(max(trial, -phi), phi)
+        total += weights[i] * e
+        if abs(trial) < phi:
+            stuck += weights[i]
+    return x, total, stuck
+
+
+@njit(cache=True)
+def newmark_sliders_potential_step(q, v, a, force, has_force, mass, damping, has_damping, stiffness, S,
+                                   h, beta, gamma, alpha_m, alpha_f, c_q, w, rtol, atol, max_iterations,
+                                   direction, thresholds, weights, stretch, coordinate, potential):
+    """One Newmark-family step of a model whose nonlinear force is learned Jenkins sliders along ``a``
+    (``a sum_i k_i e_i``, tangent ``(sum of the stuck k_i) a a^T``) plus a learned potential's gradient
+    ``grad U(q)`` (tangent its Hessian; ``potential``: :attr:`femrom.fem.CompiledScalar.parts`): the
+    predictors, Newton on the new acceleration with the reference's residual and update tests, LU with partial
+    pivoting, and the sliders' commit at the new ``q``, as ``newmark_sliders_step`` of the law kernels does
+    for the sliders alone.
+
+    Returns ``(q1, v1, a1, stretch1, coordinate1, iterations, status, residual, tolerance)``.
+    """
+    r = q.size
+    q_pred, v_pred, q_bal, b = _newmark_predict(q, v, a, force, has_force, mass, damping, has_damping, stiffness,
+                                                h, beta, gamma, alpha_m, alpha_f)
+    norm_b = _norm(b)
+    x = a.copy()
+    f = np.empty(r)
+    Sx = np.empty(r)
+    R = np.empty(r)
+    J = np.empty((r, r))
+    at = np.empty(r)
+    grad = np.empty(r)
+    hess = np.empty((r, r))
+    work = _workspace(potential, r)
+    eps = np.finfo(np.float64).eps
+    c = w * c_q
+    iterations = -1
+    norm = tolerance = np.nan
+    for iteration in range(max_iterations + 1):
+        for i in range(r):
+            at[i] = q_bal[i] + c_q * x[i]
+        _, total, stuck = _sliders_force(direction, thresholds, weights, stretch, coordinate, at)
+        _vgh(at, potential, 2, grad, hess, work)
+        for i in range(r):
+            f[i] = grad[i] + direction[i] * total
+        _matvec(S, x, Sx)
+        scale = _norm(Sx) + norm_b + w * _norm(f)
+        for i in range(r):
+            R[i] = Sx[i] - b[i] + w * f[i]
+        norm = _norm(R)
+        if not math.isfinite(norm):
+            return q_pred, v_pred, x, stretch.copy(), coordinate, iteration, NOT_FINITE, norm, tolerance
+        tolerance = atol + rtol * scale
+        if norm <= tolerance:
+            iterations = iteration
+            break
+        if iteration == max_iterations:
+            return q_pred, v_pred, x, stretch.copy(), coordinate, iteration, NOT_CONVERGED, norm, tolerance
+        for i in range(r):
+            for j in range(r):
+                J[i, j] = S[i, j] + c * (hess[i, j] + stuck * (direction[i] * direction[j]))
+        if not _lu_solve(J, R):
+            return q_pred, v_pred, x, stretch.copy(), coordinate, iteration, SINGULAR, norm, tolerance
+        for i in range(r):
+            x[i] = x[i] - R[i]
+        if _norm(R) <= 4.0 * eps * _norm(x):
+            iterations = iteration + 1
+            break
+    q1 = np.empty(r)
+    v1 = np.empty(r)
+    for i in range(r):
+        q1[i] = q_pred[i] + (beta * h * h) * x[i]
+        v1[i] = v_pred[i] + (gamma * h) * x[i]
+    x1 = 0.0
+    for j in range(r):
+        x1 += direction[j] * q1[j]
+    stretch1 = np.empty(thresholds.size)
+    for i in range(thresholds.size):
+        phi = thresholds[i]
+        stretch1[i] = min(max(stretch[i] + (x1 - coordinate), -phi), phi)
+    return q1, v1, x, stretch1, x1, iterations, 0, norm, tolerance
+
+
+@njit(cache=True)
+def newmark_sliders_potential_march(q, v, a, forces, has_force, mass, damping, has_damping, stiffness, S,
+                                    h, beta, gamma, alpha_m, alpha_f, c_q, w, rtol, atol, max_iterations,
+                                    direction, thresholds, weights, stretch, coordinate, potential, Q, V, A):
+    """``n`` steps of :func:`newmark_sliders_potential_step` from ``(q, v, a)``, the forcing of step ``k`` in
+    ``forces[:, k]``, the states in the columns ``1 .. n`` of ``Q``, ``V``, ``A`` (r, n + 1).
+
+    Returns ``(stretch, coordinate, step, iterations, status, residual, tolerance)``: a step that fails stops
+    the march with its status and index (``STATE_NOT_FINITE``: its new ``q`` is not finite); else ``step``
+    is ``n``."""
+    n = Q.shape[1] - 1
+    iterations = 0
+    qk, vk, ak, ek, xk = q.copy(), v.copy(), a.copy(), stretch.copy(), coordinate
+    for k in range(n):
+        qk, vk, ak, ek, xk, its, status, norm, tolerance = newmark_sliders_potential_step(
+            qk, vk, ak, forces[:, k].copy(), has_force, mass, damping, has_damping, stiffness, S,
+            h, beta, gamma, alpha_m, alpha_f, c_q, w, rtol, atol, max_iterations,
+            direction, thresholds, weights, ek, xk, potential)
+        if status != 0:
+            return ek, xk, k, iterations, status, norm, tolerance
+        finite = True
+        for i in range(qk.size):
+            Q[i, k + 1], V[i, k + 1], A[i, k + 1] = qk[i], vk[i], ak[i]
+            finite = finite and math.isfinite(qk[i])
+        iterations += its
+        if not finite:
+            return ek, xk, k, iterations, STATE_NOT_FINITE, norm, tolerance
+    return ek, xk, n, iterations, 0, np.nan, np.nan

@@ -57,7 +57,8 @@ class ReducedForces:
         return float(sum(t.potential(q) for t in self.terms))
 
     def commit(self, q, v, state):
-        return tuple(t.commit(q, v, s) for t, s in zip(self.terms, state))
+        states = state if state is not None else self.initial_state()
+        return tuple(t.commit(q, v, s) for t, s in zip(self.terms, states))
 
 
 def _sum(matrices):

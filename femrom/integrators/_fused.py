@@ -196,15 +196,42 @@ class FusedJointStep(_FusedStep):
 
 class FusedSlidersStep(_FusedStep):
     """:class:`FusedJointStep` for learned Jenkins sliders along a reduced direction (a
-    :class:`~femrom.fem.CompiledSliders`); :meth:`march` takes a whole trajectory in one call."""
+    :class:`~femrom.fem.CompiledSliders`), alone or beside a learned potential of ``q^`` (a
+    :class:`~femrom.fem.CompiledScalar`: SpML with sliders, ``newmark_sliders_potential_step`` of
+    :func:`femrom.fem.compiled_scalar_kernels`); :meth:`march` takes a whole trajectory in one call.
 
-    def __init__(self, scheme, system, dt: float, effective_matrix, sliders, initial_state):
+    ``slot``: with a potential, the model's force is a sum whose state is a tuple; ``slot`` is the sliders'
+    place in it (the potential's entry is stateless and passes through)."""
+
+    def __init__(self, scheme, system, dt: float, effective_matrix, sliders, initial_state, *, potential=None,
+                 slot: int | None = None):
         super().__init__(scheme, system, dt, effective_matrix, initial_state)
-        self.sliders = sliders
+        self.sliders, self.potential, self._slot = sliders, potential, slot
         self._law = (sliders.direction, sliders.thresholds, sliders.weights)
+        if potential is None:
+            self._step, self._march, self._extra = (self._kernels.newmark_sliders_step,
+                                                    self._kernels.newmark_sliders_march, ())
+        else:
+            scalar = compiled_scalar_kernels()
+            self._step, self._march, self._extra = (scalar.newmark_sliders_potential_step,
+                                                    scalar.newmark_sliders_potential_march, (potential.parts,))
+
+    @staticmethod
+    def enabled() -> bool:
+        """Whether the compiled laws are on now (the fused step follows the same switch)."""
+        return compiled_kernels() is not None and compiled_scalar_kernels() is not None
+
+    def _state(self, sliders, state):
+        """The model's state with the sliders' part ``sliders``."""
+        if self._slot is None:
+            return sliders
+        state = self._initial_state() if state is None else state
+        return tuple(sliders if i == self._slot else s for i, s in enumerate(state))
 
     def _parts(self, state):
         state = self._initial_state() if state is None else state
+        if self._slot is not None:
+            state = state[self._slot]
         stretch = state.stretch
         if not (stretch.flags.c_contiguous and stretch.dtype == np.float64):
             stretch = np.array(stretch, dtype=float)
@@ -216,11 +243,11 @@ class FusedSlidersStep(_FusedStep):
         has_force = force is not None
         M, C, has_C, K, S = self._matrices
         q1, v1, a1, stretch1, coordinate1, iterations, status, norm, tolerance = \
-            self._kernels.newmark_sliders_step(q, v, a, force if has_force else self._no_force, has_force,
-                                               M, C, has_C, K, S, *self._scalars, *self._law, stretch, coordinate)
+            self._step(q, v, a, force if has_force else self._no_force, has_force,
+                       M, C, has_C, K, S, *self._scalars, *self._law, stretch, coordinate, *self._extra)
         if status:
             self._raise(status, iterations, norm, tolerance)
-        return q1, v1, a1, self.sliders.state(stretch1, coordinate1), iterations
+        return q1, v1, a1, self._state(self.sliders.state(stretch1, coordinate1), state), iterations
 
     def march(self, q0, v0, a0, state, forces, n_steps: int, forces_end=None):
         """``(Q, V, A (r, n + 1), final state, newton_iterations)`` of ``n = n_steps`` steps, the forcing of
@@ -236,9 +263,9 @@ class FusedSlidersStep(_FusedStep):
         Q, V, A = (np.empty((r, n + 1)) for _ in range(3))
         Q[:, 0], V[:, 0], A[:, 0] = q0, v0, a0
         M, C, has_C, K, S = self._matrices
-        stretch1, coordinate1, done, iterations, status, norm, tolerance = self._kernels.newmark_sliders_march(
+        stretch1, coordinate1, done, iterations, status, norm, tolerance = self._march(
             np.array(q0, dtype=float), np.array(v0, dtype=float), np.array(a0, dtype=float), forces, has_force,
-            M, C, has_C, K, S, *self._scalars, *self._law, stretch, coordinate, Q, V, A)
+            M, C, has_C, K, S, *self._scalars, *self._law, stretch, coordinate, *self._extra, Q, V, A)
         if status == self._kernels.STATE_NOT_FINITE:
             raise NonFiniteState(done + 1)
         if status:
@@ -247,13 +274,14 @@ class FusedSlidersStep(_FusedStep):
             except ConvergenceError as err:
                 err.step = done + 1
                 raise
-        return Q, V, A, self.sliders.state(stretch1, coordinate1), iterations
+        return Q, V, A, self._state(self.sliders.state(stretch1, coordinate1), state), iterations
 
 
 def fused_step(scheme, system, dt: float, effective_matrix, implicit):
     """A :class:`FusedJointStep` or :class:`FusedSlidersStep` when ``implicit`` (the step's
     :class:`ImplicitSolve`) runs dense Newton and ``system``'s force offers a compiled joint or compiled
-    sliders (compiled laws on), else ``None``."""
+    sliders, or is the sum of compiled sliders and a compiled stateless potential of ``q^`` (compiled laws
+    on), else ``None``."""
     if implicit.method != "dense":
         return None
     force = system.nonlinear
@@ -265,7 +293,30 @@ def fused_step(scheme, system, dt: float, effective_matrix, implicit):
     sliders = offer() if callable(offer) else None
     if sliders is not None:
         return FusedSlidersStep(scheme, system, dt, effective_matrix, sliders, force.initial_state)
-    return None
+    return _sliders_beside_a_potential(scheme, system, dt, effective_matrix, force)
+
+
+def _sliders_beside_a_potential(scheme, system, dt, effective_matrix, force):
+    """:class:`FusedSlidersStep` with a potential for a force that sums exactly two terms: compiled sliders and
+    a compiled, conservative, stateless scalar function of ``q^``; else ``None``."""
+    terms = getattr(force, "terms", None)
+    if not isinstance(terms, tuple) or len(terms) != 2 or compiled_scalar_kernels() is None:
+        return None
+    sliders = potential = slot = None
+    for i, term in enumerate(terms):
+        offer = getattr(term, "compiled_sliders", None)
+        compiled = offer() if callable(offer) else None
+        if compiled is not None:
+            sliders, slot = compiled, i
+            continue
+        offer = getattr(term, "compiled_scalar", None)
+        compiled = offer() if callable(offer) else None
+        if compiled is not None and compiled.argument == "q" and term.conservative and not term.stateful:
+            potential = compiled
+    if sliders is None or potential is None:
+        return None
+    return FusedSlidersStep(scheme, system, dt, effective_matrix, sliders, force.initial_state, potential=potential,
+                            slot=slot)
 
 
 #: The chord march holds its Jacobian into the next step when the step converged in at most this many updates
