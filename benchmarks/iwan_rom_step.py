@@ -16,6 +16,12 @@ rest per block. Rows:
 - ``driver_numpy`` and ``driver_fused``: :func:`femrom.integrators.integrate` (the streaming driver,
   a Python step each), numpy step and fused step.
 
+``--potential`` adds a learned quartic potential beside the sliders (all degree-4 monomials, scaled so
+that its force is about a tenth of ``K q`` at the blow's largest linear motion): the shape of SpML with
+sliders and its monomials (``SpML([..., "hysteresis"])``, the jointed-beam ROM study's ``spml_hyst``),
+whose fused step evaluates the potential's gradient and Hessian by the scalar kernels
+(``newmark_sliders_potential_step``); it writes ``iwan_rom_step_potential.json``.
+
 ``march`` rows report its ``stepping_seconds`` (the loop alone), ``driver`` rows the whole call.
 The blocks alternate ``--repeats`` times; medians of the blocks' mean step times and their spread
 (min-max), and ratios against ``linear`` and ``march_numpy``. Run ``python -m benchmarks.iwan_rom_step``
@@ -64,20 +70,41 @@ def models(r: int, sliders: int):
     return dataclasses.replace(nonlinear, inputs=blow), dataclasses.replace(linear, inputs=blow), term
 
 
+def with_potential(system, linear, dt: float, steps: int):
+    """``system`` with a quartic potential over all degree-4 monomials beside its sliders, its force a tenth of
+    ``K q`` at the linear model's largest motion under the blow."""
+    from femrom.inference import LearnedPotential, SymmetricPolynomial, multi_indices
+
+    r = system.n_dofs
+    zero = np.zeros(r)
+    peak = float(np.abs(march(linear, Newmark(), dt * np.arange(steps + 1), zero, zero, inputs=linear.inputs)["q"]).max())
+    index = multi_indices(r, 4)
+    coefficients = np.random.default_rng(7).uniform(0.5, 1.0, len(index))
+    coefficients *= 0.1 * float(np.max(np.diag(linear.stiffness))) / (4.0 * len(index) * peak ** 2)
+    potential = LearnedPotential(r, SymmetricPolynomial(r, {4: (index, coefficients)}))
+    ops = ReducedOperators.from_matrices(system.stiffness, damping=system.damping, input_matrix=system.input_matrix,
+                                         nonlinear=potential)
+    sliders = system.nonlinear
+    return dataclasses.replace(ops.with_terms(sliders).system, inputs=system.inputs)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--steps", type=int, default=4000)
     parser.add_argument("--repeats", type=int, default=7)
     parser.add_argument("--sliders", type=int, default=32)
+    parser.add_argument("--potential", action="store_true", help="a learned quartic potential beside the sliders")
     args = parser.parse_args()
     if not compiled_laws():
         raise SystemExit("the compiled kernels are off (numba missing or FEMROM_COMPILED_LAWS=0)")
     dt = 1.0 / (128 * F1)
     times = dt * np.arange(args.steps + 1)
     result = {"machine": platform.platform(), "python": platform.python_version(), "steps": args.steps,
-              "repeats": args.repeats, "sliders": args.sliders, "dt": dt, "rows": {}}
+              "repeats": args.repeats, "sliders": args.sliders, "potential": args.potential, "dt": dt, "rows": {}}
     for r in (1, 3):
         system, linear, term = models(r, args.sliders)
+        if args.potential:
+            system = with_potential(system, linear, dt, args.steps)
         zero = np.zeros(r)
 
         def marched(model, compiled):
@@ -105,7 +132,7 @@ def main() -> None:
                 seconds[name].append(per_step)
                 iterations[name] = its
                 if name == "march_numpy":
-                    state = run["state"]
+                    state = run["state"] if not args.potential else run["state"][-1]
         use_compiled_laws(True)
         slipped = int(np.count_nonzero(np.abs(state.stretch) >= term.thresholds))
         medians = {name: statistics.median(v) for name, v in seconds.items()}
@@ -122,9 +149,10 @@ def main() -> None:
             print(f"| {name} | {row['us_per_step']:.2f} | {row['spread_us'][0]:.2f}-{row['spread_us'][1]:.2f} "
                   f"| {row['over_linear']:.2f} | {row['march_numpy_over']:.1f} | "
                   f"{row['newton_iterations_per_step']:.3f} |")
-    RESULTS.parent.mkdir(parents=True, exist_ok=True)
-    RESULTS.write_text(json.dumps(result, indent=1))
-    print(f"written: {RESULTS}")
+    out = RESULTS.with_name("iwan_rom_step_potential.json") if args.potential else RESULTS
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps(result, indent=1))
+    print(f"written: {out}")
 
 
 if __name__ == "__main__":
