@@ -19,8 +19,8 @@ rest per block. Rows:
 ``--potential`` adds a learned quartic potential beside the sliders (all degree-4 monomials, scaled so
 that its force is about a tenth of ``K q`` at the blow's largest linear motion): the shape of SpML with
 sliders and its monomials (``SpML([..., "hysteresis"])``, the jointed-beam ROM study's ``spml_hyst``),
-whose fused step evaluates the potential's gradient and Hessian by the scalar kernels
-(``newmark_sliders_potential_step``); it writes ``iwan_rom_step_potential.json``.
+whose fused step evaluates the potential's gradient and Hessian beside the sliders
+(``newmark_sliders_step`` of the scalar kernels); it writes ``iwan_rom_step_potential.json``.
 
 ``march`` rows report its ``stepping_seconds`` (the loop alone), ``driver`` rows the whole call.
 The blocks alternate ``--repeats`` times; medians of the blocks' mean step times and their spread

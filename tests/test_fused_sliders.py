@@ -53,13 +53,18 @@ def _close(x, reference):
 
 
 def stepped(system, compiled):
+    """``((q, stretches, coordinates, iterations per step), summary)`` of the run from rest; for a model whose
+    state is the tuple of its terms' (sliders beside a potential), the sliders' part."""
+    terms = getattr(system.nonlinear, "terms", None)
+    slot = None if terms is None else [i for i, t in enumerate(terms) if hasattr(t, "compiled_sliders")][0]
     use_compiled_laws(compiled)
     try:
         steps = iterate(system, Newmark(newton=Newton(rtol=1e-12)), None, None, DT, STEPS,
                         start=StepResult.at_rest(R), progress=False)
         rows, done = [], 0
         for result in steps:
-            rows.append((result.q, result.state.stretch, result.state.coordinate, steps.newton_iterations - done))
+            sliders = result.state if slot is None else result.state[slot]
+            rows.append((result.q, sliders.stretch, sliders.coordinate, steps.newton_iterations - done))
             done = steps.newton_iterations
         return [np.array(column) for column in zip(*rows)], steps.summary()
     finally:
@@ -142,8 +147,8 @@ def test_sliders_beside_a_learned_potential_step_and_march_compiled():
     times = DT * np.arange(STEPS + 1)
     scheme = Newmark(newton=Newton(rtol=1e-12))
     fused = march(system, scheme, times, np.zeros(R), np.zeros(R), inputs=system.inputs)
-    (q, e, x, its), summary = stepped_sum(system, True)
-    (q_ref, e_ref, x_ref, its_ref), summary_ref = stepped_sum(system, False)
+    (q, e, x, its), summary = stepped(system, True)
+    (q_ref, e_ref, x_ref, its_ref), summary_ref = stepped(system, False)
     assert summary.details.get("compiled_step") is True and "compiled_step" not in summary_ref.details
     assert fused["path"] == "compiled steps"
     np.testing.assert_array_equal(its, its_ref)
@@ -157,20 +162,3 @@ def test_sliders_beside_a_learned_potential_step_and_march_compiled():
     assert 0.05 < np.abs(quartic).max() / np.abs(linear).max() < 1.0          # observed 0.25
     (q_plain, *_), _ = stepped(model()[0], True)
     assert np.abs(q - q_plain).max() > 1e-3 * np.abs(q_plain).max()
-
-
-def stepped_sum(system, compiled):
-    """:func:`stepped` for a model whose state is the tuple of its terms' (the sliders' picked out)."""
-    slot = [i for i, t in enumerate(system.nonlinear.terms) if hasattr(t, "compiled_sliders")][0]
-    use_compiled_laws(compiled)
-    try:
-        steps = iterate(system, Newmark(newton=Newton(rtol=1e-12)), None, None, DT, STEPS,
-                        start=StepResult.at_rest(R), progress=False)
-        rows, done = [], 0
-        for result in steps:
-            sliders = result.state[slot]
-            rows.append((result.q, sliders.stretch, sliders.coordinate, steps.newton_iterations - done))
-            done = steps.newton_iterations
-        return [np.array(column) for column in zip(*rows)], steps.summary()
-    finally:
-        use_compiled_laws(True)

@@ -156,7 +156,8 @@ class CompiledSliders:
     return-map as ``e_i = clip(e_i^0 + (a . q^ - x^0), -phi_i, phi_i)`` (stuck where
     ``|trial| < phi_i``); the state is ``(e^0 (p,), x^0)``, rebuilt into the force's own state
     object by :attr:`state` (whose ``stretch`` and ``coordinate`` are the two parts). The kernels
-    are ``newmark_sliders_step`` and ``newmark_sliders_march`` of :func:`compiled_kernels`.
+    are ``newmark_sliders_step`` and ``newmark_sliders_march`` of :func:`compiled_scalar_kernels` (which
+    also take a learned potential beside the sliders).
 
     Attributes
     ----------

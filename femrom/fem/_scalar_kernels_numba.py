@@ -14,6 +14,9 @@ step of :class:`femrom.integrators.DiscreteGradient` for a model whose nonlinear
 potential of ``q`` and/or a learned dissipation of ``q'``: the predictor, the Newton iterations on the
 midpoint velocity (the two-point Gauss quadrature of the average vector field, Gonzalez's projection,
 the update test with the stagnation floor) and the end-of-step acceleration, in one call.
+:func:`newmark_sliders_step` and :func:`newmark_sliders_march` are a Newmark-family step (a trajectory) of a
+model with learned Jenkins sliders, alone or beside a learned potential (``FusedSlidersStep`` of
+:mod:`femrom.integrators._fused`).
 :func:`discrete_gradient_march` steps a whole trajectory in one call, by that Newton iteration or by a chord
 iteration (one Jacobian a step, values and gradients at the other iterates, a predictor from the extrapolated
 learned force) to the same fixed point (:func:`_dg_solve`).
@@ -677,8 +680,8 @@ def discrete_gradient_march(forces, has_force, forces_end, mass, damping, has_da
     return n, 0
 
 
-# -- a Newmark-family step of learned sliders beside a learned potential ---------------------------------------
-# _matvec, _newmark_predict and _sliders_force repeat femrom.fem._law_kernels_numba's (numba's per-file cache).
+# -- a Newmark-family step of learned sliders, alone or beside a learned potential ------------------------------
+# _matvec and _newmark_predict repeat femrom.fem._law_kernels_numba's (numba's per-file cache).
 @njit(cache=True)
 def _matvec(A, x, out):
     for i in range(A.shape[0]):
@@ -737,18 +740,35 @@ def _sliders_force(direction, thresholds, weights, stretch, coordinate, q):
 
 
 @njit(cache=True)
-def newmark_sliders_potential_step(q, v, a, force, has_force, mass, damping, has_damping, stiffness, S,
-                                   h, beta, gamma, alpha_m, alpha_f, c_q, w, rtol, atol, max_iterations,
-                                   direction, thresholds, weights, stretch, coordinate, potential):
+def newmark_sliders_step(q, v, a, force, has_force, mass, damping, has_damping, stiffness, S,
+                         h, beta, gamma, alpha_m, alpha_f, c_q, w, rtol, atol, max_iterations,
+                         direction, thresholds, weights, stretch, coordinate, potential, work):
     """One Newmark-family step of a model whose nonlinear force is learned Jenkins sliders along ``a``
-    (``a sum_i k_i e_i``, tangent ``(sum of the stuck k_i) a a^T``) plus a learned potential's gradient
-    ``grad U(q)`` (tangent its Hessian; ``potential``: :attr:`femrom.fem.CompiledScalar.parts`): the
-    predictors, Newton on the new acceleration with the reference's residual and update tests, LU with partial
-    pivoting, and the sliders' commit at the new ``q``, as ``newmark_sliders_step`` of the law kernels does
-    for the sliders alone.
+    (:class:`femrom.inference.LearnedHysteresis`: ``a sum_i k_i e_i``, tangent ``(sum of the stuck k_i) a a^T``)
+    and, unless ``potential`` is ``None``, a learned potential's gradient ``grad U(q)`` (tangent its Hessian;
+    ``potential``: :attr:`femrom.fem.CompiledScalar.parts`, ``work`` its :func:`_workspace`; SpML with sliders).
+    ``None`` (for both) is a type of its own to numba: the sliders alone compile without the potential's code
+    and pay nothing for it. State: the stretches ``e`` (p,)
+    and the coordinate ``x^0``. What ``NewmarkFamily.step`` does with the dense Newton of ``ImplicitSolve``, in
+    the same order of operations (as ``newmark_joint_step`` of the law kernels for a joint): the predictors,
+    Newton on the new acceleration with the residual test ``|R| <= atol + rtol (|S x| + |b| + w |f|)`` and the
+    update test ``|dx| <= 4 eps |x|``, LU with partial pivoting, and the sliders' commit at the new ``q``.
 
     Returns ``(q1, v1, a1, stretch1, coordinate1, iterations, status, residual, tolerance)``.
     """
+    r = q.size
+    return _sliders_step(q, v, a, force, has_force, mass, damping, has_damping, stiffness, S,
+                         h, beta, gamma, alpha_m, alpha_f, c_q, w, rtol, atol, max_iterations,
+                         direction, thresholds, weights, stretch, coordinate, potential,
+                         np.zeros(r), np.zeros((r, r)), work)
+
+
+@njit(cache=True, inline="always")
+def _sliders_step(q, v, a, force, has_force, mass, damping, has_damping, stiffness, S,
+                  h, beta, gamma, alpha_m, alpha_f, c_q, w, rtol, atol, max_iterations,
+                  direction, thresholds, weights, stretch, coordinate, potential, grad, hess, work):
+    """:func:`newmark_sliders_step` in the potential's arrays ``grad`` (r,), ``hess`` (r, r) (zero without a
+    potential) and workspace ``work`` (:func:`_workspace`), allocated once by a march."""
     r = q.size
     q_pred, v_pred, q_bal, b = _newmark_predict(q, v, a, force, has_force, mass, damping, has_damping, stiffness,
                                                 h, beta, gamma, alpha_m, alpha_f)
@@ -759,9 +779,6 @@ def newmark_sliders_potential_step(q, v, a, force, has_force, mass, damping, has
     R = np.empty(r)
     J = np.empty((r, r))
     at = np.empty(r)
-    grad = np.empty(r)
-    hess = np.empty((r, r))
-    work = _workspace(potential, r)
     eps = np.finfo(np.float64).eps
     c = w * c_q
     iterations = -1
@@ -770,7 +787,8 @@ def newmark_sliders_potential_step(q, v, a, force, has_force, mass, damping, has
         for i in range(r):
             at[i] = q_bal[i] + c_q * x[i]
         _, total, stuck = _sliders_force(direction, thresholds, weights, stretch, coordinate, at)
-        _vgh(at, potential, 2, grad, hess, work)
+        if potential is not None:
+            _vgh(at, potential, 2, grad, hess, work)
         for i in range(r):
             f[i] = grad[i] + direction[i] * total
         _matvec(S, x, Sx)
@@ -812,23 +830,25 @@ def newmark_sliders_potential_step(q, v, a, force, has_force, mass, damping, has
 
 
 @njit(cache=True)
-def newmark_sliders_potential_march(q, v, a, forces, has_force, mass, damping, has_damping, stiffness, S,
-                                    h, beta, gamma, alpha_m, alpha_f, c_q, w, rtol, atol, max_iterations,
-                                    direction, thresholds, weights, stretch, coordinate, potential, Q, V, A):
-    """``n`` steps of :func:`newmark_sliders_potential_step` from ``(q, v, a)``, the forcing of step ``k`` in
+def newmark_sliders_march(q, v, a, forces, has_force, mass, damping, has_damping, stiffness, S,
+                          h, beta, gamma, alpha_m, alpha_f, c_q, w, rtol, atol, max_iterations,
+                          direction, thresholds, weights, stretch, coordinate, potential, work, Q, V, A):
+    """``n`` steps of :func:`newmark_sliders_step` from ``(q, v, a)``, the forcing of step ``k`` in
     ``forces[:, k]``, the states in the columns ``1 .. n`` of ``Q``, ``V``, ``A`` (r, n + 1).
 
     Returns ``(stretch, coordinate, step, iterations, status, residual, tolerance)``: a step that fails stops
     the march with its status and index (``STATE_NOT_FINITE``: its new ``q`` is not finite); else ``step``
     is ``n``."""
     n = Q.shape[1] - 1
+    r = q.size
     iterations = 0
     qk, vk, ak, ek, xk = q.copy(), v.copy(), a.copy(), stretch.copy(), coordinate
+    grad, hess = np.zeros(r), np.zeros((r, r))
     for k in range(n):
-        qk, vk, ak, ek, xk, its, status, norm, tolerance = newmark_sliders_potential_step(
+        qk, vk, ak, ek, xk, its, status, norm, tolerance = _sliders_step(
             qk, vk, ak, forces[:, k].copy(), has_force, mass, damping, has_damping, stiffness, S,
             h, beta, gamma, alpha_m, alpha_f, c_q, w, rtol, atol, max_iterations,
-            direction, thresholds, weights, ek, xk, potential)
+            direction, thresholds, weights, ek, xk, potential, grad, hess, work)
         if status != 0:
             return ek, xk, k, iterations, status, norm, tolerance
         finite = True

@@ -197,8 +197,8 @@ class FusedJointStep(_FusedStep):
 class FusedSlidersStep(_FusedStep):
     """:class:`FusedJointStep` for learned Jenkins sliders along a reduced direction (a
     :class:`~femrom.fem.CompiledSliders`), alone or beside a learned potential of ``q^`` (a
-    :class:`~femrom.fem.CompiledScalar`: SpML with sliders, ``newmark_sliders_potential_step`` of
-    :func:`femrom.fem.compiled_scalar_kernels`); :meth:`march` takes a whole trajectory in one call.
+    :class:`~femrom.fem.CompiledScalar`: SpML with sliders), by ``newmark_sliders_step`` of
+    :func:`femrom.fem.compiled_scalar_kernels`; :meth:`march` takes a whole trajectory in one call.
 
     ``slot``: with a potential, the model's force is a sum whose state is a tuple; ``slot`` is the sliders'
     place in it (the potential's entry is stateless and passes through)."""
@@ -208,13 +208,11 @@ class FusedSlidersStep(_FusedStep):
         super().__init__(scheme, system, dt, effective_matrix, initial_state)
         self.sliders, self.potential, self._slot = sliders, potential, slot
         self._law = (sliders.direction, sliders.thresholds, sliders.weights)
-        if potential is None:
-            self._step, self._march, self._extra = (self._kernels.newmark_sliders_step,
-                                                    self._kernels.newmark_sliders_march, ())
-        else:
-            scalar = compiled_scalar_kernels()
-            self._step, self._march, self._extra = (scalar.newmark_sliders_potential_step,
-                                                    scalar.newmark_sliders_potential_march, (potential.parts,))
+        scalar = compiled_scalar_kernels()
+        self._step, self._march = scalar.newmark_sliders_step, scalar.newmark_sliders_march
+        # the potential's parts and workspace (scratch, reused by every step), or None for the sliders alone
+        self._extra = (None, None) if potential is None else \
+            (potential.parts, scalar._workspace(potential.parts, system.n_dofs))
 
     @staticmethod
     def enabled() -> bool:
