@@ -434,12 +434,12 @@ class MeasuredRangeJoint:
     1.95`` kg) is 5.2 g.
     """
 
-    friction_coefficient: float = 0.4667
+    friction_coefficient: float = 0.4267
     chi: float = 0.0
     beta: float = 0.3
-    closing: float = 1.993e-4
+    closing: float = 1.213e-4
     shaker_mass: float = 5.2e-3
-    closing_damping: float = 8.482e12
+    closing_damping: float = 1.307e13
 
     def __post_init__(self):
         for name, ok, valid in (("friction_coefficient", lambda v: v > 0, "> 0"), ("chi", lambda v: v > -1, "> -1"),
