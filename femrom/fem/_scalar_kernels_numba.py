@@ -144,6 +144,10 @@ def _workspace(parts, r):
             np.empty(m * m * m + 2 * m * m))
 
 
+#: The workspace a caller allocates once for repeated evaluations (a march's steps): :func:`_workspace`.
+scalar_workspace = _workspace
+
+
 @njit(cache=True)
 def scalar_vgh(x, parts, hessian, grad, hess):
     """``phi(x)``; ``grad`` (r,) and, with ``hessian``, ``hess`` (r, r) overwritten with its derivatives."""

@@ -212,7 +212,7 @@ class FusedSlidersStep(_FusedStep):
         self._step, self._march = scalar.newmark_sliders_step, scalar.newmark_sliders_march
         # the potential's parts and workspace (scratch, reused by every step), or None for the sliders alone
         self._extra = (None, None) if potential is None else \
-            (potential.parts, scalar._workspace(potential.parts, system.n_dofs))
+            (potential.parts, scalar.scalar_workspace(potential.parts, system.n_dofs))
 
     @staticmethod
     def enabled() -> bool:
