@@ -273,7 +273,7 @@ def joint_commit(kind, gap, state, stiffness, strength):
 # -- a whole Newmark-family step of a small model with a projected joint --------------------------------------
 # It lives here, not with the integrators, because numba's on-disk cache keys a compiled function on
 # its own file only: a step compiled elsewhere would keep calling stale copies of the kernels above
-# after they change. Its Python side is femrom.integrators' FusedJointStep (FusedSlidersStep below).
+# after they change. Its Python side is femrom.integrators' FusedJointStep.
 
 #: ``status`` of :func:`newmark_joint_step`.
 CONVERGED, NOT_CONVERGED, NOT_FINITE, SINGULAR, STATE_NOT_FINITE = 0, 1, 2, 3, 4
