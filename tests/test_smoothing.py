@@ -175,5 +175,9 @@ def test_bad_data_and_options_are_refused(runs):
                                           exact.accelerations[:, :10], times=exact.times[:10]))
     with pytest.raises(FemromError, match="uniformly sampled"):
         Smoothing().apply(SecondOrderData(exact.states, exact.velocities, exact.accelerations))
+    # a threshold (SpML's default "auto") cannot judge such data: they are kept as given, and said so
+    unsampled = Smoothing.auto().apply(SecondOrderData(exact.states, exact.velocities, exact.accelerations))
+    assert unsampled.states is exact.states
+    assert unsampled.diagnostics["smoothing"]["note"] == "not uniformly sampled: kept as given"
     with pytest.raises(FemromError, match="smoothing must be"):
         LagrangianOpInf(["damping"], smoothing="yes")

@@ -174,10 +174,20 @@ class Smoothing:
         fields = self._fields(data)
         use = (0,) if fields == "states" else (0, 1, 2)
         bounds = list(data.starts) + [data.n_samples]
-        out = [data.states.copy(), data.velocities.copy(), data.accelerations.copy()]
         report = []
+        if self.threshold > 0.0 and _step(data, required=False) is None:
+            # differences judge noise only on a uniform grid: a threshold keeps such data as given
+            report = [{"kept": True, "noise": None}] * (len(bounds) - 1)
+            return replace(data, diagnostics=dict(data.diagnostics, smoothing={
+                "fields": fields, "threshold": self.threshold, "trajectories": report,
+                "note": "not uniformly sampled: kept as given"}))
         noise = self.noise(data) if self.threshold > 0.0 else [np.inf] * (len(bounds) - 1)
-        step = _step(data) if any(n >= self.threshold for n in noise) else None
+        if all(level < self.threshold for level in noise):       # every trajectory kept: no copies
+            report = [{"kept": True, "noise": float(level)} for level in noise]
+            return replace(data, diagnostics=dict(data.diagnostics, smoothing={
+                "fields": fields, "threshold": self.threshold, "trajectories": report}))
+        out = [data.states.copy(), data.velocities.copy(), data.accelerations.copy()]
+        step = _step(data)
         for (a, b), level in zip(zip(bounds[:-1], bounds[1:]), noise):
             if level < self.threshold:
                 report.append({"kept": True, "noise": float(level)})
@@ -196,8 +206,6 @@ class Smoothing:
             report.append(rows)
         diagnostics = dict(data.diagnostics, smoothing={"fields": fields, "threshold": self.threshold,
                                                         "trajectories": report})
-        if all(isinstance(t, dict) and t.get("kept") for t in report):
-            return replace(data, diagnostics=diagnostics)
         return replace(data, states=out[0], velocities=out[1], accelerations=out[2], diagnostics=diagnostics)
 
 
@@ -216,13 +224,16 @@ def noise_level(y: np.ndarray, order: int = 6, *, robust: bool = False) -> float
     return float(np.sqrt(np.mean(d * d) / comb(2 * order, order)))
 
 
-def _step(data) -> float:
+def _step(data, *, required: bool = True) -> float | None:
+    """The uniform sampling step of ``data``; without one, an error (``required``) or ``None``."""
     from femrom.inference._data import sampling_step
 
     h = sampling_step(data)
     if h is None:
         h = data.diagnostics.get("dt") if data.diagnostics.get("n_trajectories", 1) == 1 else None
     if h is None or not h > 0:
+        if not required:
+            return None
         raise FemromValueError("smoothing needs uniformly sampled trajectories (times, or diagnostics dt)")
     return float(h)
 

@@ -263,7 +263,7 @@ class SpML(Learner):
         Denoise each training and validation trajectory before both steps (:class:`Smoothing`; for
         noisy states: their noise is noise in the regressors, docs/spml.md, "Convergence").
         ``"auto"`` (default): :meth:`Smoothing.auto`, only the trajectories whose estimated noise
-        is at least 1e-3 of their RMS (exact and integrator data estimate 1e-12 to 1e-5 and are kept
+        is at least 1e-3 of their RMS (exact and integrator data estimate 1e-12 to 1e-4 and are kept
         as given); ``True``: every trajectory; ``None``: the data as given.
     progress : bool or None
         The progress line with the loss (``None``: on a terminal, in a log every 30 s).
