@@ -174,20 +174,18 @@ class Smoothing:
         fields = self._fields(data)
         use = (0,) if fields == "states" else (0, 1, 2)
         bounds = list(data.starts) + [data.n_samples]
+        # a threshold keeps data it cannot judge (differences need a uniform grid); without one, they are refused
+        step = _step(data, required=self.threshold == 0.0)
+        noise = [np.inf] * (len(bounds) - 1) if self.threshold == 0.0 else \
+            [None] * (len(bounds) - 1) if step is None else self.noise(data)
+        summary = {"fields": fields, "threshold": self.threshold}
+        if step is None or all(level < self.threshold for level in noise):       # every trajectory kept: no copies
+            if step is None:
+                summary["note"] = "not uniformly sampled: kept as given"
+            report = [{"kept": True, "noise": None if level is None else float(level)} for level in noise]
+            return replace(data, diagnostics=dict(data.diagnostics, smoothing={**summary, "trajectories": report}))
         report = []
-        if self.threshold > 0.0 and _step(data, required=False) is None:
-            # differences judge noise only on a uniform grid: a threshold keeps such data as given
-            report = [{"kept": True, "noise": None}] * (len(bounds) - 1)
-            return replace(data, diagnostics=dict(data.diagnostics, smoothing={
-                "fields": fields, "threshold": self.threshold, "trajectories": report,
-                "note": "not uniformly sampled: kept as given"}))
-        noise = self.noise(data) if self.threshold > 0.0 else [np.inf] * (len(bounds) - 1)
-        if all(level < self.threshold for level in noise):       # every trajectory kept: no copies
-            report = [{"kept": True, "noise": float(level)} for level in noise]
-            return replace(data, diagnostics=dict(data.diagnostics, smoothing={
-                "fields": fields, "threshold": self.threshold, "trajectories": report}))
         out = [data.states.copy(), data.velocities.copy(), data.accelerations.copy()]
-        step = _step(data)
         for (a, b), level in zip(zip(bounds[:-1], bounds[1:]), noise):
             if level < self.threshold:
                 report.append({"kept": True, "noise": float(level)})
@@ -204,8 +202,7 @@ class Smoothing:
                     out[i][j, a:b] = curve[i]
                 rows.append(info)
             report.append(rows)
-        diagnostics = dict(data.diagnostics, smoothing={"fields": fields, "threshold": self.threshold,
-                                                        "trajectories": report})
+        diagnostics = dict(data.diagnostics, smoothing={**summary, "trajectories": report})
         return replace(data, states=out[0], velocities=out[1], accelerations=out[2], diagnostics=diagnostics)
 
 
