@@ -11,7 +11,10 @@ Fits, all with ``SpML(["damping"])`` and ``SpMLConfig(seed=0)`` otherwise:
 - ``rollout``: the default and a rollout refinement (8 samples a window from every 8th sample,
   2 substeps, at most 30 iterations);
 - ``smoothed``: the default on trajectories denoised first (:class:`femrom.inference.Smoothing`,
-  its defaults: one spline per coordinate through the states, velocities and accelerations).
+  its defaults: one spline per coordinate through the states, velocities and accelerations), the
+  equation-error fit alone (``output_error=False``);
+- ``output_error``: the same and the output-error stage after it (SpML's defaults on noisy data:
+  the raw trajectories simulated, Levenberg-Marquardt on the noise-weighted misfit).
 
 With noise, ``--seeds`` repeats each fit on independent noise draws (the table then adds the median
 and range per system and fit).
@@ -47,10 +50,11 @@ FITS = {
     "lbfgs": {"least_squares": False},
     "default": {},
     "rollout": {"rollout_steps": 8, "rollout_stride": 8, "rollout_substeps": 2, "rollout_iterations": 30},
-    "smoothed": {},
+    "smoothed": {"output_error": False},
+    "output_error": {"output_error": True},
 }
 #: Fits on denoised trajectories.
-SMOOTHED = {"smoothed"}
+SMOOTHED = {"smoothed", "output_error"}
 
 
 def run(system_name: str, fit: str, noise: float, seed: int = 0) -> dict:

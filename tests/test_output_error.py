@@ -98,3 +98,40 @@ def test_from_the_truth_it_ends_at_the_noise_floor():
     d = train[0]
     for field, x in enumerate((d.states, d.velocities, d.accelerations)):
         assert 0.9 < field_noise(d, field) / (0.01 * np.sqrt(np.mean(x * x))) < 1.1
+
+
+def test_concatenated_trajectories_are_split_at_their_starts():
+    """One data set of four runs side by side (no times, the sampling step in its diagnostics) is the
+    same problem as the list of runs: the same costs to round-off."""
+    from femrom.inference import concatenate
+
+    system = SYSTEMS["duffing2"]()
+    train, _ = system.training(noise=0.01, seed=3)
+    settings = OutputError(iterations=1)
+    free = ("stiffness", "learned_potential")
+    listed = output_error_refinement(system.operators, train, free, settings=settings)
+    joined = output_error_refinement(system.operators, concatenate(train), free, settings=settings)
+    assert concatenate(train).times is None
+    assert joined["cost_before"] == pytest.approx(listed["cost_before"], rel=1e-12)
+    assert joined["cost"] == pytest.approx(listed["cost"], rel=1e-9)
+
+
+def test_bad_settings_and_impossible_requests_are_refused_in_one_line():
+    from _required import extra
+
+    extra("torch")
+    from femrom._errors import FemromValueError
+    from femrom.inference import SpML, SpMLConfig
+
+    with pytest.raises(FemromValueError, match="output_error must be True, False or 'auto'"):
+        SpMLConfig(output_error="yes")
+    with pytest.raises(FemromValueError, match="OutputError.substeps"):
+        OutputError(substeps=0)
+    with pytest.raises(FemromValueError, match="output_error_iterations"):
+        SpMLConfig(output_error_iterations=0)
+    # sliders carry a state the sensitivities do not follow: refused before the fit, not after it
+    system = SYSTEMS["duffing2"]()
+    train, _ = system.training()
+    learner = SpML(["damping", "hysteresis"], config=SpMLConfig(output_error=True), smoothing=None, progress=False)
+    with pytest.raises(FemromValueError, match="output_error=True is not possible with sliders"):
+        learner.fit(train)

@@ -105,22 +105,25 @@ def test_the_rollout_is_the_discrete_gradient_scheme_and_refines_without_harm(ex
 @pytest.fixture(scope="module", params=sorted(SYSTEMS))
 def noisy(request):
     """(name, system, 1 % noisy training runs, validation run, the unseen amplitude exactly over three
-    windows, the fit on the raw data, the fit with the defaults, which smooth): noise of 1 % of each field's RMS
-    on states, velocities and accelerations (seed 0)."""
+    windows, and three fits: on the raw data, on the smoothed data alone (``output_error=False``), and
+    the defaults (smoothing, then the output-error stage)): noise of 1 % of each field's RMS on states,
+    velocities and accelerations (seed 0)."""
     system = SYSTEMS[request.param]()
     train, validation = system.training(noise=0.01)
     raw = SpML(["damping"], config=SpMLConfig(seed=0), smoothing=None, progress=False).fit(
         train, validation=validation)
-    smooth = _fit(train, validation)          # the defaults: "auto" smoothing
-    return request.param, system, train, validation, system.test(3.0), raw, smooth
+    smooth = _fit(train, validation, output_error=False)
+    default = _fit(train, validation)
+    return request.param, system, train, validation, system.test(3.0), raw, smooth, default
 
 
 def test_one_percent_noise_raw_data_fit_as_well_as_the_data_allow_but_miss(noisy):
     """Without smoothing the optimiser reaches the truth's loss, yet the force misses its target by 3x
     (Duffing) to 30x (chain): the error is the estimator's (noise in the states is noise in the
     regressors), not the optimiser's. This is the lower side of the smoothing test below: the fit
-    on raw data cannot pass it."""
-    name, system, train, _, test, raw, _ = noisy
+    on raw data cannot pass it. (No output-error stage: it follows a smoothing only.)"""
+    name, system, train, _, test, raw, _, _ = noisy
+    assert all(s["stage"] != "output error" for s in raw.stages_)
     split = spml_error_split(raw.operators_, system.operators, train, test)
     # observed: chain 4.57e-3 against the truth's 4.62e-3; Duffing 3.33e-4 against 3.35e-4
     assert split.loss <= split.truth_loss, split
@@ -129,14 +132,13 @@ def test_one_percent_noise_raw_data_fit_as_well_as_the_data_allow_but_miss(noisy
     assert split.potential > 2e-3 and split.mass > 1e-2, split
 
 
-def test_one_percent_noise_smoothed_data_meet_the_prediction_targets(noisy):
-    """The same data smoothed first (one spline per coordinate through the states, velocities and
-    accelerations, the smoothing chosen from the data): the unseen amplitude within 1e-2 over the
-    training window's length and 1e-1 over three times it (10x the exact-data targets). The force
-    error falls 3-4x but stays above its 1e-3 target: what remains is the noise inside the signal's
-    band, which no smoothing removes (over six noise seeds the error of the mean force is 1/sqrt(6)
-    of the mean error: variance, not bias; docs/spml.md, "Convergence")."""
-    name, system, train, _, test, raw, smooth = noisy
+def test_one_percent_noise_smoothing_alone_meets_the_prediction_targets(noisy):
+    """The data smoothed first (one spline per coordinate through the states, velocities and
+    accelerations, the smoothing chosen from the data), the equation-error fit alone: the unseen
+    amplitude within 1e-2 over the training window's length and 1e-1 over three times it (10x the
+    exact-data targets), the force 3-4x closer than on raw data but above its 1e-3 target: what
+    remains is the noise inside the signal's band, which no smoothing removes (docs/spml.md)."""
+    name, system, train, _, test, raw, smooth, _ = noisy
     # the default "auto" smoothing estimated 1.3-2.2e-2 relative noise on every run (threshold 1e-3)
     assert raw.smoothed_ is None and smooth.smoothed_ == [True] * len(train)
     split = spml_error_split(smooth.operators_, system.operators, train, test)
@@ -149,8 +151,40 @@ def test_one_percent_noise_smoothed_data_meet_the_prediction_targets(noisy):
     # the force 3-4x and the mass 8-60x closer (observed chain 8.2e-3 against 3.4e-2 and 3.4e-3 against
     # 3.0e-2; Duffing 1.1e-3 against 3.2e-3 and 3.9e-4 against 2.3e-2)
     assert split.potential < 0.5 * raw_split.potential and split.mass < 0.3 * raw_split.mass, (split, raw_split)
+
+
+def test_one_percent_noise_the_defaults_refine_by_output_error_to_the_datas_floor(noisy):
+    """The defaults add the output-error stage (the measured trajectories simulated, their misfit
+    weighted by the estimated noise: the maximum-likelihood fit): the predictions 3-10x closer than
+    smoothing alone's, the force at the data's own floor. That floor is what
+    ``benchmarks/spml_noise_floor.py`` measures, the same estimator of exactly the true class with
+    the mass known: on these data 7.5e-4 (Duffing) and 1.5e-3 (chain), so the 1e-3 force target is
+    met on the Duffing pair and asks more of the chain's data than they determine."""
+    name, system, train, _, test, _, smooth, default = noisy
+    stage = [s for s in default.stages_ if s["stage"] == "output error"]
+    assert len(stage) == 1 and stage[0]["kept"], default.stages_
+    stage = stage[0]
+    # the cost ends at the noise's expectation, half the number of residuals (observed Duffing 4885 / 4812,
+    # chain 7143 / 7218; from 7047 and 18157), and the held-out run's falls too
+    assert abs(stage["cost"] / stage["expected"] - 1.0) < 0.05 < stage["cost_before"] / stage["expected"] - 1.0
+    assert stage["validation_cost"] < stage["validation_cost_before"]
+    split = spml_error_split(default.operators_, system.operators, train, test)
+    before = spml_error_split(smooth.operators_, system.operators, train, test)
+    errors = prediction_errors(default.operators_, system, test)
+    errors_before = prediction_errors(smooth.operators_, system, test)
+    # observed (seed 0): Duffing 1.3e-3 / 4.4e-3 against 4.7e-3 / 1.7e-2, chain 1.3e-3 / 2.0e-3 against
+    # 6.1e-3 / 2.1e-2; over five noise seeds at most 3.6e-3 / 8.2e-3 (Duffing) and 2.4e-3 / 3.9e-3 (chain)
+    assert errors["window"] <= 0.5 * errors_before["window"] and errors["total"] <= 0.5 * errors_before["total"], \
+        (errors, errors_before)
+    assert errors["window"] <= 1e-2 and errors["total"] <= 1e-1, errors
+    # observed (seed 0): Duffing 7.7e-4 against 1.1e-3, chain 2.0e-3 against 8.2e-3; over five seeds
+    # Duffing 5.2e-4 .. 7.7e-4 (the floor 4.4e-4 .. 7.5e-4 on seeds 0-2), chain 1.8e-3 .. 3.7e-3 (the floor
+    # 1.5e-3 .. 3.6e-3)
+    assert split.potential < before.potential, (split, before)
+    assert split.potential <= {"duffing2": 1e-3, "chain3": 2.5e-3}[name], split
     if split.potential > 1e-3:
-        pytest.xfail(f"1 % noise, {name}, smoothed: force {split.potential:.2e} against 1e-3 (the in-band noise)")
+        pytest.xfail(f"1 % noise, {name}: force {split.potential:.2e} against 1e-3, the data's maximum-likelihood "
+                     f"floor 1.5e-3 (benchmarks/spml_noise_floor.py)")
 
 
 def test_predict_helper_returns_the_samples():

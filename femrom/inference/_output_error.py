@@ -244,18 +244,20 @@ class _Trajectory:
 
 
 def _trajectories(datasets) -> list[SecondOrderData]:
+    """Every trajectory of ``datasets`` (split at their ``starts``) with its sample times (from the
+    sampling step where concatenated data carry none)."""
     out = []
     for d in datasets:
         bounds = list(d.starts) + [d.n_samples]
-        if len(bounds) == 2:
-            out.append(d)
-            continue
-        if d.times is None:
-            raise FemromValueError("output error needs sampled times on every trajectory")
+        dt = sampling_step(d)
+        if dt is None:
+            raise FemromValueError("output error needs uniformly sampled trajectories (times, or the sampling step "
+                                   "of concatenated data)")
         for a, b in zip(bounds[:-1], bounds[1:]):
+            times = dt * np.arange(b - a) if d.times is None else d.times[a:b]
             out.append(SecondOrderData(d.states[:, a:b], d.velocities[:, a:b], d.accelerations[:, a:b],
                                        inputs=None if d.inputs is None else d.inputs[:, a:b],
-                                       times=d.times[a:b], diagnostics=dict(d.diagnostics)))
+                                       times=times, diagnostics=dict(d.diagnostics)))
     return out
 
 
@@ -553,7 +555,8 @@ def output_error_refinement(operators: ReducedOperators, data, free, *, start_fr
 def _prepare(d: SecondOrderData) -> _Trajectory:
     dt = sampling_step(d)
     if dt is None or d.times is None:
-        raise FemromValueError("output error needs uniformly sampled trajectories with times")
+        raise FemromValueError("output error needs uniformly sampled trajectories (times, or the sampling step "
+                               "of concatenated data)")
     fields = measured_fields(d)
     return _Trajectory(d, fields, tuple(field_noise(d, f) for f in fields), float(dt))
 

@@ -14,6 +14,7 @@ from femrom._progress import Progress
 from femrom.inference._data import SecondOrderData, concatenate, sampling_step
 from femrom.inference._learner import Learner, register_learner
 from femrom.inference._operators import ReducedOperators
+from femrom.inference._output_error import OutputError, output_error_refinement
 from femrom.inference._second_order import system_terms, terms_for_training
 from femrom.inference._smoothing import Smoothing
 from femrom.inference._structured_lstsq import FastSolver
@@ -24,6 +25,10 @@ from femrom.inference.learners.lopinf import LagrangianOpInf
 from femrom.inference.terms.learned_dissipation import LearnedDissipation
 from femrom.inference.terms.learned_hysteresis import LearnedHysteresis, slider_stretches
 from femrom.inference.terms.learned_potential import LearnedPotential
+
+#: Levenberg-Marquardt steps of each output-error candidate (networks as trained, and switched off) before
+#: the better one goes on alone.
+CANDIDATE_STEPS = 5
 
 #: The names that ask SpML for learned sliders (:class:`LearnedHysteresis`) among its terms.
 HYSTERESIS_TERMS = ("hysteresis", LearnedHysteresis.name)
@@ -97,6 +102,21 @@ class SpMLConfig:
         iterations, checked on the validation trajectory's windows (docs/spml.md, "Convergence").
         Needs sampled times, and no known force terms.
     rollout_substeps, rollout_stride, rollout_iterations : int
+    output_error : bool or "auto"
+        After the other stages, refine the parameters linear in the balance (the mass up to its
+        gauge, step 1's linear terms, the monomials' coefficients) and each trajectory's initial
+        state by output error: every measured trajectory simulated by the discrete-gradient march,
+        the misfit of its states, velocities and accelerations weighted by their estimated noise,
+        Levenberg-Marquardt with exact sensitivities (:mod:`femrom.inference._output_error`; the
+        maximum-likelihood estimate where the noise is white). It fits the raw data, not the smoothed
+        ones, and is kept only where the validation trajectories' output error (their initial states
+        fitted) falls. ``"auto"``: when the smoothing replaced a trajectory (noisy data; on exact
+        data the scheme's own error would be all it fits); needs uniformly sampled times, no
+        sliders and no known force terms (else skipped, said in :attr:`SpML.stages_`).
+    output_error_iterations : int
+        Its Levenberg-Marquardt steps at most.
+    output_error_substeps : int
+        Its discrete-gradient steps per sampling interval.
     polynomial_start : bool
         Start from the least-squares solution whatever step 1's start scores (implies
         ``least_squares``).
@@ -149,6 +169,9 @@ class SpMLConfig:
     rollout_substeps: int = 4
     rollout_stride: int = 1
     rollout_iterations: int = 100
+    output_error: bool | str = "auto"
+    output_error_iterations: int = 20
+    output_error_substeps: int = 8
     polynomial_start: bool = False
     polynomial_ridge: float = 1e-12
     refine_linear: bool = True
@@ -198,8 +221,11 @@ class SpMLConfig:
             raise FemromValueError(f"SpMLConfig.rollout_steps must be >= 0, got {self.rollout_steps}")
         if self.dissipation_directions is not None and int(self.dissipation_directions) < 0:
             raise FemromValueError(f"SpMLConfig.dissipation_directions must be >= 0, got {self.dissipation_directions}")
+        if not (isinstance(self.output_error, (bool, np.bool_)) or self.output_error == "auto"):
+            raise FemromValueError(f"SpMLConfig.output_error must be True, False or 'auto', got {self.output_error!r}")
         for name in ("max_iterations", "check_every", "patience", "history_size", "threads", "least_squares_rounds",
-                     "rollout_substeps", "rollout_stride", "rollout_iterations"):
+                     "rollout_substeps", "rollout_stride", "rollout_iterations", "output_error_iterations",
+                     "output_error_substeps"):
             if int(getattr(self, name)) < 1:
                 raise FemromValueError(f"SpMLConfig.{name} must be >= 1, got {getattr(self, name)}")
         if not (self.tolerance >= 0 and self.weight_decay >= 0 and self.polynomial_ridge >= 0):
@@ -286,8 +312,12 @@ class SpML(Learner):
         ``iteration``, ``loss`` (training), ``validation_loss`` at every check of L-BFGS, ``kept``
         where the weights were the best so far.
     stages_ : list of dict
-        ``stage`` ("step 1", "least squares", "L-BFGS"), ``seconds``, ``loss``, ``validation_loss``
-        after it (``pruned``: whether a least-squares solve switched the networks off).
+        ``stage`` ("step 1", "least squares", "L-BFGS", "rollout"), ``seconds``, ``loss``, ``validation_loss``
+        after it (``pruned``: whether a least-squares solve switched the networks off); the
+        "output error" stage's ``cost`` and ``cost_before`` (half the noise-weighted squared misfit),
+        ``expected`` (the noise's share: half the number of residuals), ``validation_cost(_before)``,
+        ``steps``, ``networks_off`` (the candidate with the networks switched off won), ``projected``
+        (matrices put back on their cones) and ``kept``, or ``skipped`` with the reason.
     best_iteration_, iterations_ : int
     loss_ : float
         The relative training loss of the kept weights; ``linear_loss_`` step 1's.
@@ -401,12 +431,16 @@ class SpML(Learner):
 
         tic = time.perf_counter()
         self.smoothed_ = None
+        measured = (data, validation)
         if self.smoothing is not None:
             data = self.smoothing.apply(data)
             validation = None if validation is None else self.smoothing.apply(validation)
             self.smoothed_ = [not t.get("kept", False) for d in (data if isinstance(data, (list, tuple)) else [data])
                               for t in _trajectory_reports(d)]
         pieces = list(data) if isinstance(data, (list, tuple)) else [data]
+        if self.config.output_error is True and self._output_error_obstacle(pieces) is not None:
+            raise FemromValueError(f"SpMLConfig.output_error=True is not possible with "
+                                   f"{self._output_error_obstacle(pieces)}")
         held = None if validation is None else list(validation) if isinstance(validation, (list, tuple)) \
             else [validation]
         data = self._own(concatenate(data) if isinstance(data, (list, tuple)) else data)
@@ -448,7 +482,6 @@ class SpML(Learner):
         self.history_ = result["history"]
         self.stages_ = ([start_stage] if start_stage else []) + result["stages"]
         self.best_iteration_, self.iterations_ = result["best_iteration"], result["iterations"]
-        self.training_seconds_ = time.perf_counter() - tic
         self.mass_ = mass
         self.potential_ = None if polynomial is None and u_network is None else \
             LearnedPotential(r, polynomial, u_network)
@@ -461,9 +494,107 @@ class SpML(Learner):
             self.hysteresis_ = LearnedHysteresis(sliders.hysteresis_.direction, sliders.hysteresis_.thresholds,
                                                  np.clip(weights, 0.0, None))
         self.linear_loss_ = self._loss(data, {n: self.linear.coefficients_[n] for n in linear}, step1=True)
+        self.training_seconds_ = time.perf_counter() - tic
         self.loss_ = self._loss(data, linear)
         self.operators_ = self._operators(linear_ops, data)
+        stage = self._output_error(measured, pieces, held, data, cfg)
+        if stage is not None:
+            self.stages_.append(stage)
+            if stage.get("kept"):
+                self.loss_ = self._loss(data, self.linear_matrices_)
+        self.training_seconds_ = time.perf_counter() - tic
+        self.operators_ = self._operators(linear_ops, data)
         return self
+
+    def _output_error_obstacle(self, pieces) -> str | None:
+        """Why the output-error stage cannot run on ``pieces`` with this model (``None``: it can)."""
+        if self.hysteresis:
+            return "sliders (their state is not followed by the sensitivities)"
+        if self.linear.known_terms:
+            return "known force terms"
+        if any(sampling_step(d) is None for d in pieces):
+            return "data without a uniform sampling step"
+        return None
+
+    def _output_error(self, measured, pieces, held, data, cfg: SpMLConfig) -> dict | None:
+        """The output-error stage (:attr:`SpMLConfig.output_error`) on the measured trajectories from the
+        (smoothed) ``pieces``' initial states; updates the learned parts when kept. Returns its record."""
+        wanted = cfg.output_error
+        if wanted == "auto":
+            wanted = bool(self.smoothed_ and any(self.smoothed_))
+            if not wanted:
+                return None
+            auto = True
+        else:
+            auto = False
+            if not wanted:
+                return None
+        reason = self._output_error_obstacle(pieces)
+        if reason is not None:          # output_error=True was refused at the start of the fit
+            return {"stage": "output error", "skipped": reason}
+        free = [cls.name for cls in self.linear._learned(data)]
+        if self.config.learn_mass:
+            free.append("mass")
+        if self.potential_ is not None and self.potential_.polynomial is not None:
+            free.append("learned_potential")
+        train_raw, validation_raw = measured
+        settings = OutputError(iterations=int(cfg.output_error_iterations), substeps=int(cfg.output_error_substeps))
+        tic = time.perf_counter()
+        # two candidates, as in the least-squares stage: the networks as trained (fixed), and switched off
+        # (a fixed network the monomials cannot take back biases a polynomial truth's fit)
+        candidates = [(self.operators_, False)]
+        networks = (self.potential_ is not None and self.potential_.network is not None) or self.dissipation_ is not None
+        if networks and "learned_potential" in free:
+            pruned = self.operators_.with_terms(LearnedPotential(self.potential_.r, self.potential_.polynomial))
+            candidates.append((pruned.without(LearnedDissipation.name), True))
+        # a few steps each, then the better one to the end: the candidates have the same free parameters, so
+        # the lower output error over all trajectories wins (the validation's alone is too few samples to tell
+        # two fits a few units of cost apart)
+        first = replace(settings, iterations=min(CANDIDATE_STEPS, settings.iterations)) if len(candidates) > 1 \
+            else settings
+        results = []
+        for operators, switched_off in candidates:
+            result = output_error_refinement(operators, train_raw, free, start_from=pieces, validation=validation_raw,
+                                             validation_start_from=held, settings=first)
+            results.append((result["cost"] + result.get("validation_cost", 0.0), switched_off, result))
+        _, switched_off, result = min(results, key=lambda item: item[0])
+        if first.iterations < settings.iterations and result["steps"] == first.iterations:
+            steps = result["steps"]
+            result = output_error_refinement(result["operators"], train_raw, free, initial_states=result["initial_states"],
+                                             validation=validation_raw, validation_start_from=held,
+                                             settings=replace(settings, iterations=settings.iterations - steps))
+            result["steps"] += steps
+        refined = result["operators"]
+        projected = []
+        for name in free:
+            term = refined.term(name)
+            if name == "learned_potential" or term.structure not in ("spd", "psd"):
+                continue
+            floor = self.linear.stiffness_shift_ if name == "stiffness" else 0.0
+            w, V = np.linalg.eigh(0.5 * (term.matrix + term.matrix.T))
+            low = floor if term.structure == "psd" or name == "stiffness" else 1e-12 * max(float(w.max()), 0.0)
+            if w.min() < low:
+                projected.append(name)
+                refined = refined.with_terms(type(term)((V * np.maximum(w, low)) @ V.T))
+        before = results[0][2].get("validation_cost_before", results[0][2]["cost_before"])
+        better = result.get("validation_cost", result["cost"]) < before
+        record = {"stage": "output error", "seconds": time.perf_counter() - tic, "cost": result["cost"],
+                  "cost_before": results[0][2]["cost_before"], "expected": result["expected"], "steps": result["steps"],
+                  "parameters": result["parameters"], "networks_off": switched_off, "projected": projected,
+                  "kept": bool(better)}
+        if "validation_cost" in result:
+            record.update(validation_cost=result["validation_cost"], validation_cost_before=before)
+        if better:
+            if "mass" in free:
+                self.mass_ = refined.term("mass").matrix
+            for name in free:
+                if name in self.linear_matrices_:
+                    self.linear_matrices_[name] = refined.term(name).matrix
+            if "learned_potential" in free:
+                self.potential_ = refined.term("learned_potential")
+            if switched_off:
+                self.dissipation_ = None
+        return record
 
     def _slider_start(self, data: SecondOrderData, cfg: SpMLConfig):
         """The sliders' start: :class:`IwanLOpInf` on the data (thresholds, top slider, weights, and its
