@@ -6,20 +6,23 @@ import numpy as np
 import pytest
 
 from benchmarks.spml_systems import SYSTEMS, polynomial_potential
-from femrom.inference import ReducedOperators, SecondOrderData
+from femrom.inference import ConvexPowers, LearnedDissipation, ReducedOperators, SecondOrderData
 from femrom.inference._output_error import (OutputError, _Model, _prepare, _Problem, field_noise,
                                             output_error_refinement)
 from femrom.study import spml_error_split
 
 
 def _forced_model():
-    """Two coordinates, a non-identity mass, damping, one input and a quartic-plus-cubic potential:
-    every kind of free parameter the refinement has."""
+    """Two coordinates, a non-identity mass, damping, one input, a quartic-plus-cubic potential and a
+    fixed convex dissipation (powers of ``v``): every kind of free parameter the refinement has, and a
+    fixed term it differentiates through."""
     duffing = SYSTEMS["duffing2"]().operators
     M = np.array([[1.2, 0.1], [0.1, 0.9]])
-    return ReducedOperators.from_matrices(duffing.stiffness, mass=M, damping=np.array([[0.05, 0.01], [0.01, 0.04]]),
-                                          input_matrix=np.array([[1.0], [0.3]]),
-                                          nonlinear=duffing.term("learned_potential"))
+    model = ReducedOperators.from_matrices(duffing.stiffness, mass=M, damping=np.array([[0.05, 0.01], [0.01, 0.04]]),
+                                           input_matrix=np.array([[1.0], [0.3]]),
+                                           nonlinear=duffing.term("learned_potential"))
+    powers = ConvexPowers(np.array([[0.3, -0.2]]), np.array([[0.2, 0.1]]))
+    return model.with_terms(LearnedDissipation(2, powers))
 
 
 def _trajectory(operators, n=60, dt=0.05, noise=0.0, seed=0):

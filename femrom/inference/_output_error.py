@@ -183,6 +183,20 @@ def _hessians(term, X: np.ndarray) -> np.ndarray:
     return H
 
 
+def _tangents(terms, Q: np.ndarray, V: np.ndarray):
+    """``(df/dq, df/dv)``, each (K, r, r): the summed tangents of ``terms`` at the columns of ``(Q, V)``."""
+    K, r = Q.shape[1], Q.shape[0]
+    Tq, Tv = np.zeros((K, r, r)), np.zeros((K, r, r))
+    for t in terms:
+        for k in range(K):
+            Jq, Jv = t.tangent(Q[:, k], V[:, k])
+            if Jq is not None:
+                Tq[k] += Jq
+            if Jv is not None:
+                Tv[k] += Jv
+    return Tq, Tv
+
+
 class _Model:
     """The operators as a function of ``theta`` and what the sensitivities need of them."""
 
@@ -377,14 +391,9 @@ class _Problem:
                 H = _hessians(t, G)
                 Jx += (h * w * c) * H
                 Aq += w * H
-        for t in others:
-            for k in range(N):
-                Jq, Jv = t.tangent(Qm[:, k], X[:, k])
-                if Jv is not None:
-                    Jx[k] += Jv
-                if Jq is not None:
-                    Jx[k] += 0.5 * h * Jq
-                    Aq[k] += Jq
+        Tq, Tv = _tangents(others, Qm, X)
+        Jx += Tv + (0.5 * h) * Tq
+        Aq += Tq
         n_theta = self.n_theta
         width = n_theta + 2 * r
         Jinv = np.linalg.inv(Jx)
@@ -421,17 +430,11 @@ class _Problem:
         # the acceleration's: M delta a = -(delta(lhs)/dtheta + (K + H + df/dq) delta q + (C + df/dv) delta v + delta M a)
         d = traj.data
         Q, V = Qf[:, ::s], Vf[:, ::s]
-        Tq = np.broadcast_to(K, (n_samples, r, r)).copy()
-        Tv = np.broadcast_to(C, (n_samples, r, r)).copy()
+        Tq, Tv = _tangents(others, Q, V)
+        Tq += K
+        Tv += C
         for t in potentials:
             Tq += _hessians(t, Q)
-        for t in others:
-            for k in range(n_samples):
-                Jq, Jv = t.tangent(Q[:, k], V[:, k])
-                if Jq is not None:
-                    Tq[k] += Jq
-                if Jv is not None:
-                    Tv[k] += Jv
         dlhs = Tq @ SQ + Tv @ SV
         if n_theta:
             Z = {"q": Q, "v": V, "a": A, "u": d.inputs, "1": np.ones((1, n_samples))}
