@@ -553,17 +553,25 @@ class SpML(Learner):
         first = replace(settings, iterations=min(CANDIDATE_STEPS, settings.iterations)) if len(candidates) > 1 \
             else settings
         results = []
-        for operators, switched_off in candidates:
-            result = output_error_refinement(operators, train_raw, free, start_from=pieces, validation=validation_raw,
-                                             validation_start_from=held, settings=first)
-            results.append((result["cost"] + result.get("validation_cost", 0.0), switched_off, result))
-        _, switched_off, result = min(results, key=lambda item: item[0])
-        if first.iterations < settings.iterations and result["steps"] == first.iterations:
-            steps = result["steps"]
-            result = output_error_refinement(result["operators"], train_raw, free, initial_states=result["initial_states"],
-                                             validation=validation_raw, validation_start_from=held,
-                                             settings=replace(settings, iterations=settings.iterations - steps))
-            result["steps"] += steps
+        total = first.iterations * len(candidates) + settings.iterations - first.iterations
+        with Progress(total, "SpML output error", enabled=self.progress) as bar:
+            def shown(step, cost):
+                bar.label = f"SpML output error: cost {cost:.6g}"
+                bar.update(1)
+
+            for operators, switched_off in candidates:
+                result = output_error_refinement(operators, train_raw, free, start_from=pieces,
+                                                 validation=validation_raw, validation_start_from=held,
+                                                 settings=first, progress=shown)
+                results.append((result["cost"] + result.get("validation_cost", 0.0), switched_off, result))
+            _, switched_off, result = min(results, key=lambda item: item[0])
+            if first.iterations < settings.iterations and result["steps"] == first.iterations:
+                steps = result["steps"]
+                result = output_error_refinement(result["operators"], train_raw, free,
+                                                 initial_states=result["initial_states"], validation=validation_raw,
+                                                 validation_start_from=held, progress=shown,
+                                                 settings=replace(settings, iterations=settings.iterations - steps))
+                result["steps"] += steps
         refined = result["operators"]
         projected = []
         for name in free:
