@@ -64,6 +64,19 @@ def random_dissipation(rng, r):
 
 
 # -- structure ------------------------------------------------------------------------------------
+def test_a_networks_hessians_at_many_points_are_its_pointwise_ones():
+    """``ScalarNetwork.hessians`` (all columns at once, the output-error stage's sensitivities) against
+    ``value_gradient_hessian`` point by point: tanh and softplus, with input skips, to round-off."""
+    rng = np.random.default_rng(4)
+    X = rng.standard_normal((5, 40))
+    for network in (random_network(rng, 5, (6, 5), "tanh"),
+                    random_network(rng, 5, (5, 4, 3), "softplus", convex=True, skip=True)):
+        H = network.hessians(X)
+        reference = np.array([network.value_gradient_hessian(X[:, k])[2] for k in range(X.shape[1])])
+        assert H.shape == (40, 5, 5)
+        np.testing.assert_allclose(H, reference, rtol=0, atol=1e-13 * np.abs(reference).max())
+
+
 def test_potential_force_and_tangent_are_its_derivatives():
     rng = np.random.default_rng(0)
     r = 4

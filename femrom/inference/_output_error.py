@@ -175,8 +175,7 @@ def _hessians(term, X: np.ndarray) -> np.ndarray:
         H += 6.0 * np.einsum("ijk,kn->nij", poly.T3, X) + 12.0 * np.einsum("ijkl,kn,ln->nij", poly.T4, X, X)
     network = getattr(term, "network", None)
     if network is not None:
-        for k in range(K):
-            H[k] += network.value_gradient_hessian(X[:, k])[2]
+        H += network.hessians(X)
     if poly is None and network is None:
         for k in range(K):
             H[k] = term.tangent(X[:, k])[0]
