@@ -46,6 +46,7 @@ from femrom._errors import FemromError, FemromValueError
 from femrom.inference._data import SecondOrderData, sampling_step
 from femrom.inference._networks import SymmetricPolynomial, derivative_map, monomials
 from femrom.inference._operators import ReducedOperators
+from femrom.inference._smoothing import _DERIVED as DERIVED_SOURCES
 from femrom.inference._smoothing import noise_level
 from femrom.inference._terms import LinearTerm
 from femrom.inference.terms.learned_potential import LearnedPotential
@@ -209,7 +210,7 @@ class _Model:
             elif isinstance(t, LearnedPotential) and "learned_potential" in free and t.polynomial is not None:
                 self.polynomial = _Polynomial(t)
         others = [t for t in operators.terms if not isinstance(t, LinearTerm)]
-        stateful = [t.name for t in others if getattr(t, "stateful", False) or getattr(t, "has_state", False)]
+        stateful = [t.name for t in others if t.stateful]
         if stateful:
             raise FemromValueError(f"output error: the terms {stateful} carry a state, which the sensitivities "
                                    "do not follow")
@@ -278,7 +279,7 @@ def measured_fields(data: SecondOrderData) -> tuple:
     """The fields of ``data`` that are measurements: the states, and the velocities and accelerations
     unless they are finite differences or an integrator's (``diagnostics["derivative_source"]``) or
     placeholders (all zero)."""
-    derived = data.diagnostics.get("derivative_source") in ("finite_difference", "integrator")
+    derived = data.diagnostics.get("derivative_source") in DERIVED_SOURCES
     if derived or not (np.any(data.velocities) and np.any(data.accelerations)):
         return (0,)
     return (0, 1, 2)
@@ -302,10 +303,8 @@ class _Problem:
 
         self.model, self.settings, self.march = model, settings, march
         self.trajectories = trajectories
-        self.free_theta = free_theta
         self.n_theta = model.size if free_theta else 0
         self.r = model.r
-        self._cache = None
 
     def _simulate(self, operators, y0, traj: _Trajectory):
         s, d = self.settings.substeps, traj.data

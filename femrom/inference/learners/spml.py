@@ -519,16 +519,9 @@ class SpML(Learner):
     def _output_error(self, measured, pieces, held, data, cfg: SpMLConfig) -> dict | None:
         """The output-error stage (:attr:`SpMLConfig.output_error`) on the measured trajectories from the
         (smoothed) ``pieces``' initial states; updates the learned parts when kept. Returns its record."""
-        wanted = cfg.output_error
-        if wanted == "auto":
-            wanted = bool(self.smoothed_ and any(self.smoothed_))
-            if not wanted:
-                return None
-            auto = True
-        else:
-            auto = False
-            if not wanted:
-                return None
+        wanted = bool(self.smoothed_ and any(self.smoothed_)) if cfg.output_error == "auto" else cfg.output_error
+        if not wanted:
+            return None
         reason = self._output_error_obstacle(pieces)
         if reason is not None:          # output_error=True was refused at the start of the fit
             return {"stage": "output error", "skipped": reason}
