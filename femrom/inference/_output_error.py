@@ -458,13 +458,11 @@ def _levenberg_marquardt(problem: _Problem, theta, y0s, settings: OutputError, p
         raise FemromValueError("output error: the model's simulation of the training trajectories fails at the start")
     res, J = out
     cost = cost0 = 0.5 * float(res @ res)
-    mu, steps = None, 0
+    mu, steps = 1e-3, 0                      # the damping, relative to the diagonal (Marquardt's scaling)
     for _ in range(settings.iterations):
         g = J.T @ res
         JTJ = J.T @ J
         diag = np.maximum(np.diag(JTJ), 1e-300)
-        if mu is None:
-            mu = 1e-3                        # relative to the diagonal (Marquardt's scaling)
         accepted = False
         for _ in range(12):
             try:
