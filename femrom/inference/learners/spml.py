@@ -104,7 +104,8 @@ class SpMLConfig:
     rollout_substeps, rollout_stride, rollout_iterations : int
     output_error : bool or "auto"
         After the other stages, refine the parameters linear in the balance (the mass up to its
-        gauge, step 1's linear terms, the monomials' coefficients) and each trajectory's initial
+        gauge when ``learn_mass``, step 1's linear terms when ``refine_linear``, the monomials'
+        coefficients) and each trajectory's initial
         state by output error: every measured trajectory simulated by the discrete-gradient march,
         the misfit of its states, velocities and accelerations weighted by their estimated noise,
         Levenberg-Marquardt with exact sensitivities (:mod:`femrom.inference._output_error`; the
@@ -525,8 +526,8 @@ class SpML(Learner):
         reason = self._output_error_obstacle(pieces)
         if reason is not None:          # output_error=True was refused at the start of the fit
             return {"stage": "output error", "skipped": reason}
-        free = [cls.name for cls in self.linear._learned(data)]
-        if self.config.learn_mass:
+        free = [cls.name for cls in self.linear._learned(data)] if cfg.refine_linear else []
+        if cfg.learn_mass:
             free.append("mass")
         if self.potential_ is not None and self.potential_.polynomial is not None:
             free.append("learned_potential")
