@@ -114,6 +114,49 @@ def _assemble(problem: GramProblem, blocks) -> np.ndarray:
 #: against 0.34 s), where the work per thread is too small to hide the contention.
 THREADED_UNKNOWNS = 8000
 
+#: Newton matrices with at least this many unknowns are factorised by
+#: :func:`blocked_cholesky` instead of LAPACK's ``potrf``: OpenBLAS's threaded
+#: ``syrk`` (called by its ``potrf``) crashes the process with two threads from order
+#: ~16 000 here (measured 2026-11-27 with scipy's and numpy's OpenBLAS, 0.3.31 and 0.3.30:
+#: orders 15 000 complete, 16 000 segfault in ``potrf`` and in a bare ``syrk``; one
+#: thread completes, at half the speed; the same family of faults as OpenBLAS
+#: issues #2562 and #2821). The blocked form calls ``potrf`` only on small diagonal
+#: blocks and ``gemm`` for the updates, and ran at order 16 000 in 19 s on two
+#: threads (35 s for ``potrf`` on one).
+BLOCKED_UNKNOWNS = 14_000
+CHOLESKY_BLOCK = 4096
+
+
+def blocked_cholesky(A: np.ndarray, block: int = CHOLESKY_BLOCK) -> np.ndarray:
+    r"""The lower Cholesky factor of the Fortran-ordered ``A``, in place (right-looking).
+
+    For every diagonal block ``j``: ``L_jj = chol(A_jj)`` (``potrf``), the panel
+    ``L_ij = A_ij L_jj^{-T}`` (``trsm``) and the trailing update
+    ``A_ik <- A_ik - L_ij L_kj^T`` column block by column block (``gemm``, lower part
+    only). Only the lower triangle holds the factor (what ``cho_solve(..., lower=True)``
+    reads); the strict upper triangle is workspace. Raises ``LinAlgError`` if ``A``
+    is not positive definite.
+    """
+    from scipy.linalg.blas import dgemm, dtrsm
+    from scipy.linalg.lapack import dpotrf
+
+    n = A.shape[0]
+    for j in range(0, n, block):
+        e = min(j + block, n)
+        c, info = dpotrf(A[j:e, j:e], lower=1, clean=0)
+        if info != 0:
+            raise np.linalg.LinAlgError(f"not positive definite (leading minor {j + info})")
+        A[j:e, j:e] = c
+        if e == n:
+            break
+        A[e:, j:e] = dtrsm(1.0, A[j:e, j:e], A[e:, j:e], side=1, lower=1, trans_a=1)
+        panel = A[e:, j:e]
+        for k in range(e, n, block):
+            ke = min(k + block, n)
+            A[k:, k:ke] = dgemm(-1.0, panel[k - e:], panel[k - e:ke - e], beta=1.0,
+                                c=A[k:, k:ke], trans_b=1)
+    return A
+
 
 def blas_threads(limit: int | None):
     """``threadpoolctl`` limit of the BLAS threads for a block (``None``: unchanged)."""
@@ -168,7 +211,10 @@ class DenseNewton:
             try:
                 # lift the solver's one-thread limit for a large factorisation
                 with blas_threads((os.cpu_count() or 1) if self.m >= THREADED_UNKNOWNS else None):
-                    self.fac = sla.cho_factor(N, lower=True, overwrite_a=True, check_finite=False)
+                    if self.m >= BLOCKED_UNKNOWNS:
+                        self.fac = (blocked_cholesky(N), True)
+                    else:
+                        self.fac = sla.cho_factor(N, lower=True, overwrite_a=True, check_finite=False)
                 return
             except np.linalg.LinAlgError:
                 continue
