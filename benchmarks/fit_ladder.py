@@ -27,8 +27,7 @@ constraints (``random_data``) instead.
 
 ``--fast-method interior_point`` (or ``first_order``) forces one path of the fast
 solver (``FastSolver(method=...)``); the interior point is then taken even above
-``ipm_max_unknowns`` (r = 150: a 4.1 GB Newton matrix, whose threaded Cholesky
-crashed in OpenBLAS here, docs/inference.md).
+``ipm_max_unknowns`` (r = 200: a 13 GB Newton matrix, docs/inference.md).
 
 Run ``python -m benchmarks.fit_ladder [--sizes 10 30 60] [--problem string|random]
 [--fast-method auto|interior_point|first_order] [--out benchmarks/results]``; it
