@@ -32,7 +32,18 @@ solves), with unknowns ``X = [K, C]`` (symmetric) and Gram matrix ``G`` (2r, 2r)
    ``W^-1 E W^-1`` added as their diagonal in the same eigenbases; the iterations
    to 1e-10 and the error against the direct solution are recorded.
 
-Run ``python -m benchmarks.newton_cg_probe [--sizes 30 60 100] [--ipm-sizes 30]``;
+3. **Deflation on the coupling directions** (``--deflation-sizes``): the preconditioned
+   Hessian ``ldl_k^-1 H`` formed densely, its eigenvalues above 2 (the outliers that
+   make CG slow), and how much of their eigenvectors lies outside
+   ``S_U = {X : (I - P_U) X (I - P_U) = 0}`` (each block's rows or columns in ``U``),
+   with ``U`` spanned by the top ``k`` coupling directions mapped back to ``K^`` and
+   ``C^`` (``G11^-1/2 w_i``, ``G22^-1/2 z_i`` of the coupling's singular vectors).
+   Where the outliers lie in ``S_U``, CG with ``S_U`` as a coarse space (the
+   balancing preconditioner ``(I - Q H) ldl_k^-1 (I - H Q) + Q``,
+   ``Q = W (W^T H W)^-1 W^T``) is run too: its iterations to 1e-10 against the size of
+   the coarse space, which a solver would factorise densely every Newton step.
+
+Run ``python -m benchmarks.newton_cg_probe [--sizes 30 60 100] [--ipm-sizes 30] [--deflation-sizes 30 60]``;
 it prints a table and writes ``benchmarks/results/newton_cg_probe.json``.
 """
 
@@ -214,6 +225,94 @@ class ProbedNewton(DenseNewton):
         return out
 
 
+def dense_operator(apply, m, index, r):
+    """The (m, m) matrix of ``(R1, R2) -> (X1, X2)`` in svec coordinates."""
+    n = m // 2
+    out = np.empty((m, m))
+    for a in range(m):
+        e = np.zeros(m)
+        e[a] = 1.0
+        X1, X2 = apply(smat(e[:n], index, r), smat(e[n:], index, r))
+        out[:, a] = np.concatenate([svec(X1, index), svec(X2, index)])
+    return 0.5 * (out + out.T)
+
+
+def deflation(problem, ks, max_cg):
+    """Section 3 of the module docstring: outliers of ``ldl_k^-1 H``, their share in
+    ``S_U`` for the top ``k`` coupling directions, and deflated CG."""
+    import scipy.linalg as sla
+    from femrom.inference._svec import svec_index
+    r, G = problem.r, problem.gram
+    index = svec_index(r)
+    n = index[0].size
+    m = 2 * n
+
+    def hessian(R1, R2):
+        Y = np.hstack([R1, R2]) @ G
+        return sym(Y[:, :r]), sym(Y[:, r:])
+    H = dense_operator(hessian, m, index, r)
+    P = dense_operator(preconditioner("ldl_k", G, r), m, index, r)   # ~ H^-1
+    w, V = sla.eigh(H, np.linalg.inv(P))
+    outliers = V[:, w > 2.0]
+
+    def inverse_root(A):
+        g, E = np.linalg.eigh(A)
+        return (E / np.sqrt(g)) @ E.T
+    Wl, _, Zr = np.linalg.svd(inverse_root(G[:r, :r]) @ G[:r, r:] @ inverse_root(G[r:, r:]))
+    rng = np.random.default_rng(0)
+    rhs = rng.standard_normal(m)
+    row = {"r": r, "unknowns": m, "outliers_above_2": int(outliers.shape[1]),
+           "largest": float(w[-1]), "k": {}}
+
+    def cg(M):
+        x, res = np.zeros(m), rhs.copy()
+        z = M(res)
+        d, rz = z.copy(), res @ z
+        for it in range(max_cg):
+            if np.linalg.norm(res) <= 1e-10 * np.linalg.norm(rhs):
+                return it
+            Hd = H @ d
+            step = rz / (d @ Hd)
+            x += step * d
+            res -= step * Hd
+            z = M(res)
+            rz, rz_old = res @ z, rz
+            d = z + (rz / rz_old) * d
+        return max_cg
+    row["cg_ldl_k"] = cg(lambda v: P @ v)
+    i, l, _ = index
+    for k in ks:
+        U = np.linalg.qr(np.hstack([inverse_root(G[:r, :r]) @ Wl[:, :k],
+                                    inverse_root(G[r:, r:]) @ Zr[:k].T]))[0]
+        off = np.eye(r) - U @ U.T
+        share = []
+        for v in outliers.T:
+            K, C = smat(v[:n], index, r), smat(v[n:], index, r)
+            share.append((np.sum((off @ K @ off) ** 2) + np.sum((off @ C @ off) ** 2)) / (v @ v))
+        share = np.asarray(share)
+        # coarse space: the rotated basis matrices with a row or column in U, both blocks
+        T = np.hstack([U, sla.null_space(U.T)])
+        picked = np.flatnonzero(np.minimum(i, l) < U.shape[1])
+        basis = np.zeros((n, picked.size))
+        for col, a in enumerate(picked):
+            e = np.zeros(n)
+            e[a] = 1.0
+            basis[:, col] = svec(T @ smat(e, index, r) @ T.T, index)
+        W = sla.block_diag(basis, basis)
+        factor = sla.cho_factor(W.T @ H @ W)
+
+        def coarse(v, W=W, factor=factor):
+            return W @ sla.cho_solve(factor, W.T @ v)
+
+        def balanced(v, coarse=coarse):
+            y = P @ (v - H @ coarse(v))
+            return y - coarse(H @ y) + coarse(v)
+        row["k"][k] = {"subspace": int(U.shape[1]), "outside_median": float(np.median(share)),
+                       "outside_max": float(share.max()), "outliers_outside_10pc": int(np.sum(share > 0.1)),
+                       "coarse_unknowns": int(W.shape[1]), "cg_deflated": cg(balanced)}
+    return row
+
+
 def ipm_systems(problem, max_cg):
     import femrom.inference._interior_point as ipm
     record = []
@@ -236,11 +335,13 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--sizes", type=int, nargs="+", default=[30, 60, 100])
     parser.add_argument("--ipm-sizes", type=int, nargs="*", default=[30])
+    parser.add_argument("--deflation-sizes", type=int, nargs="*", default=[])
+    parser.add_argument("--deflation-k", type=int, nargs="+", default=[4, 6, 8, 10, 12])
     parser.add_argument("--max-cg", type=int, default=3000)
     parser.add_argument("--out", type=Path, default=Path(__file__).parent / "results")
     args = parser.parse_args(argv)
     M, Q, U, dt = string_data()
-    rows, systems = [], []
+    rows, systems, deflated = [], [], []
     with blas_threads(1):
         for r in args.sizes:
             row = unconstrained(reduced_problem(M, Q, U, dt, r), args.max_cg)
@@ -255,10 +356,20 @@ def main(argv=None) -> int:
             systems.append(out)
             print(f"r={r:4d} interior point: {out['ipm_iterations']} iterations, {out['status']}; CG iterations "
                   f"per Newton system: {[s['iterations'] for s in out['systems']]}", flush=True)
+        for r in args.deflation_sizes:
+            row = deflation(reduced_problem(M, Q, U, dt, r), args.deflation_k, args.max_cg)
+            deflated.append(row)
+            print(f"r={r:4d} ldl_k: {row['outliers_above_2']} of {row['unknowns']} eigenvalues above 2 "
+                  f"(largest {row['largest']:.1e}), CG {row['cg_ldl_k']} it", flush=True)
+            for k, v in row["k"].items():
+                print(f"        k={k:3d}: U of {v['subspace']}, outliers outside S_U: median "
+                      f"{v['outside_median']:.3f}, max {v['outside_max']:.3f} ({v['outliers_outside_10pc']} above "
+                      f"0.1); coarse space {v['coarse_unknowns']} unknowns, deflated CG {v['cg_deflated']} it",
+                      flush=True)
     args.out.mkdir(parents=True, exist_ok=True)
     payload = {"benchmark": "newton_cg_probe", "machine": platform.platform(),
                "date": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "load_average": os.getloadavg(),
-               "description": __doc__.split("\n\n")[1], "unconstrained": rows, "ipm_systems": systems}
+               "description": __doc__.split("\n\n")[1], "unconstrained": rows, "ipm_systems": systems, "deflation": deflated}
     (args.out / "newton_cg_probe.json").write_text(json.dumps(payload, indent=2))
     return 0
 
