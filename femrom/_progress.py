@@ -10,6 +10,10 @@ writes nothing. ``FEMROM_NO_PROGRESS`` silences both.
   and the estimated time left. Used by the time integrators (one unit per
   step: :func:`femrom.integrators.iterate`) and the randomized SVD (one unit
   per pass over the snapshots).
+- :class:`Steps`, for iterations whose number is not known in advance: the step
+  reached, a note (e.g. the current gap) and the time so far. Used by the
+  L-OpInf interior-point method on large problems
+  (:func:`femrom.inference.solve_fast`: 16 min at r = 150).
 - :class:`Stage`, for one long call that has no steps to count: a line
   ``label ...`` when it starts and ``label: done in m:ss`` when it ends. Used
   by mesh generation (:func:`femrom.mesh.generate_mesh`, only when gmsh
@@ -124,6 +128,61 @@ class Progress:
         self.stream.flush()
 
     def __enter__(self) -> "Progress":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+class Steps:
+    """Throttled line ``label: step k  note  m:ss`` for an open-ended iteration.
+
+    Parameters as :class:`Progress` without ``total``; :meth:`update` takes the
+    note of the step just done. :meth:`close` writes ``label: k steps in m:ss  note``
+    (in a log only if a line was written before).
+    """
+
+    def __init__(self, label: str = "", *, enabled: bool | None = None,
+                 stream: TextIO | None = None, min_interval: float = 0.25,
+                 log_seconds: float | None = None):
+        self.label = label
+        self.stream = stream if stream is not None else sys.stderr
+        self.mode = _resolve(enabled, self.stream)
+        self.min_interval = min_interval if self.mode == "live" else (
+            _log_seconds() if log_seconds is None else float(log_seconds))
+        self.done = 0
+        self.note = ""
+        self._start = time.perf_counter()
+        self._last = -1.0 if self.mode == "live" else self._start
+        self._logged = False
+
+    @property
+    def enabled(self) -> bool:
+        return self.mode is not None
+
+    def update(self, note: str = "") -> None:
+        self.done += 1
+        self.note = note
+        if self.mode is None:
+            return
+        now = time.perf_counter()
+        if now - self._last < self.min_interval:
+            return
+        self._last = now
+        text = f"{self.label}: step {self.done}  {note}  {_format_seconds(now - self._start)}"
+        self.stream.write(f"\r{text}   " if self.mode == "live" else f"{text}\n")
+        self._logged = self._logged or self.mode == "log"
+        self.stream.flush()
+
+    def close(self) -> None:
+        if self.mode is None or (self.mode == "log" and not self._logged):
+            return
+        elapsed = _format_seconds(time.perf_counter() - self._start)
+        text = f"{self.label}: {self.done} steps in {elapsed}  {self.note}"
+        self.stream.write(f"\r{text}" + " " * 20 + "\n" if self.mode == "live" else f"{text}\n")
+        self.stream.flush()
+
+    def __enter__(self) -> "Steps":
         return self
 
     def __exit__(self, *exc) -> None:

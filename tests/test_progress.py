@@ -10,7 +10,7 @@ import scipy.sparse as sp
 
 from femrom.cases import scene_file
 from femrom import _progress
-from femrom._progress import Progress, Stage
+from femrom._progress import Progress, Stage, Steps
 
 
 class FakeTTY(io.StringIO):
@@ -126,6 +126,35 @@ def test_a_log_gets_a_plain_line_every_interval_and_nothing_for_short_work(monke
     with Stage("assembling", stream=stream):
         clock.now += 3.0
     assert stream.getvalue() == "assembling: done in 0:03\n"
+
+
+def test_open_ended_steps_show_the_step_its_note_and_the_time(monkeypatch, terminal, clock):
+    """An iteration of unknown length (the interior point): live, the step reached and
+    its note; in a log, a line every 30 s and a final one; short work says nothing."""
+    stream = FakeTTY()
+    steps = Steps("L-OpInf interior point", stream=stream, min_interval=0.0)
+    for k in range(3):
+        clock.now += 20.0
+        steps.update(f"gap {10.0 ** -k:.0e}")
+    assert stream.getvalue().endswith("\rL-OpInf interior point: step 3  gap 1e-02  1:00   ")
+    steps.close()
+    assert stream.getvalue().endswith("L-OpInf interior point: 3 steps in 1:00  gap 1e-02" + " " * 20 + "\n")
+
+    monkeypatch.delenv("FEMROM_PROGRESS_SECONDS", raising=False)
+    stream = io.StringIO()
+    with Steps("ipm", stream=stream) as short:
+        for _ in range(5):
+            clock.now += 1.0
+            short.update("gap 1")
+    assert stream.getvalue() == ""
+    with Steps("ipm", stream=stream) as long:
+        for k in range(1, 8):          # 7 steps of 20 s: lines at 20 + 20 > 30 s, ...
+            clock.now += 20.0
+            long.update(f"step note {k}")
+    lines = stream.getvalue().splitlines()
+    assert lines[0] == "ipm: step 2  step note 2  0:40"
+    assert [line.split()[2] for line in lines[:-1]] == ["2", "4", "6"]
+    assert lines[-1] == "ipm: 7 steps in 2:20  step note 7"
 
 
 def test_the_log_interval_comes_from_the_environment(monkeypatch, clock):

@@ -60,6 +60,7 @@ import os
 import numpy as np
 import scipy.linalg as sla
 
+from femrom._progress import Steps
 from femrom.inference._duality_gap import gap_bound, relative_gap, smallest_eigenvalue
 from femrom.inference._problem import GramProblem
 from femrom.inference._svec import hessian, smat, svec, svec_index, sym, sym_kron
@@ -129,33 +130,32 @@ CHOLESKY_BLOCK = 4096
 
 
 def blocked_cholesky(A: np.ndarray, block: int = CHOLESKY_BLOCK) -> np.ndarray:
-    r"""The lower Cholesky factor of the Fortran-ordered ``A``, in place (right-looking).
+    r"""The lower Cholesky factor of the Fortran-ordered ``A``, in place, by tiles.
 
-    For every diagonal block ``j``: ``L_jj = chol(A_jj)`` (``potrf``), the panel
-    ``L_ij = A_ij L_jj^{-T}`` (``trsm``) and the trailing update
-    ``A_ik <- A_ik - L_ij L_kj^T`` column block by column block (``gemm``, lower part
-    only). Only the lower triangle holds the factor (what ``cho_solve(..., lower=True)``
-    reads); the strict upper triangle is workspace. Raises ``LinAlgError`` if ``A``
-    is not positive definite.
+    With tiles ``A_ij`` of ``block`` rows and columns, for every ``j``:
+    ``L_jj = chol(A_jj)`` (``potrf``), ``L_ij = A_ij L_jj^{-T}`` below it (``trsm``),
+    and ``A_ik <- A_ik - L_ij L_kj^T`` for ``j < k <= i`` (``gemm``). Every call works
+    on one tile, so the temporaries are a few tiles (128 MB each at 4096). Only the
+    lower triangle holds the factor (what ``cho_solve(..., lower=True)`` reads); the
+    strict upper triangle is workspace. Raises ``LinAlgError`` if ``A`` is not
+    positive definite.
     """
     from scipy.linalg.blas import dgemm, dtrsm
     from scipy.linalg.lapack import dpotrf
 
     n = A.shape[0]
-    for j in range(0, n, block):
-        e = min(j + block, n)
-        c, info = dpotrf(A[j:e, j:e], lower=1, clean=0)
+    tiles = [slice(j, min(j + block, n)) for j in range(0, n, block)]
+    for t, J in enumerate(tiles):
+        c, info = dpotrf(A[J, J], lower=1, clean=0)
         if info != 0:
-            raise np.linalg.LinAlgError(f"not positive definite (leading minor {j + info})")
-        A[j:e, j:e] = c
-        if e == n:
-            break
-        A[e:, j:e] = dtrsm(1.0, A[j:e, j:e], A[e:, j:e], side=1, lower=1, trans_a=1)
-        panel = A[e:, j:e]
-        for k in range(e, n, block):
-            ke = min(k + block, n)
-            A[k:, k:ke] = dgemm(-1.0, panel[k - e:], panel[k - e:ke - e], beta=1.0,
-                                c=A[k:, k:ke], trans_b=1)
+            raise np.linalg.LinAlgError(f"not positive definite (leading minor {J.start + info})")
+        A[J, J] = c
+        for I in tiles[t + 1:]:
+            A[I, J] = dtrsm(1.0, c, A[I, J], side=1, lower=1, trans_a=1)
+        for u, Kt in enumerate(tiles[t + 1:], start=t + 1):
+            right = A[Kt, J]
+            for I in tiles[u:]:
+                A[I, Kt] = dgemm(-1.0, A[I, J], right, beta=1.0, c=A[I, Kt], trans_b=1)
     return A
 
 
@@ -320,6 +320,9 @@ def _path_following(problem, newton, X_ls, tol, max_iterations, g_min):
     best = (np.inf, None, None)
     status = "max_iterations"
     it = best_iteration = 0
+    # a line per step on a terminal (every 30 s in a log) where a fit takes minutes
+    steps = Steps(f"L-OpInf interior point ({newton.m} unknowns)",
+                  enabled=None if newton.m >= THREADED_UNKNOWNS else False)
     for it in range(1, max_iterations + 1):
         X = _assemble(problem, Xb)
         grad = problem.gradient(X)
@@ -335,6 +338,7 @@ def _path_following(problem, newton, X_ls, tol, max_iterations, g_min):
         else:           # no certificate: the interior-point gap at a tiny dual residual
             bound = comp if residual <= (1e-10 * max(abs(f), 1.0)) ** 2 else np.inf
         rel = relative_gap(bound, f, problem)
+        steps.update(f"gap bound {rel:.1e}")
         if rel < best[0] and _feasible(problem, Xb):
             best = (rel, [A.copy() for A in Xb], [None if Zj is None else Zj.copy() for Zj in Zb])
             best_iteration = it
@@ -409,6 +413,7 @@ def _path_following(problem, newton, X_ls, tol, max_iterations, g_min):
             if cone[j]:
                 Rinv = scalings[j][1]
                 Zb[j] = Zb[j] + alpha * sym(Rinv.T @ dz[j] @ Rinv)
+    steps.close()
     rel, Xb, Zb = best
     if status != "optimal" and rel <= INACCURATE:
         status = "optimal_inaccurate"
