@@ -15,6 +15,7 @@ import scipy.linalg as sl
 from skfem import MeshLine
 
 from _required import extra
+from femrom import FemromError
 from femrom.fem import (Condensation, axial_stiffness, bending_stiffness, line_basis, line_mass,
                         rayleigh_damping)
 from femrom.inference import (
@@ -665,6 +666,22 @@ def test_blocked_cholesky_matches_lapack_and_refuses_an_indefinite_matrix():
     B[40, 40] = -1.0
     with pytest.raises(np.linalg.LinAlgError, match="not positive definite"):
         blocked_cholesky(B, block=16)
+
+
+def test_the_interior_point_is_not_started_without_the_memory_for_its_newton_matrix(monkeypatch):
+    """Where the dense Newton matrix would not fit in the available memory, "auto"
+    takes the first-order path (still certified on this well-conditioned problem)
+    and a forced interior point is refused in one line, before any allocation."""
+    import femrom.inference._interior_point as ipm
+    rng = np.random.default_rng(21)
+    problem = LagrangianOpInf(["damping"], regularization=1e-8).regression(random_data(rng, 8, 100))
+    _, info = solve_fast(problem, FastSolver())
+    assert info["method"] == "interior_point"            # small m: the default choice
+    monkeypatch.setattr(ipm, "available_bytes", lambda: 1000)
+    _, info = solve_fast(problem, FastSolver())
+    assert info["method"] == "first_order" and info["gap_estimate"] < 1e-8
+    with pytest.raises(FemromError, match=r"needs 0\.0 GB and 0\.0 GB are available; use method='auto'"):
+        solve_fast(problem, FastSolver(method="interior_point"))
 
 
 @pytest.mark.parametrize("seed", [0, 1])

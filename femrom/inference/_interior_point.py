@@ -159,6 +159,24 @@ def blocked_cholesky(A: np.ndarray, block: int = CHOLESKY_BLOCK) -> np.ndarray:
     return A
 
 
+def newton_bytes(m: int) -> int:
+    """Memory the dense Newton matrix of ``m`` unknowns takes, with a quarter for
+    the rest of the method (the sparse Hessian, the factorisation's tiles, iterates)."""
+    return int(1.25 * 8 * m * m)
+
+
+def available_bytes() -> int | None:
+    """``MemAvailable`` of ``/proc/meminfo`` (Linux), ``None`` where it is not known."""
+    try:
+        with open("/proc/meminfo") as meminfo:
+            for line in meminfo:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        return None
+    return None
+
+
 def blas_threads(limit: int | None):
     """``threadpoolctl`` limit of the BLAS threads for a block (``None``: unchanged)."""
     if limit is None:

@@ -56,7 +56,8 @@ from typing import ClassVar
 
 import numpy as np
 
-from femrom._errors import FemromValueError
+from femrom._errors import FemromRuntimeError, FemromValueError
+from femrom.inference import _interior_point
 from femrom.inference._first_order import solve_first_order
 from femrom.inference._interior_point import blas_threads, solve_ipm
 from femrom.inference._problem import GramProblem
@@ -121,7 +122,10 @@ class FastSolver:
         dense Newton matrix takes ``8 m^2`` bytes: 4.6 GB at 24 000, ``r = 154``; the
         string fit at r = 150, ``m = 22 650``, peaked at 6.6 GB resident and took
         16 min on two cores, certified, where the first-order path stopped
-        uncertified 4 % above that optimum after 19 min).
+        uncertified 4 % above that optimum after 19 min). Nor where the matrix
+        would not fit in the memory available (``1.25 x 8 m^2`` bytes against
+        ``MemAvailable``): "auto" then takes the first-order path, and
+        ``method="interior_point"`` is refused in one line.
     ipm_max_iterations : int
     """
 
@@ -242,7 +246,14 @@ def _solve_square(problem: GramProblem, options: FastSolver, info):
     g = np.linalg.eigvalsh(problem.gram)
     info["condition"] = float(g[-1] / g[0]) if g[0] > 0 else np.inf
     m = sum(b.size * (b.size + 1) // 2 for b in problem.blocks)
-    ipm_allowed = m <= options.ipm_max_unknowns and any(b.structure == "psd" for b in problem.blocks)
+    need, free = _interior_point.newton_bytes(m), _interior_point.available_bytes()
+    fits = free is None or need <= free
+    if options.method == "interior_point" and not fits:
+        raise FemromRuntimeError(
+            f"FastSolver(method='interior_point'): its dense Newton matrix of {m} unknowns needs "
+            f"{need / 1e9:.1f} GB and {free / 1e9:.1f} GB are available; use method='auto' or 'first_order'")
+    ipm_allowed = m <= options.ipm_max_unknowns and fits and any(
+        b.structure == "psd" for b in problem.blocks)
     if options.method == "auto":
         order = ["interior_point", "first_order"] if ipm_allowed and (
             info["condition"] > options.ipm_condition or m <= options.ipm_small_unknowns) \
