@@ -60,9 +60,9 @@ def sym_kron(A: np.ndarray, index, out: np.ndarray | None = None,
     Kronecker product ``A (x)_s A`` of Todd, Toh & Tutuncu (1998) in svec coordinates.
 
     With ``E_a = c_a (e_i e_l^T + e_l e_i^T)`` and ``E_b = c_b (e_p e_q^T + e_q e_p^T)``,
-    ``M[a, b] = 2 c_a c_b (A_ip A_lq + A_iq A_lp)``: four gathers of ``A`` a block of
-    ``rows`` rows (default: about 32 MB a gather, so that the temporaries stay
-    small next to ``M``, which is 3.2 GB at r = 200). Written into ``out`` if given.
+    ``M[a, b] = 2 c_a c_b (A_ip A_lq + A_iq A_lp)``: four gathers of ``A``, ``rows``
+    rows of ``M`` at a time (default: about 32 MB a gather, so that the temporaries
+    stay small next to ``M``, which is 3.2 GB at r = 200). Written into ``out`` if given.
     """
     i, l, c = index
     n = i.size
