@@ -47,7 +47,8 @@ directly is insensitive to ``kappa(G)``. This module is such a method:
 Cost: the dense Newton matrix has ``m^2`` entries and its factorisation
 ``m^3 / 3`` flops (two blocks: ``r = 30``: ``m = 930``, 10 ms; ``r = 60``: 3660,
 0.4 s; ``r = 100``: 10100, 0.8 GB and ~8 s on one core; ``r = 150``: 22650, 4.1 GB
-and 68 s on two, :func:`blocked_cholesky`), about 10-15 iterations.
+and 68 s on two, :func:`blocked_cholesky`; ``r = 200``: 40200, 12.9 GB and 4.5 min),
+about 10-15 iterations.
 :func:`femrom.inference.solve_fast` uses this method for ill-conditioned data
 up to ``FastSolver.ipm_max_unknowns``.
 """

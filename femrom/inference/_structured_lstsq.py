@@ -119,10 +119,11 @@ class FastSolver:
         "auto" whatever their conditioning (10-50 ms there).
     ipm_max_unknowns : int
         The interior-point method is not used above this many unknowns (its
-        dense Newton matrix takes ``8 m^2`` bytes: 4.6 GB at 24 000, ``r = 154``; the
-        string fit at r = 150, ``m = 22 650``, peaked at 6.6 GB resident and took
-        16 min on two cores, certified, where the first-order path stopped
-        uncertified 4 % above that optimum after 19 min). Nor where the matrix
+        dense Newton matrix takes ``8 m^2`` bytes: 16 GB at 45 000, ``r = 211``). On
+        the string data the first-order path stops uncertified 4 % above the
+        optimum at r = 150 and 200 (19-20 min), where the interior point certifies
+        it in 16 min (r = 150, 6.6 GB resident) and 65 min (r = 200, ``m = 40 200``,
+        14.3 GB) on two cores. Nor where the matrix
         would not fit in the memory available (``1.25 x 8 m^2`` bytes against
         ``MemAvailable``): "auto" then takes the first-order path, and
         ``method="interior_point"`` is refused in one line.
@@ -145,7 +146,7 @@ class FastSolver:
     method: str = "auto"
     ipm_condition: float = 1e4
     ipm_small_unknowns: int = 600
-    ipm_max_unknowns: int = 24_000
+    ipm_max_unknowns: int = 45_000
     ipm_max_iterations: int = 60
 
     name: ClassVar[str] = "fast"
