@@ -110,8 +110,14 @@ class Progress:
         elapsed = max(now - self._start, 1e-12)
         rate = self.done / elapsed
         left = (self.total - self.done) / rate if rate > 0 else float("inf")
-        text = (f"{self.label}: {self.done}/{self.total}  {_format_rate(rate)}/s  "
-                f"{_format_seconds(left)} left")
+        self._draw(f"{self.label}: {self.done}/{self.total}  {_format_rate(rate)}/s  "
+                   f"{_format_seconds(left)} left")
+
+    def close(self) -> None:
+        elapsed = time.perf_counter() - self._start
+        self._final(f"{self.label}: {self.done}/{self.total} in {_format_seconds(elapsed)}")
+
+    def _draw(self, text: str) -> None:
         if self.mode == "live":
             self.stream.write(f"\r{text}   ")
         else:
@@ -119,11 +125,9 @@ class Progress:
             self._logged = True
         self.stream.flush()
 
-    def close(self) -> None:
+    def _final(self, text: str) -> None:
         if self.mode is None or (self.mode == "log" and not self._logged):
             return  # a log hears of work that outlived one interval, not of every short loop
-        elapsed = time.perf_counter() - self._start
-        text = f"{self.label}: {self.done}/{self.total} in {_format_seconds(elapsed)}"
         self.stream.write(f"\r{text}" + " " * 20 + "\n" if self.mode == "live" else f"{text}\n")
         self.stream.flush()
 
@@ -134,7 +138,7 @@ class Progress:
         self.close()
 
 
-class Steps:
+class Steps(Progress):
     """Throttled line ``label: step k  note  m:ss`` for an open-ended iteration.
 
     Parameters as :class:`Progress` without ``total``; :meth:`update` takes the
@@ -145,20 +149,9 @@ class Steps:
     def __init__(self, label: str = "", *, enabled: bool | None = None,
                  stream: TextIO | None = None, min_interval: float = 0.25,
                  log_seconds: float | None = None):
-        self.label = label
-        self.stream = stream if stream is not None else sys.stderr
-        self.mode = _resolve(enabled, self.stream)
-        self.min_interval = min_interval if self.mode == "live" else (
-            _log_seconds() if log_seconds is None else float(log_seconds))
-        self.done = 0
+        super().__init__(0, label, enabled=enabled, stream=stream, min_interval=min_interval,
+                         log_seconds=log_seconds)
         self.note = ""
-        self._start = time.perf_counter()
-        self._last = -1.0 if self.mode == "live" else self._start
-        self._logged = False
-
-    @property
-    def enabled(self) -> bool:
-        return self.mode is not None
 
     def update(self, note: str = "") -> None:
         self.done += 1
@@ -169,24 +162,11 @@ class Steps:
         if now - self._last < self.min_interval:
             return
         self._last = now
-        text = f"{self.label}: step {self.done}  {note}  {_format_seconds(now - self._start)}"
-        self.stream.write(f"\r{text}   " if self.mode == "live" else f"{text}\n")
-        self._logged = self._logged or self.mode == "log"
-        self.stream.flush()
+        self._draw(f"{self.label}: step {self.done}  {note}  {_format_seconds(now - self._start)}")
 
     def close(self) -> None:
-        if self.mode is None or (self.mode == "log" and not self._logged):
-            return
         elapsed = _format_seconds(time.perf_counter() - self._start)
-        text = f"{self.label}: {self.done} steps in {elapsed}  {self.note}"
-        self.stream.write(f"\r{text}" + " " * 20 + "\n" if self.mode == "live" else f"{text}\n")
-        self.stream.flush()
-
-    def __enter__(self) -> "Steps":
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.close()
+        self._final(f"{self.label}: {self.done} steps in {elapsed}  {self.note}")
 
 
 class Stage:
