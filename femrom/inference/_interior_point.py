@@ -167,15 +167,12 @@ def newton_bytes(m: int) -> int:
 
 
 def available_bytes() -> int | None:
-    """``MemAvailable`` of ``/proc/meminfo`` (Linux), ``None`` where it is not known."""
+    """The memory available to a new allocation (``psutil``), ``None`` where it is not known."""
+    import psutil
     try:
-        with open("/proc/meminfo") as meminfo:
-            for line in meminfo:
-                if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
-    except (OSError, ValueError, IndexError):
+        return int(psutil.virtual_memory().available)
+    except (OSError, RuntimeError, AttributeError):   # pragma: no cover - exotic platforms
         return None
-    return None
 
 
 def blas_threads(limit: int | None):

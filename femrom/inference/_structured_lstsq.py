@@ -125,7 +125,7 @@ class FastSolver:
         it in 16 min (r = 150, 6.6 GB resident) and 65 min (r = 200, ``m = 40 200``,
         14.3 GB) on two cores. Nor where the matrix
         would not fit in the memory available (``1.25 x 8 m^2`` bytes against
-        ``MemAvailable``): "auto" then takes the first-order path, and
+        ``psutil.virtual_memory().available``): "auto" then takes the first-order path, and
         ``method="interior_point"`` is refused in one line.
     ipm_max_iterations : int
     """
