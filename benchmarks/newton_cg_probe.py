@@ -146,6 +146,12 @@ def pcg(apply, precondition, rhs, tol=1e-10, max_iterations=3000, monitor=None):
     return x, max_iterations
 
 
+def inverse_root(A):
+    """``A^-1/2`` of a symmetric positive-definite ``A``."""
+    w, V = np.linalg.eigh(A)
+    return (V / np.sqrt(w)) @ V.T
+
+
 def unconstrained(problem, max_cg):
     r, G = problem.r, problem.gram
 
@@ -156,9 +162,6 @@ def unconstrained(problem, max_cg):
     rhs = [-sym(problem.cross.T[:, :r]), -sym(problem.cross.T[:, r:])]
     g = np.linalg.eigvalsh(G)
 
-    def inverse_root(A):
-        w, V = np.linalg.eigh(A)
-        return (V / np.sqrt(w)) @ V.T
     coupling = np.linalg.svd(inverse_root(G[:r, :r]) @ G[:r, r:] @ inverse_root(G[r:, r:]),
                              compute_uv=False)
     row = {"r": r, "unknowns": r * (r + 1), "kappa": float(g[-1] / g[0]),
@@ -255,9 +258,6 @@ def deflation(problem, ks, max_cg):
     w, V = sla.eigh(H, np.linalg.inv(P))
     outliers = V[:, w > 2.0]
 
-    def inverse_root(A):
-        g, E = np.linalg.eigh(A)
-        return (E / np.sqrt(g)) @ E.T
     Wl, _, Zr = np.linalg.svd(inverse_root(G[:r, :r]) @ G[:r, r:] @ inverse_root(G[r:, r:]))
     rng = np.random.default_rng(0)
     rhs = rng.standard_normal(m)
@@ -265,20 +265,8 @@ def deflation(problem, ks, max_cg):
            "largest": float(w[-1]), "k": {}}
 
     def cg(M):
-        x, res = np.zeros(m), rhs.copy()
-        z = M(res)
-        d, rz = z.copy(), res @ z
-        for it in range(max_cg):
-            if np.linalg.norm(res) <= 1e-10 * np.linalg.norm(rhs):
-                return it
-            Hd = H @ d
-            step = rz / (d @ Hd)
-            x += step * d
-            res -= step * Hd
-            z = M(res)
-            rz, rz_old = res @ z, rz
-            d = z + (rz / rz_old) * d
-        return max_cg
+        # the probe's CG on one vector: H and the preconditioner as dense matrices
+        return pcg(lambda d: [H @ d[0]], lambda v: (M(v),), [rhs], max_iterations=max_cg)[1]
     row["cg_ldl_k"] = cg(lambda v: P @ v)
     i, l, _ = index
     for k in ks:
